@@ -1,0 +1,153 @@
+"""Forward-mode dual numbers over numpy arrays: values and exact first derivatives.
+
+The mortar kernels are written once, in terms of :class:`Dual` arrays, and
+return every mortar quantity together with its derivative with respect to the
+nodal coordinates it depends on (at most 12 in 2D: two slave nodes, their two
+neighbours that enter averaged normals, and two master nodes). Derivatives are
+exact to rounding: every operation applies its own chain rule, nothing is
+approximated by differences.
+
+A Dual holds ``value`` of shape ``S`` and ``grad`` of shape ``S + (n,)``; the
+derivative axis is always last, so the usual numpy broadcasting of the leading
+axes carries over.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class Dual:
+    """An array of values with their gradients with respect to ``n`` variables."""
+
+    __slots__ = ("value", "grad")
+    __array_priority__ = 1000
+
+    def __init__(self, value, grad):
+        self.value = np.asarray(value, dtype=np.float64)
+        self.grad = np.asarray(grad, dtype=np.float64)
+
+    @classmethod
+    def variables(cls, values: np.ndarray) -> Dual:
+        """Independent variables: ``values`` of shape (m, n), each row its own n variables."""
+        values = np.asarray(values, dtype=np.float64)
+        grad = np.broadcast_to(np.eye(values.shape[-1]), values.shape + (values.shape[-1],))
+        return cls(values, grad.copy())
+
+    @classmethod
+    def constant(cls, value, nvars: int) -> Dual:
+        value = np.asarray(value, dtype=np.float64)
+        return cls(value, np.zeros(value.shape + (nvars,)))
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return self.value.shape
+
+    def __getitem__(self, index) -> Dual:
+        if not isinstance(index, tuple):
+            index = (index,)
+        if any(item is Ellipsis for item in index):
+            return Dual(self.value[index], self.grad[index + (slice(None),)])
+        return Dual(self.value[index], self.grad[index])
+
+    def _broadcast_grad(self, other) -> np.ndarray:
+        if np.ndim(other) == 0:
+            return self.grad
+        shape = np.broadcast_shapes(self.value.shape, np.shape(other))
+        return np.broadcast_to(self.grad, shape + self.grad.shape[-1:])
+
+    def __neg__(self) -> Dual:
+        return Dual(-self.value, -self.grad)
+
+    def __add__(self, other) -> Dual:
+        if isinstance(other, Dual):
+            return Dual(self.value + other.value, self.grad + other.grad)
+        return Dual(self.value + other, self._broadcast_grad(other))
+
+    __radd__ = __add__
+
+    def __sub__(self, other) -> Dual:
+        if isinstance(other, Dual):
+            return Dual(self.value - other.value, self.grad - other.grad)
+        return Dual(self.value - other, self._broadcast_grad(other))
+
+    def __rsub__(self, other) -> Dual:
+        return Dual(other - self.value, -self._broadcast_grad(other))
+
+    def __mul__(self, other) -> Dual:
+        if isinstance(other, Dual):
+            return Dual(
+                self.value * other.value,
+                self.grad * other.value[..., None] + other.grad * self.value[..., None],
+            )
+        other = np.asarray(other)
+        return Dual(self.value * other, self.grad * other[..., None])
+
+    __rmul__ = __mul__
+
+    def __truediv__(self, other) -> Dual:
+        if isinstance(other, Dual):
+            inverse = 1.0 / other.value
+            value = self.value * inverse
+            return Dual(
+                value,
+                (self.grad - other.grad * value[..., None]) * inverse[..., None],
+            )
+        inverse = 1.0 / np.asarray(other)
+        return Dual(self.value * inverse, self.grad * inverse[..., None])
+
+    def __rtruediv__(self, other) -> Dual:
+        inverse = 1.0 / self.value
+        value = other * inverse
+        return Dual(value, -self.grad * (value * inverse)[..., None])
+
+
+def sqrt(a: Dual) -> Dual:
+    root = np.sqrt(a.value)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        factor = np.where(root > 0.0, 0.5 / np.where(root > 0.0, root, 1.0), 0.0)
+    return Dual(root, a.grad * factor[..., None])
+
+
+def where(condition, a: Dual, b: Dual) -> Dual:
+    """Elementwise selection; the derivative is the one of the selected branch."""
+    condition = np.asarray(condition)
+    return Dual(
+        np.where(condition, a.value, b.value),
+        np.where(condition[..., None], a.grad, b.grad),
+    )
+
+
+def maximum(a: Dual, b: Dual) -> Dual:
+    return where(a.value >= b.value, a, b)
+
+
+def minimum(a: Dual, b: Dual) -> Dual:
+    return where(a.value <= b.value, a, b)
+
+
+def stack(items: list[Dual], axis: int = -1) -> Dual:
+    """Stack Duals along a new value axis (``axis`` counts value axes only)."""
+    ndim = items[0].value.ndim + 1
+    axis = axis % ndim
+    return Dual(
+        np.stack([item.value for item in items], axis=axis),
+        np.stack([item.grad for item in items], axis=axis),
+    )
+
+
+def cross(a: Dual, b: Dual) -> Dual:
+    """2D cross product a_x b_y - a_y b_x over the last value axis (of length 2)."""
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def dot(a: Dual, b: Dual) -> Dual:
+    """Dot product over the last value axis."""
+    return sum_(a * b, axis=-1)
+
+
+def sum_(a: Dual, axis: int) -> Dual:
+    """Sum over a value axis."""
+    ndim = a.value.ndim
+    axis = axis % ndim
+    return Dual(a.value.sum(axis=axis), a.grad.sum(axis=axis))

@@ -1,0 +1,476 @@
+"""Mortar coupling of a slave and a master surface: D, M, weighted gaps, derivatives.
+
+:class:`MortarInterface` is the parallel layer around :mod:`kernels`: it
+extracts the two surfaces, numbers one multiplier per slave node across
+ranks, brings in the master facets (and slave neighbours) that other ranks
+own near this rank's slave facets, keeps candidate pairs while nothing moved
+past the search margin, evaluates all pairs in one batched kernel call and
+assembles the results into PETSc objects whose sparsity is fixed between
+searches (COO preallocation: no allocation inside a Newton loop).
+
+Layouts: rows of D, M, the weighted gap and its Jacobian are multipliers
+(one per slave node, owned by the rank owning the node's dofs); columns of D
+and M are global dof blocks (nodes) of the displacement space; columns of
+Jacobians are global displacement dofs (block * 2 + component).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import dolfinx
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from . import kernels, search, surface
+from .layout import CooMatrix
+from .kernels import BasisOption, IntegrationOption, NormalOption
+
+DEFAULT_GAUSS_POINTS = {"segment": 3, "element": 4}
+
+
+@dataclasses.dataclass
+class MortarStatistics:
+    """Counters and timings of one interface, for reports and benchmarks."""
+
+    pairs: int = 0
+    segments: int = 0
+    searches_done: int = 0
+    searches_skipped: int = 0
+    evaluations: int = 0
+    time_search: float = 0.0
+    time_exchange: float = 0.0
+    time_integration: float = 0.0
+    time_assembly: float = 0.0
+
+
+def _owner_of_blocks(index_map, local_blocks: np.ndarray, rank: int) -> np.ndarray:
+    owners = np.full(local_blocks.shape, rank, dtype=np.int32)
+    ghost = local_blocks >= index_map.size_local
+    owners[ghost] = index_map.owners[local_blocks[ghost] - index_map.size_local]
+    return owners
+
+
+def _alltoallv(comm: MPI.Intracomm, chunks: list[np.ndarray], dtype, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """Send chunks[r] (rows of ``width`` values) to rank r; return received rows and their sources."""
+    send_counts = np.array([c.shape[0] * width for c in chunks], dtype=np.int64)
+    recv_counts = np.array(comm.alltoall(send_counts.tolist()), dtype=np.int64)
+    send = np.concatenate([np.asarray(c, dtype=dtype).reshape(-1) for c in chunks]) if chunks else np.zeros(0, dtype)
+    recv = np.empty(int(recv_counts.sum()), dtype=dtype)
+    mpi_type = MPI._typedict[np.dtype(dtype).char]
+    comm.Alltoallv([send, (send_counts, None), mpi_type], [recv, (recv_counts, None), mpi_type])
+    sources = np.repeat(np.arange(comm.size), recv_counts // width)
+    return recv.reshape(-1, width), sources
+
+
+class MortarInterface:
+    """One slave/master pair of surfaces and its mortar quantities.
+
+    Args:
+        V: P1 vector displacement space on a 2D mesh.
+        facet_tags: facet meshtags naming the surfaces.
+        slave_marker, master_marker: tag values of the slave (non-mortar) and
+            master (mortar) surfaces.
+        normals: ``averaged`` (default), ``slave`` or ``master`` normal field.
+        integration: ``segment`` (default, exact) or ``element``.
+        basis: multiplier basis, ``standard`` (default) or ``dual``.
+        num_gauss_points: per segment (or per slave facet for ``element``).
+        search_margin: boxes are grown by this much; default twice the mean
+            slave facet length.
+    """
+
+    def __init__(
+        self,
+        V: dolfinx.fem.FunctionSpace,
+        facet_tags: dolfinx.mesh.MeshTags,
+        slave_marker: int,
+        master_marker: int,
+        *,
+        normals: NormalOption = "averaged",
+        integration: IntegrationOption = "segment",
+        basis: BasisOption = "standard",
+        num_gauss_points: int | None = None,
+        search_margin: float | None = None,
+    ):
+        for value, allowed, what in (
+            (normals, kernels.NORMAL_OPTIONS, "normals"),
+            (integration, kernels.INTEGRATION_OPTIONS, "integration"),
+            (basis, kernels.BASIS_OPTIONS, "basis"),
+        ):
+            if value not in allowed:
+                raise ValueError(f"unknown {what} option {value!r}; expected one of {allowed}")
+        self.V = V
+        self.comm: MPI.Intracomm = V.mesh.comm
+        self.normals = normals
+        self.integration = integration
+        self.basis = basis
+        self.num_gauss_points = num_gauss_points or DEFAULT_GAUSS_POINTS[integration]
+        if self.num_gauss_points < 1:
+            raise ValueError("num_gauss_points must be >= 1")
+        self.slave = surface.extract_surface(V, facet_tags, slave_marker, "slave")
+        self.master = surface.extract_surface(V, facet_tags, master_marker, "master")
+        surface.check_disjoint(self.slave, self.master, self.comm)
+        if search_margin is None:
+            lengths = np.linalg.norm(
+                np.diff(self.slave.reference_coordinates[self.slave.facets], axis=1)[:, 0], axis=1
+            )
+            total = self.comm.allreduce(np.array([lengths.sum(), lengths.size]), op=MPI.SUM)
+            search_margin = 2.0 * total[0] / total[1]
+        if not search_margin > 0.0:
+            raise ValueError(f"search_margin must be positive, got {search_margin}")
+        self.reuse = search.SearchReuse(margin=float(search_margin))
+        self.statistics = MortarStatistics()
+
+        index_map = V.dofmap.index_map
+        self.block_size = V.dofmap.index_map_bs
+        self.num_owned_dofs = index_map.size_local * self.block_size
+        self.num_global_dofs = index_map.size_global * self.block_size
+        self.num_owned_blocks = index_map.size_local
+        self.num_global_blocks = index_map.size_global
+        self._number_multipliers()
+        self._pattern_version = 0
+        self._matrices: dict[str, tuple[int, PETSc.Mat]] = {}
+        self.quantities: kernels.PairQuantities | None = None
+
+    # -- multipliers -------------------------------------------------------
+
+    def _number_multipliers(self) -> None:
+        """One multiplier per slave node, owned by the owner of its dofs.
+
+        A node may belong only to slave facets of other ranks; those ranks
+        tell the owner, which numbers all its slave nodes, then answers with
+        the global numbers.
+        """
+        comm = self.comm
+        index_map = self.V.dofmap.index_map
+        slave = self.slave
+        owners = _owner_of_blocks(index_map, slave.node_blocks, comm.rank)
+        ghosts = ~slave.node_owned
+        requests = [
+            np.column_stack([slave.node_global_blocks[ghosts & (owners == r)],
+                             slave.reference_coordinates[ghosts & (owners == r)].view(np.int64)])
+            for r in range(comm.size)
+        ]
+        received, sources = _alltoallv(comm, requests, np.int64, 3)
+        own_blocks = np.concatenate([slave.node_global_blocks[slave.node_owned], received[:, 0]])
+        own_coordinates = np.concatenate(
+            [slave.reference_coordinates[slave.node_owned], received[:, 1:].copy().view(np.float64)]
+        )
+        unique_blocks, first = np.unique(own_blocks, return_index=True)
+        self.num_owned_multipliers = unique_blocks.size
+        self.multiplier_offset = comm.exscan(unique_blocks.size) or 0
+        self.num_global_multipliers = comm.allreduce(unique_blocks.size, op=MPI.SUM)
+        self.owned_multiplier_blocks = unique_blocks
+        self.owned_multiplier_coordinates = own_coordinates[first]
+        answers = [
+            self.multiplier_offset + np.searchsorted(unique_blocks, received[sources == r, 0])
+            for r in range(comm.size)
+        ]
+        answered, _ = _alltoallv(comm, [a[:, None] for a in answers], np.int64, 1)
+        numbers = np.empty(slave.num_nodes, dtype=np.int64)
+        numbers[slave.node_owned] = self.multiplier_offset + np.searchsorted(
+            unique_blocks, slave.node_global_blocks[slave.node_owned]
+        )
+        order = np.concatenate([np.flatnonzero(ghosts & (owners == r)) for r in range(comm.size)])
+        numbers[order.astype(np.int64)] = answered[:, 0]
+        self.node_multipliers = numbers
+        ghost_multipliers = np.unique(numbers[ghosts])
+        self._ghost_multipliers = ghost_multipliers[
+            (ghost_multipliers < self.multiplier_offset)
+            | (ghost_multipliers >= self.multiplier_offset + self.num_owned_multipliers)
+        ]
+
+    def create_multiplier_vector(self) -> PETSc.Vec:
+        """A ghosted vector in the multiplier layout (ghosts: this rank's slave nodes)."""
+        return PETSc.Vec().createGhost(
+            self._ghost_multipliers.astype(PETSc.IntType),
+            size=(self.num_owned_multipliers, self.num_global_multipliers),
+            comm=self.comm,
+        )
+
+    def node_values(self, z: PETSc.Vec) -> np.ndarray:
+        """Values of a ghosted multiplier vector at this rank's slave nodes (collective)."""
+        z.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        with z.localForm() as local:
+            array = local.getArray(readonly=True)
+            owned = self.node_multipliers - self.multiplier_offset
+            result = np.empty(self.slave.num_nodes)
+            is_owned = (owned >= 0) & (owned < self.num_owned_multipliers)
+            result[is_owned] = array[owned[is_owned]]
+            position = np.searchsorted(self._ghost_multipliers, self.node_multipliers[~is_owned])
+            result[~is_owned] = array[self.num_owned_multipliers + position]
+        return result
+
+    # -- search and geometry ----------------------------------------------
+
+    def update(self, u: dolfinx.fem.Function | None = None) -> kernels.PairQuantities:
+        """Evaluate all mortar quantities at x = X + u (collective).
+
+        Re-searches only when a surface node moved more than half the margin
+        since the last search; otherwise only coordinates are exchanged.
+        """
+        stats = self.statistics
+        start = time.perf_counter()
+        slave_x = self.slave.current_coordinates(u)
+        master_x = self.master.current_coordinates(u)
+        moving = np.concatenate([slave_x, master_x])
+        if self.reuse.needs_search(moving, self.comm):
+            self._search(slave_x, master_x)
+            self.reuse.searched(moving)
+        else:
+            self.reuse.skipped()
+            self._refresh_coordinates(slave_x, master_x)
+        stats.searches_done = self.reuse.searches_done
+        stats.searches_skipped = self.reuse.searches_skipped
+        stats.time_search += time.perf_counter() - start
+
+        start = time.perf_counter()
+        pair_x = self._node_x[self.pair_nodes]
+        self.quantities = kernels.pair_quantities(
+            pair_x,
+            self.pair_has_neighbour,
+            normals=self.normals,
+            integration=self.integration,
+            basis=self.basis,
+            num_gauss_points=self.num_gauss_points,
+        )
+        stats.segments = int(np.count_nonzero(self.quantities.valid))
+        stats.evaluations += 1
+        stats.time_integration += time.perf_counter() - start
+        return self.quantities
+
+    def _exchange_plan(self, slave_x: np.ndarray, master_x: np.ndarray) -> None:
+        """Which owned master and slave facets each other rank needs."""
+        comm = self.comm
+        margin = self.reuse.margin
+        slave_lower, slave_upper = search.facet_boxes(slave_x, self.slave.facets)
+        if self.slave.num_facets:
+            my_box = np.concatenate([slave_lower.min(axis=0), slave_upper.max(axis=0)])
+        else:
+            my_box = np.array([np.inf, np.inf, -np.inf, -np.inf])
+        boxes = np.array(comm.allgather(my_box))
+        master_lower, master_upper = search.facet_boxes(master_x, self.master.facets)
+        self._send_master = []
+        self._send_slave = []
+        for r in range(comm.size):
+            if r == comm.rank:
+                self._send_master.append(np.zeros(0, dtype=np.int64))
+                self._send_slave.append(np.zeros(0, dtype=np.int64))
+                continue
+            lower, upper = boxes[r, :2], boxes[r, 2:]
+            self._send_master.append(np.flatnonzero(
+                search.boxes_overlap(master_lower, master_upper, lower, upper, margin)))
+            self._send_slave.append(np.flatnonzero(
+                search.boxes_overlap(slave_lower, slave_upper, lower, upper, margin)))
+
+    def _receive(self, owned: surface.ContactSurface, x: np.ndarray, plan: list[np.ndarray]):
+        """Global blocks (k, 2) and coordinates (k, 2, 2) of the facets others send."""
+        chunks = []
+        for facets in plan:
+            nodes = owned.facets[facets]
+            chunks.append(np.column_stack([
+                np.ascontiguousarray(owned.node_global_blocks[nodes]).view(np.float64),
+                x[nodes].reshape(-1, 4),
+            ]))
+        data, _ = _alltoallv(self.comm, chunks, np.float64, 6)
+        blocks = data[:, :2].copy().view(np.int64)
+        return blocks, data[:, 2:].reshape(-1, 2, 2)
+
+    def _search(self, slave_x: np.ndarray, master_x: np.ndarray) -> None:
+        slave, master = self.slave, self.master
+        parallel = self.comm.size > 1
+        start = time.perf_counter()
+        if parallel:
+            self._exchange_plan(slave_x, master_x)
+            remote_master_blocks, remote_master_x = self._receive(master, master_x, self._send_master)
+            remote_slave_blocks, remote_slave_x = self._receive(slave, slave_x, self._send_slave)
+        else:
+            remote_master_blocks = remote_slave_blocks = np.zeros((0, 2), dtype=np.int64)
+            remote_master_x = remote_slave_x = np.zeros((0, 2, 2))
+        self.statistics.time_exchange += time.perf_counter() - start
+
+        # node table: local slave nodes, local master nodes, remote master
+        # facet ends, remote slave facet ends
+        ns, nm = slave.num_nodes, master.num_nodes
+        nrm, nrs = remote_master_blocks.shape[0], remote_slave_blocks.shape[0]
+        self._node_blocks = np.concatenate([
+            slave.node_global_blocks, master.node_global_blocks,
+            remote_master_blocks.reshape(-1), remote_slave_blocks.reshape(-1),
+        ])
+        self._node_x = np.concatenate([
+            slave_x, master_x, remote_master_x.reshape(-1, 2), remote_slave_x.reshape(-1, 2)
+        ])
+        all_master_facets = np.concatenate([
+            master.facets + ns, ns + nm + np.arange(2 * nrm).reshape(-1, 2)
+        ]).astype(np.int64)
+        all_slave_facets = np.concatenate([
+            slave.facets, ns + nm + 2 * nrm + np.arange(2 * nrs).reshape(-1, 2)
+        ]).astype(np.int64)
+
+        pairs = search.candidate_pairs(
+            self._node_x, slave.facets, self._node_x, all_master_facets, self.reuse.margin
+        )
+        a = slave.facets[pairs[:, 0], 0]
+        b = slave.facets[pairs[:, 0], 1]
+        # neighbours: p is the start of the slave facet ending at a, q the end
+        # of the one starting at b (matched by global block, across ranks)
+        starts = self._node_blocks[all_slave_facets[:, 0]]
+        ends = self._node_blocks[all_slave_facets[:, 1]]
+        p, has_p = self._lookup(ends, all_slave_facets[:, 0], self._node_blocks[a])
+        q, has_q = self._lookup(starts, all_slave_facets[:, 1], self._node_blocks[b])
+        p = np.where(has_p, p, a)
+        q = np.where(has_q, q, b)
+        c = all_master_facets[pairs[:, 1], 0]
+        d = all_master_facets[pairs[:, 1], 1]
+        self.pair_nodes = np.stack([p, a, b, q, c, d], axis=1)
+        self.pair_has_neighbour = np.stack([has_p, has_q], axis=1)
+        self.pair_slave_facets = pairs[:, 0]
+        self.pair_multipliers = self.node_multipliers[np.stack([a, b], axis=1)]
+        dofs = self._node_blocks[self.pair_nodes][:, :, None] * self.block_size + np.arange(2)
+        dofs[~has_p, 0, :] = -1
+        dofs[~has_q, 3, :] = -1
+        self.pair_dofs = dofs.reshape(-1, 12)
+        self.pair_node_blocks = self._node_blocks[self.pair_nodes]
+        self._num_remote = (nrm, nrs)
+        self._pattern_version += 1
+        self.statistics.pairs = int(pairs.shape[0])
+
+    @staticmethod
+    def _lookup(keys: np.ndarray, values: np.ndarray, queries: np.ndarray):
+        order = np.argsort(keys, kind="stable")
+        sorted_keys = keys[order]
+        position = np.clip(np.searchsorted(sorted_keys, queries), 0, max(keys.size - 1, 0))
+        if keys.size == 0:
+            return np.zeros_like(queries), np.zeros(queries.shape, dtype=bool)
+        found = sorted_keys[position] == queries
+        return values[order[position]], found
+
+    def _refresh_coordinates(self, slave_x: np.ndarray, master_x: np.ndarray) -> None:
+        ns, nm = self.slave.num_nodes, self.master.num_nodes
+        self._node_x[:ns] = slave_x
+        self._node_x[ns:ns + nm] = master_x
+        if self.comm.size > 1:
+            start = time.perf_counter()
+            _, remote_master_x = self._receive(self.master, master_x, self._send_master)
+            _, remote_slave_x = self._receive(self.slave, slave_x, self._send_slave)
+            self._node_x[ns + nm:] = np.concatenate(
+                [remote_master_x.reshape(-1, 2), remote_slave_x.reshape(-1, 2)]
+            )
+            self.statistics.time_exchange += time.perf_counter() - start
+
+    # -- PETSc objects -----------------------------------------------------
+
+    def _coo_matrix(self, name: str, rows, cols, values, row_sizes, col_sizes) -> PETSc.Mat:
+        """A matrix whose pattern is rebuilt only after a new search."""
+        version, matrix = self._matrices.get(name, (-1, None))
+        if version != self._pattern_version:
+            if matrix is not None:
+                matrix.destroy()
+            matrix = CooMatrix(self.comm, rows, cols, row_sizes, col_sizes)
+            self._matrices[name] = (self._pattern_version, matrix)
+        return matrix.assemble(values)
+
+    @property
+    def _multiplier_sizes(self):
+        return (self.num_owned_multipliers, self.num_global_multipliers)
+
+    @property
+    def _dof_sizes(self):
+        return (self.num_owned_dofs, self.num_global_dofs)
+
+    @property
+    def _block_sizes(self):
+        return (self.num_owned_blocks, self.num_global_blocks)
+
+    def _require(self) -> kernels.PairQuantities:
+        if self.quantities is None:
+            raise RuntimeError("call update(u) before assembling mortar quantities")
+        return self.quantities
+
+    def mortar_matrices(self) -> tuple[PETSc.Mat, PETSc.Mat]:
+        """D (multipliers x slave nodes) and M (multipliers x master nodes).
+
+        Columns are global dof blocks of the displacement space (one per node).
+        """
+        q = self._require()
+        rows = np.broadcast_to(self.pair_multipliers[:, :, None], (q.D.shape[0], 2, 2))
+        slave_cols = np.broadcast_to(self.pair_node_blocks[:, None, 1:3], rows.shape)
+        master_cols = np.broadcast_to(self.pair_node_blocks[:, None, 4:6], rows.shape)
+        D = self._coo_matrix("D", rows, slave_cols, q.D, self._multiplier_sizes, self._block_sizes)
+        M = self._coo_matrix("M", rows, master_cols, q.M, self._multiplier_sizes, self._block_sizes)
+        return D, M
+
+    def weighted_gap(self, vector: PETSc.Vec | None = None) -> PETSc.Vec:
+        """The weighted gaps g~_j in the multiplier layout."""
+        q = self._require()
+        if vector is None:
+            vector = self.create_multiplier_vector()
+        vector.zeroEntries()
+        vector.setValues(
+            self.pair_multipliers.reshape(-1).astype(PETSc.IntType),
+            q.gap.value.reshape(-1),
+            addv=PETSc.InsertMode.ADD_VALUES,
+        )
+        vector.assemble()
+        return vector
+
+    def gap_jacobian(self) -> PETSc.Mat:
+        """d g~ / d u (multipliers x displacement dofs), exact."""
+        q = self._require()
+        rows = np.broadcast_to(self.pair_multipliers[:, :, None], (q.gap.grad.shape[0], 2, 12))
+        cols = np.broadcast_to(self.pair_dofs[:, None, :], rows.shape)
+        return self._coo_matrix("G", rows, cols, q.gap.grad, self._multiplier_sizes, self._dof_sizes)
+
+    def _force_columns(self) -> np.ndarray:
+        """(n, 8) dofs of the slave nodes a, b and master nodes c, d."""
+        return self.pair_dofs.reshape(-1, 6, 2)[:, [1, 2, 4, 5], :].reshape(-1, 8)
+
+    def _force_coefficients(self, q: kernels.PairQuantities):
+        """(n, j, 4 nodes, 2 comps) Dual: -Dn for slave nodes, +Mn for master nodes."""
+        from . import dual
+
+        return dual.stack([-q.Dn[:, :, 0], -q.Dn[:, :, 1], q.Mn[:, :, 0], q.Mn[:, :, 1]], axis=2)
+
+    def constraint_matrix(self) -> PETSc.Mat:
+        """B with B_j,(k,c) = -Dn_jk[c] (slave), +Mn_jl[c] (master).
+
+        The contact force is -B^T z: slave nodes are pushed along -n by the
+        pressure z >= 0, master nodes along +n (paper, eq. 1).
+        """
+        q = self._require()
+        coefficients = self._force_coefficients(q)
+        rows = np.broadcast_to(self.pair_multipliers[:, :, None], (q.D.shape[0], 2, 8))
+        cols = np.broadcast_to(self._force_columns()[:, None, :], rows.shape)
+        return self._coo_matrix("B", rows, cols, coefficients.value.reshape(-1, 2, 8),
+                                self._multiplier_sizes, self._dof_sizes)
+
+    def force_jacobian(self, z: PETSc.Vec) -> PETSc.Mat:
+        """d(-B(u)^T z)/du at fixed z (displacement dofs x displacement dofs)."""
+        q = self._require()
+        z_nodes = self.node_values(z)
+        z_pair = z_nodes[self._pair_slave_nodes()]  # (n, 2)
+        coefficients = self._force_coefficients(q)
+        grad = -np.einsum("nj,njkcv->nkcv", z_pair, coefficients.grad).reshape(-1, 8, 12)
+        rows = np.broadcast_to(self._force_columns()[:, :, None], grad.shape)
+        cols = np.broadcast_to(self.pair_dofs[:, None, :], grad.shape)
+        return self._coo_matrix("K", rows, cols, grad, self._dof_sizes, self._dof_sizes)
+
+    def contact_force(self, z: PETSc.Vec, vector: PETSc.Vec) -> PETSc.Vec:
+        """Add -B^T z to ``vector`` (displacement layout), without forming B."""
+        q = self._require()
+        z_pair = self.node_values(z)[self._pair_slave_nodes()]
+        force = -np.einsum("nj,njkc->nkc", z_pair, self._force_coefficients(q).value)
+        vector.setValues(self._force_columns().reshape(-1).astype(PETSc.IntType),
+                         force.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
+        vector.assemble()
+        return vector
+
+    def _pair_slave_nodes(self) -> np.ndarray:
+        return self.pair_nodes[:, 1:3]
+
+    def destroy(self) -> None:
+        for _, matrix in self._matrices.values():
+            matrix.destroy()
+        self._matrices.clear()

@@ -1,0 +1,188 @@
+"""Contact surfaces extracted from dolfinx facet tags: facets, nodes, dofs, owners.
+
+A :class:`ContactSurface` is this rank's share of one tagged boundary: the
+facets it owns, oriented so that their normal points out of their body, and
+the nodes of those facets with the displacement dofs that move them. Nodes
+are identified across ranks by their global dof block (a P1 vector space has
+one block per vertex), which is independent of how a rank numbers them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import dolfinx
+import numpy as np
+from mpi4py import MPI
+
+from . import compat
+
+
+class SurfaceError(ValueError):
+    """A contact surface cannot be built from the given tags or space."""
+
+
+@dataclasses.dataclass
+class ContactSurface:
+    """This rank's owned facets of one contact surface.
+
+    Attributes:
+        name: for messages (``"slave"``, ``"master"``, a tag name).
+        marker: the facet tag value.
+        facets: (num_facets, 2) local node indices, oriented start -> end so
+            that (t_y, -t_x), t = end - start, points out of the body.
+        facet_entities: (num_facets,) dolfinx facet indices on this rank.
+        node_blocks: (num_nodes,) local dof block of each node in ``V``.
+        node_global_blocks: (num_nodes,) global dof block (the node's identity).
+        node_owned: (num_nodes,) whether this rank owns the node's dofs.
+        reference_coordinates: (num_nodes, 2) undeformed coordinates.
+        cells: (num_facets,) the cell of each facet (for body checks).
+    """
+
+    name: str
+    marker: int
+    facets: np.ndarray
+    facet_entities: np.ndarray
+    node_blocks: np.ndarray
+    node_global_blocks: np.ndarray
+    node_owned: np.ndarray
+    reference_coordinates: np.ndarray
+    cells: np.ndarray
+    block_size: int = 2
+
+    @property
+    def num_facets(self) -> int:
+        return self.facets.shape[0]
+
+    @property
+    def num_nodes(self) -> int:
+        return self.node_blocks.shape[0]
+
+    def node_dofs(self) -> np.ndarray:
+        """(num_nodes, 2) global PETSc indices of the x and y displacement dofs."""
+        return self.node_global_blocks[:, None] * self.block_size + np.arange(self.block_size)
+
+    def current_coordinates(self, u: dolfinx.fem.Function | None) -> np.ndarray:
+        """x = X + u at the surface nodes (ghost values of ``u`` must be up to date)."""
+        if u is None:
+            return self.reference_coordinates.copy()
+        values = u.x.array.reshape(-1, self.block_size)
+        return self.reference_coordinates + values[self.node_blocks, :2]
+
+
+def check_space(V: dolfinx.fem.FunctionSpace) -> None:
+    """Raise a clear error for a space the 2D mortar method does not support."""
+    mesh = V.mesh
+    tdim = mesh.topology.dim
+    gdim = mesh.geometry.dim
+    if tdim == 3 or gdim == 3:
+        raise NotImplementedError(
+            "3D contact is not yet supported by dolfinx_mortar (2D meshes only)"
+        )
+    if tdim != 2:
+        raise SurfaceError(f"contact needs a 2D mesh; got topological dimension {tdim}")
+    cell_name = mesh.topology.cell_name()
+    if cell_name not in ("triangle", "quadrilateral"):
+        raise SurfaceError(f"unsupported cell type {cell_name!r}; use triangles or quadrilaterals")
+    if compat.coordinate_element_degree(mesh) != 1:
+        raise SurfaceError("only meshes with linear (P1/Q1) geometry are supported")
+    block_size = V.dofmap.index_map_bs
+    if block_size != gdim:
+        raise SurfaceError(
+            f"the displacement must be a vector space with {gdim} components; "
+            f"got block size {block_size}"
+        )
+    if not compat.is_linear_lagrange(V):
+        raise SurfaceError("the displacement space must be linear Lagrange (P1 or Q1)")
+
+
+def extract_surface(
+    V: dolfinx.fem.FunctionSpace,
+    facet_tags: dolfinx.mesh.MeshTags,
+    marker: int,
+    name: str = "surface",
+) -> ContactSurface:
+    """Build this rank's part of the contact surface tagged ``marker``.
+
+    Raises:
+        SurfaceError: the tag is absent or empty on every rank, a tagged facet
+            is not on the boundary, or the space is not supported.
+    """
+    check_space(V)
+    mesh = V.mesh
+    comm = mesh.comm
+    tdim = mesh.topology.dim
+    fdim = tdim - 1
+    if facet_tags.dim != fdim:
+        raise SurfaceError(f"{name}: meshtags of dimension {facet_tags.dim} are not facet tags")
+    mesh.topology.create_connectivity(fdim, tdim)
+    mesh.topology.create_connectivity(tdim, fdim)
+    facet_map = mesh.topology.index_map(fdim)
+
+    tagged = facet_tags.indices[facet_tags.values == marker]
+    facets = np.sort(tagged[tagged < facet_map.size_local]).astype(np.int32)
+    if comm.allreduce(facets.size, op=MPI.SUM) == 0:
+        present = np.unique(np.concatenate(comm.allgather(np.unique(facet_tags.values))))
+        raise SurfaceError(
+            f"{name}: facet tag {marker} marks no facet on any rank (tags present: {present.tolist()})"
+        )
+
+    f_to_c = mesh.topology.connectivity(fdim, tdim)
+    num_cells = np.diff(f_to_c.offsets)[facets]
+    interior = comm.allreduce(int(np.count_nonzero(num_cells != 1)), op=MPI.SUM)
+    if interior:
+        raise SurfaceError(
+            f"{name}: {interior} facets with tag {marker} are interior facets; "
+            "a contact surface must lie on the boundary of its body"
+        )
+    cells = f_to_c.array[f_to_c.offsets[facets]]
+    c_to_f = mesh.topology.connectivity(tdim, fdim)
+    facets_per_cell = c_to_f.offsets[1] - c_to_f.offsets[0]
+    cell_facets = c_to_f.array.reshape(-1, facets_per_cell)[cells]
+    local_facet = np.argmax(cell_facets == facets[:, None], axis=1)
+
+    layout = V.dofmap.dof_layout
+    closure = np.array(
+        [layout.entity_closure_dofs(fdim, i) for i in range(facets_per_cell)], dtype=np.int32
+    )
+    cell_dofs = V.dofmap.list[cells]
+    facet_blocks = np.take_along_axis(cell_dofs, closure[local_facet], axis=1)
+
+    geometry_dofmap = compat.geometry_dofmap(mesh)
+    facet_geometry = np.take_along_axis(geometry_dofmap[cells], closure[local_facet], axis=1)
+    X = mesh.geometry.x[:, :2]
+    start, end = X[facet_geometry[:, 0]], X[facet_geometry[:, 1]]
+    cell_midpoints = X[geometry_dofmap[cells]].mean(axis=1)
+    tangent = end - start
+    outward = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
+    flip = np.einsum("ij,ij->i", outward, 0.5 * (start + end) - cell_midpoints) < 0.0
+    facet_blocks[flip] = facet_blocks[flip, ::-1]
+    facet_geometry[flip] = facet_geometry[flip, ::-1]
+
+    node_blocks, inverse = np.unique(facet_blocks.ravel(), return_inverse=True)
+    node_facets = inverse.reshape(-1, 2).astype(np.int32)
+    geometry_of_node = np.empty(node_blocks.size, dtype=np.int64)
+    geometry_of_node[inverse] = facet_geometry.ravel()
+    dof_map = V.dofmap.index_map
+    return ContactSurface(
+        name=name,
+        marker=int(marker),
+        facets=node_facets,
+        facet_entities=facets,
+        node_blocks=node_blocks.astype(np.int32),
+        node_global_blocks=dof_map.local_to_global(node_blocks.astype(np.int32)).astype(np.int64),
+        node_owned=node_blocks < dof_map.size_local,
+        reference_coordinates=X[geometry_of_node].copy(),
+        cells=cells.astype(np.int32),
+        block_size=V.dofmap.index_map_bs,
+    )
+
+
+def check_disjoint(slave: ContactSurface, master: ContactSurface, comm: MPI.Intracomm) -> None:
+    """The same facet may not be both slave and master."""
+    shared = np.intersect1d(slave.facet_entities, master.facet_entities).size
+    if comm.allreduce(shared, op=MPI.SUM):
+        raise SurfaceError(
+            f"{comm.allreduce(shared, op=MPI.SUM)} facets are tagged both slave "
+            f"({slave.marker}) and master ({master.marker})"
+        )
