@@ -60,7 +60,12 @@ def create_matrix(form):
 
 
 def create_vector(form):
-    """A ghosted PETSc vector for the test space of a compiled linear form."""
+    """A ghosted PETSc vector for the test space of a compiled linear form.
+
+    dolfinx 0.10 onwards takes the function space, 0.9 the form.
+    """
+    if DOLFINX_VERSION >= (0, 10):
+        return dolfinx.fem.petsc.create_vector(form.function_spaces[0])
     return dolfinx.fem.petsc.create_vector(form)
 
 
@@ -93,3 +98,10 @@ def set_bc(b, bcs, x0=None, alpha: float = 1.0) -> None:
         dolfinx.fem.petsc.set_bc(b, bcs, alpha=alpha)
     else:
         dolfinx.fem.petsc.set_bc(b, bcs, x0, alpha)
+
+
+def set_bc_values(u: dolfinx.fem.Function, bcs) -> None:
+    """Write the Dirichlet values into the dofs of ``u`` they constrain."""
+    for bc in bcs:
+        bc.set(u.x.array)
+    u.x.scatter_forward()

@@ -146,6 +146,7 @@ def pair_quantities(
     integration: IntegrationOption = "segment",
     basis: BasisOption = "standard",
     num_gauss_points: int = 3,
+    crosspoint: np.ndarray | None = None,
 ) -> PairQuantities:
     """Mortar contributions of every pair, with derivatives.
 
@@ -161,6 +162,12 @@ def pair_quantities(
         basis: multiplier basis Phi; ``dual`` is biorthogonal to N on the
             whole slave facet (see :func:`dual_basis_coefficients`).
         num_gauss_points: Gauss points per segment (or per slave facet).
+        crosspoint: (n, 2) bool, slave nodes a, b that carry no multiplier
+            (their displacement is prescribed). Their basis function is added
+            to the other node's on the facet, so sum_j Phi_j = 1 still holds
+            (constants stay representable: the patch test passes) and the
+            system stays regular (a dual Phi at a crosspoint is orthogonal to
+            every linear function vanishing there and would couple to nothing).
     """
     if integration not in INTEGRATION_OPTIONS:
         raise ValueError(f"unknown integration {integration!r}; expected one of {INTEGRATION_OPTIONS}")
@@ -225,6 +232,8 @@ def pair_quantities(
         Phi = _apply_dual_coefficients(N)
     else:
         Phi = N
+    if crosspoint is not None:
+        Phi = _merge_crosspoints(Phi, np.asarray(crosspoint, dtype=bool).reshape(num_pairs, 2))
 
     weighted_phi = Phi * weight[..., None]  # (n, g, 2)
     D = np.einsum("ngj,ngk->njk", weighted_phi.value, N.value)
@@ -270,3 +279,19 @@ def _apply_dual_coefficients(N: Dual) -> Dual:
         [N[..., 0] * A[0, 0] + N[..., 1] * A[0, 1], N[..., 0] * A[1, 0] + N[..., 1] * A[1, 1]],
         axis=-1,
     )
+
+
+def _merge_crosspoints(Phi: Dual, crosspoint: np.ndarray) -> Dual:
+    """Move the basis function of a crosspoint node onto the facet's other node."""
+    if not crosspoint.any():
+        return Phi
+    total = Phi[..., 0] + Phi[..., 1]
+    zero = total * 0.0
+    cross_a = crosspoint[:, 0][:, None]
+    cross_b = crosspoint[:, 1][:, None]
+    phi_a = dual.where(cross_a, zero, dual.where(cross_b, total, Phi[..., 0]))
+    phi_b = dual.where(cross_b, zero, dual.where(cross_a, total, Phi[..., 1]))
+    both = cross_a & cross_b
+    phi_a = dual.where(both, zero, phi_a)
+    phi_b = dual.where(both, zero, phi_b)
+    return dual.stack([phi_a, phi_b], axis=-1)

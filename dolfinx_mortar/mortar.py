@@ -28,6 +28,7 @@ from . import kernels, search, surface
 from .layout import CooMatrix
 from .kernels import BasisOption, IntegrationOption, NormalOption
 
+CONFIGURATIONS = ("current", "reference")
 DEFAULT_GAUSS_POINTS = {"segment": 3, "element": 4}
 
 
@@ -79,6 +80,10 @@ class MortarInterface:
         num_gauss_points: per segment (or per slave facet for ``element``).
         search_margin: boxes are grown by this much; default twice the mean
             slave facet length.
+        configuration: ``current`` (default): everything on x = X + u, for
+            large deformations; ``reference``: integrals and normals on the
+            undeformed surfaces, computed once, gap linear in u (small strain,
+            to pair with linear elasticity).
     """
 
     def __init__(
@@ -93,8 +98,10 @@ class MortarInterface:
         basis: BasisOption = "standard",
         num_gauss_points: int | None = None,
         search_margin: float | None = None,
+        configuration: str = "current",
     ):
         for value, allowed, what in (
+            (configuration, CONFIGURATIONS, "configuration"),
             (normals, kernels.NORMAL_OPTIONS, "normals"),
             (integration, kernels.INTEGRATION_OPTIONS, "integration"),
             (basis, kernels.BASIS_OPTIONS, "basis"),
@@ -106,6 +113,8 @@ class MortarInterface:
         self.normals = normals
         self.integration = integration
         self.basis = basis
+        self.configuration = configuration
+        self._reference_quantities: kernels.PairQuantities | None = None
         self.num_gauss_points = num_gauss_points or DEFAULT_GAUSS_POINTS[integration]
         if self.num_gauss_points < 1:
             raise ValueError("num_gauss_points must be >= 1")
@@ -133,6 +142,7 @@ class MortarInterface:
         self._pattern_version = 0
         self._matrices: dict[str, tuple[int, PETSc.Mat]] = {}
         self.quantities: kernels.PairQuantities | None = None
+        self._crosspoint_blocks = np.zeros(0, dtype=np.int64)
 
     # -- multipliers -------------------------------------------------------
 
@@ -182,6 +192,26 @@ class MortarInterface:
             | (ghost_multipliers >= self.multiplier_offset + self.num_owned_multipliers)
         ]
 
+    def set_crosspoints(self, global_blocks: np.ndarray) -> None:
+        """Slave nodes (global dof blocks) that carry no multiplier.
+
+        Used where the slave surface meets a Dirichlet boundary: the node's
+        basis function is merged into its neighbour's (see
+        :func:`kernels.pair_quantities`); its multiplier rows become empty.
+        Collective: pass this rank's blocks, all ranks' are gathered.
+        """
+        gathered = np.concatenate(self.comm.allgather(np.asarray(global_blocks, dtype=np.int64)))
+        self._crosspoint_blocks = np.unique(gathered)
+        self.reuse.invalidate()
+        self.quantities = None
+        self._reference_quantities = None
+
+    @property
+    def owned_crosspoint_multipliers(self) -> np.ndarray:
+        """Global numbers of the owned multipliers that are crosspoints."""
+        owned = np.isin(self.owned_multiplier_blocks, self._crosspoint_blocks)
+        return self.multiplier_offset + np.flatnonzero(owned)
+
     def create_multiplier_vector(self) -> PETSc.Vec:
         """A ghosted vector in the multiplier layout (ghosts: this rank's slave nodes)."""
         return PETSc.Vec().createGhost(
@@ -209,37 +239,74 @@ class MortarInterface:
         """Evaluate all mortar quantities at x = X + u (collective).
 
         Re-searches only when a surface node moved more than half the margin
-        since the last search; otherwise only coordinates are exchanged.
+        since the last search; otherwise only coordinates are exchanged. With
+        ``configuration="reference"`` the integrals are taken once on the
+        undeformed surfaces and only the gap follows u (small strain).
         """
         stats = self.statistics
         start = time.perf_counter()
         slave_x = self.slave.current_coordinates(u)
         master_x = self.master.current_coordinates(u)
-        moving = np.concatenate([slave_x, master_x])
-        if self.reuse.needs_search(moving, self.comm):
-            self._search(slave_x, master_x)
-            self.reuse.searched(moving)
-        else:
-            self.reuse.skipped()
+        if self.configuration == "reference":
+            if self._reference_quantities is None:
+                slave_X = self.slave.reference_coordinates
+                master_X = self.master.reference_coordinates
+                self._search(slave_X, master_X)
+                self.reuse.searched(np.concatenate([slave_X, master_X]))
+                self._reference_node_x = self._node_x.copy()
+            else:
+                self.reuse.skipped()
             self._refresh_coordinates(slave_x, master_x)
+        else:
+            moving = np.concatenate([slave_x, master_x])
+            if self.reuse.needs_search(moving, self.comm):
+                self._search(slave_x, master_x)
+                self.reuse.searched(moving)
+            else:
+                self.reuse.skipped()
+                self._refresh_coordinates(slave_x, master_x)
         stats.searches_done = self.reuse.searches_done
         stats.searches_skipped = self.reuse.searches_skipped
         stats.time_search += time.perf_counter() - start
 
         start = time.perf_counter()
-        pair_x = self._node_x[self.pair_nodes]
-        self.quantities = kernels.pair_quantities(
-            pair_x,
+        if self.configuration == "reference":
+            if self._reference_quantities is None:
+                self._reference_quantities = self._evaluate(self._reference_node_x)
+            self.quantities = self._with_current_gap(self._reference_quantities)
+        else:
+            self.quantities = self._evaluate(self._node_x)
+        stats.segments = int(np.count_nonzero(self.quantities.valid))
+        stats.evaluations += 1
+        stats.time_integration += time.perf_counter() - start
+        return self.quantities
+
+    def _evaluate(self, node_x: np.ndarray) -> kernels.PairQuantities:
+        return kernels.pair_quantities(
+            node_x[self.pair_nodes],
             self.pair_has_neighbour,
             normals=self.normals,
             integration=self.integration,
             basis=self.basis,
             num_gauss_points=self.num_gauss_points,
+            crosspoint=self.pair_crosspoint,
         )
-        stats.segments = int(np.count_nonzero(self.quantities.valid))
-        stats.evaluations += 1
-        stats.time_integration += time.perf_counter() - start
-        return self.quantities
+
+    def _with_current_gap(self, reference: kernels.PairQuantities) -> kernels.PairQuantities:
+        """Reference integrals, constant in u; the gap linear in the current positions."""
+        from .dual import Dual
+
+        x = self._node_x[self.pair_nodes]  # (n, 6, 2)
+        Dn, Mn = reference.Dn.value, reference.Mn.value  # (n, j, k, c)
+        gap = (np.einsum("njlc,nlc->nj", Mn, x[:, 4:6]) - np.einsum("njkc,nkc->nj", Dn, x[:, 1:3]))
+        grad = np.zeros(gap.shape + (kernels.NUM_PAIR_VARIABLES,))
+        grad[:, :, 2:6] = -Dn.reshape(-1, 2, 4)
+        grad[:, :, 8:12] = Mn.reshape(-1, 2, 4)
+        def constant(value: np.ndarray) -> Dual:
+            return Dual(value, np.broadcast_to(0.0, value.shape + (kernels.NUM_PAIR_VARIABLES,)))
+
+        return dataclasses.replace(reference, Dn=constant(Dn), Mn=constant(Mn),
+                                   area=constant(reference.area.value), gap=Dual(gap, grad))
 
     def _exchange_plan(self, slave_x: np.ndarray, master_x: np.ndarray) -> None:
         """Which owned master and slave facets each other rank needs."""
@@ -328,6 +395,8 @@ class MortarInterface:
         self.pair_has_neighbour = np.stack([has_p, has_q], axis=1)
         self.pair_slave_facets = pairs[:, 0]
         self.pair_multipliers = self.node_multipliers[np.stack([a, b], axis=1)]
+        self.pair_crosspoint = np.isin(self._node_blocks[np.stack([a, b], axis=1)],
+                                       self._crosspoint_blocks)
         dofs = self._node_blocks[self.pair_nodes][:, :, None] * self.block_size + np.arange(2)
         dofs[~has_p, 0, :] = -1
         dofs[~has_q, 3, :] = -1

@@ -36,8 +36,9 @@ class MeshTying:
         petsc_options_prefix: prefix for those options.
 
     A slave node whose displacement is fully prescribed (a crosspoint with a
-    Dirichlet boundary) gets no multiplier: the constraint there would repeat
-    the boundary condition and make the system singular.
+    Dirichlet boundary) gets no multiplier: its basis function is merged into
+    its neighbour's (constants stay in the multiplier space, so the patch test
+    holds), and its multiplier row is an identity row.
     """
 
     def __init__(
@@ -66,14 +67,17 @@ class MeshTying:
             normals="slave", integration=integration, basis=basis,
             num_gauss_points=num_gauss_points,
         )
-        self.interface.update(None)
         comm = self.V.mesh.comm
         interface = self.interface
         bs = self.V.dofmap.index_map_bs
+        fixed = dirichlet_dofs(bcs, self.V)
+        fixed_blocks = np.unique(fixed // bs)
+        fully_fixed = fixed_blocks[np.isin(fixed_blocks * bs, fixed) & np.isin(fixed_blocks * bs + 1, fixed)]
+        interface.set_crosspoints(fully_fixed)
+        interface.update(None)
         self.layout = BlockLayout(comm, interface.num_owned_dofs, bs * interface.num_owned_multipliers)
 
         D_mat, M_mat = interface.mortar_matrices()
-        fixed = dirichlet_dofs(bcs, self.V)
         constraint = []
         for matrix in (D_mat, M_mat):
             rows, cols, values = csr_to_coo(matrix)
@@ -86,9 +90,8 @@ class MeshTying:
         z_rows = (rows[:, None] * bs + component).reshape(-1)
         u_cols = (cols[:, None] * bs + component).reshape(-1)
         b_values = np.repeat(values, bs)
-        self._fixed_multipliers = self._crosspoint_multipliers(fixed, z_rows, u_cols, b_values)
-        keep = ~np.isin(z_rows, self._fixed_multipliers)
-        z_rows, u_cols, b_values = z_rows[keep], u_cols[keep], b_values[keep]
+        crosspoints = interface.owned_crosspoint_multipliers
+        self._fixed_multipliers = (crosspoints[:, None] * bs + np.arange(bs)).reshape(-1)
 
         self.K = dolfinx.fem.petsc.assemble_matrix(self.a, bcs=bcs)
         self.K.assemble()
@@ -98,13 +101,10 @@ class MeshTying:
         all_rows = np.concatenate([mono.u(k_rows), mono.z(z_rows), mono.u(u_cols), fixed_z])
         all_cols = np.concatenate([mono.u(k_cols), mono.u(u_cols), mono.z(z_rows), fixed_z])
         all_values = np.concatenate([k_values, b_values, b_values, np.ones(fixed_z.size)])
-        # B^T rows of prescribed dofs are dropped: those rows stay identity rows
-        transpose = np.zeros(all_rows.size, dtype=bool)
-        transpose[k_rows.size + z_rows.size : k_rows.size + 2 * z_rows.size] = True
-        drop = transpose & np.isin(all_rows, mono.u(fixed))
-        all_rows[drop] = -1
         self._system = mono.create_matrix(all_rows, all_cols)
         self.A = self._system.assemble(all_values)
+        # rows of prescribed dofs stay identity rows: no multiplier force there
+        self.A.zeroRows(mono.u(fixed).astype(PETSc.IntType), diag=1.0)
 
         self.solver = PETSc.KSP().create(comm)
         self.solver.setOperators(self.A)
@@ -117,16 +117,6 @@ class MeshTying:
         self.solver.setFromOptions()
         for key in options:
             del opts[f"{petsc_options_prefix}{key}"]
-
-    def _crosspoint_multipliers(self, fixed, z_rows, u_cols, values) -> np.ndarray:
-        """Multiplier rows whose own slave node is fully prescribed (global, this rank's)."""
-        interface = self.interface
-        bs = self.V.dofmap.index_map_bs
-        owned_blocks = interface.owned_multiplier_blocks
-        owned_dofs = owned_blocks[:, None] * bs + np.arange(bs)
-        fixed_set = np.isin(owned_dofs, fixed)
-        rows = (interface.multiplier_offset + np.arange(owned_blocks.size))[:, None] * bs + np.arange(bs)
-        return rows[fixed_set]
 
     def solve(self) -> dolfinx.fem.Function:
         """Assemble the right-hand side, solve, and write the displacement into ``u``."""

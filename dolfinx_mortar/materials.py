@@ -1,0 +1,94 @@
+"""Strain energies and residual forms of plane-strain bodies in UFL (total Lagrangian).
+
+Each function returns the first Piola-Kirchhoff stress P(u) of a material;
+:func:`residual` turns a list of (stress, cells) into the weak form
+sum_b int_{Omega_b} P : grad(v) dX - external work, for several bodies with
+different materials in one mesh (cell tags pick the body).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import ufl
+
+
+@dataclasses.dataclass(frozen=True)
+class Material:
+    """Young's modulus and Poisson's ratio of one body, and its model.
+
+    model: ``neo-hookean`` (compressible, W = mu/2 (I1 - 2 - 2 ln J) +
+    lambda/2 (ln J)^2 in plane strain), ``saint-venant-kirchhoff``
+    (W = mu E:E + lambda/2 tr(E)^2), or ``linear`` (small strain).
+    """
+
+    E: float
+    nu: float
+    model: str = "neo-hookean"
+
+    def __post_init__(self):
+        if self.model not in MODELS:
+            raise ValueError(f"unknown material model {self.model!r}; expected one of {MODELS}")
+        if not self.E > 0:
+            raise ValueError(f"Young's modulus must be positive, got {self.E}")
+        if not -1.0 < self.nu < 0.5:
+            raise ValueError(f"Poisson's ratio must lie in (-1, 0.5), got {self.nu}")
+
+    @property
+    def mu(self) -> float:
+        return self.E / (2.0 * (1.0 + self.nu))
+
+    @property
+    def lmbda(self) -> float:
+        return self.E * self.nu / ((1.0 + self.nu) * (1.0 - 2.0 * self.nu))
+
+    def stress(self, u):
+        """First Piola-Kirchhoff stress (Cauchy stress for ``linear``)."""
+        return STRESS[self.model](u, self.mu, self.lmbda)
+
+
+def deformation_gradient(u):
+    return ufl.Identity(len(u)) + ufl.grad(u)
+
+
+def neo_hookean_stress(u, mu: float, lmbda: float):
+    F = ufl.variable(deformation_gradient(u))
+    J = ufl.det(F)
+    C = F.T * F
+    energy = 0.5 * mu * (ufl.tr(C) - 2.0 - 2.0 * ufl.ln(J)) + 0.5 * lmbda * ufl.ln(J) ** 2
+    return ufl.diff(energy, F)
+
+
+def saint_venant_kirchhoff_stress(u, mu: float, lmbda: float):
+    F = deformation_gradient(u)
+    green = 0.5 * (F.T * F - ufl.Identity(len(u)))
+    S = 2.0 * mu * green + lmbda * ufl.tr(green) * ufl.Identity(len(u))
+    return F * S
+
+
+def linear_stress(u, mu: float, lmbda: float):
+    strain = ufl.sym(ufl.grad(u))
+    return 2.0 * mu * strain + lmbda * ufl.tr(strain) * ufl.Identity(len(u))
+
+
+STRESS = {
+    "neo-hookean": neo_hookean_stress,
+    "saint-venant-kirchhoff": saint_venant_kirchhoff_stress,
+    "linear": linear_stress,
+}
+MODELS = tuple(STRESS)
+
+
+def internal_work(u, v, materials: dict[int, Material], cell_tags=None):
+    """sum over bodies of int P(u) : grad(v) dX; keys of ``materials`` are cell tags.
+
+    With ``cell_tags=None`` a single material (any key) applies everywhere.
+    """
+    if cell_tags is None:
+        if len(materials) != 1:
+            raise ValueError("several materials need cell_tags to say where each applies")
+        (material,) = materials.values()
+        return ufl.inner(material.stress(u), ufl.grad(v)) * ufl.dx
+    dx = ufl.Measure("dx", domain=u.function_space.mesh, subdomain_data=cell_tags)
+    forms = [ufl.inner(m.stress(u), ufl.grad(v)) * dx(tag) for tag, m in materials.items()]
+    return sum(forms[1:], forms[0])

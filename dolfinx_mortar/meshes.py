@@ -1,0 +1,839 @@
+"""gmsh builders for the 2D benchmark geometries (Hertz, patch test, ironing, rings, tied blocks).
+
+Every geometry is built here from a few numbers, so no geometry file is needed: the
+gmsh model lives on rank 0 only and :func:`compat.model_to_mesh` distributes it.
+
+Bodies that touch are separate meshes inside one dolfinx mesh: their boundaries may
+have nodes at the same coordinates but never share a node, a facet or a cell, which is
+what a contact (or mortar tying) formulation expects. Each body is one cell tag; the
+boundary pieces the solvers need are facet tags. ``markers`` maps their names to tag
+values; ``contact_slave`` and ``contact_master`` are aliases of two of those names
+(same value, not extra facets), so a solver can be written once for every benchmark.
+
+``refinement`` halves the mesh size at the contact surfaces (and the coarsest size far
+away) per level. Graded meshes keep a fixed growth rate of the element size with the
+distance from the contact surfaces, so their fine layer thins with refinement and the
+cell count grows by about 2 to 4 per level rather than by 4. Structured meshes
+(``patch_test``, ``tied_blocks``) double the element count along every side.
+
+Run ``python3 -m dolfinx_mortar.meshes NAME --output meshes/NAME.xdmf`` to export a
+mesh with its tags for ParaView.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import operator
+import pathlib
+from collections.abc import Callable, Sequence
+
+import dolfinx
+import dolfinx.io
+import dolfinx.mesh
+from mpi4py import MPI
+
+from dolfinx_mortar import compat
+
+CELL_TYPES = ("triangle", "quadrilateral")
+"""Accepted values of every builder's ``cell_type``."""
+
+HERTZ_CASES = ("A", "B", "C")
+"""Accepted values of :func:`hertz`'s ``case``."""
+
+GROWTH = 0.25
+"""Increase of the element size per unit distance from a refined curve (graded meshes)."""
+
+_HERTZ_HALF_WIDTH = {"A": 0.39, "B": 1.0, "C": 0.7}
+"""Contact half-width a of the Hertz cases at radius 8 (it scales with sqrt(radius))."""
+
+
+@dataclasses.dataclass
+class TaggedMesh:
+    """A mesh of several separate bodies with its cell and facet tags.
+
+    Attributes:
+        mesh: The distributed mesh of all bodies.
+        cell_tags: One tag value per body.
+        facet_tags: Tagged boundary pieces and internal symmetry lines.
+        markers: Name to tag value, identical on every rank. ``contact_slave`` and
+            ``contact_master`` repeat the value of the slave and master surfaces.
+        h_contact: Nominal element size on the slave contact surface (the one the
+            mortar integrals live on); nan if the builder does not define one.
+    """
+
+    mesh: dolfinx.mesh.Mesh
+    cell_tags: dolfinx.mesh.MeshTags
+    facet_tags: dolfinx.mesh.MeshTags
+    markers: dict[str, int]
+    h_contact: float = math.nan
+
+
+# ---------------------------------------------------------------------------------------
+# Parameter checks. They run on every rank before gmsh starts, so a bad argument raises
+# the same ValueError everywhere instead of leaving the other ranks waiting for a mesh.
+
+
+def _check_refinement(refinement: int) -> int:
+    try:
+        value = operator.index(refinement)
+    except TypeError:
+        raise ValueError(f"refinement must be an integer, got {refinement!r}") from None
+    if isinstance(refinement, bool) or value < 0:
+        raise ValueError(f"refinement must be a non-negative integer, got {refinement!r}")
+    return value
+
+
+def _check_cell_type(cell_type: str) -> bool:
+    if cell_type not in CELL_TYPES:
+        raise ValueError(f"cell_type must be one of {CELL_TYPES}, got {cell_type!r}")
+    return cell_type == "quadrilateral"
+
+
+def _check_ratio(ratio: Sequence[int]) -> tuple[int, int]:
+    try:
+        values = tuple(ratio)
+    except TypeError:
+        raise ValueError(f"ratio must be a pair of integers >= 1, got {ratio!r}") from None
+    if len(values) != 2:
+        raise ValueError(f"ratio must be a pair of integers >= 1, got {ratio!r}")
+    checked = []
+    for value in values:
+        try:
+            number = operator.index(value)
+        except TypeError:
+            raise ValueError(f"ratio must be a pair of integers >= 1, got {ratio!r}") from None
+        if isinstance(value, bool) or number < 1:
+            raise ValueError(f"ratio must be a pair of integers >= 1, got {ratio!r}")
+        checked.append(number)
+    return checked[0], checked[1]
+
+
+def _check_positive(name: str, value: float) -> float:
+    number = float(value)
+    if not math.isfinite(number) or number <= 0.0:
+        raise ValueError(f"{name} must be a positive number, got {value!r}")
+    return number
+
+
+# ---------------------------------------------------------------------------------------
+# gmsh plumbing, used on rank 0 only.
+
+
+class _Model:
+    """The geometry of one builder, written with gmsh's built-in kernel.
+
+    The built-in kernel keeps points at equal coordinates distinct (with
+    ``Geometry.AutoCoherence`` off), which is how touching bodies stay separate meshes.
+    """
+
+    def __init__(self, gmsh) -> None:
+        self.gmsh = gmsh
+        self.geo = gmsh.model.geo
+        self._refined: list[tuple[list[int], float]] = []
+        self._transfinite: list[int] = []
+
+    def point(self, x: float, y: float) -> int:
+        return self.geo.addPoint(x, y, 0.0)
+
+    def line(self, start: int, end: int, nodes: int | None = None) -> int:
+        """A straight curve; ``nodes`` makes it transfinite with that many nodes."""
+        tag = self.geo.addLine(start, end)
+        if nodes is not None:
+            self.geo.mesh.setTransfiniteCurve(tag, nodes)
+        return tag
+
+    def arc(self, start: int, centre: int, end: int) -> int:
+        """The circular arc (less than half a circle) from ``start`` to ``end``."""
+        return self.geo.addCircleArc(start, centre, end)
+
+    def surface(self, curves: Sequence[int], transfinite: bool = False) -> int:
+        """The plane surface bounded by ``curves`` (any order of orientation)."""
+        loop = self.geo.addCurveLoop(list(curves), reorient=True)
+        tag = self.geo.addPlaneSurface([loop])
+        if transfinite:
+            self.geo.mesh.setTransfiniteSurface(tag)
+            self._transfinite.append(tag)
+        return tag
+
+    def refine_near(self, curves: Sequence[int], size: float) -> None:
+        """Ask for element size ``size`` on ``curves``, growing by GROWTH with distance."""
+        self._refined.append((list(curves), size))
+
+    def mesh(
+        self,
+        cells: dict[int, list[int]],
+        facets: dict[int, list[int]],
+        names: dict[int, str],
+        h_max: float,
+        quadrilateral: bool,
+    ) -> None:
+        """Synchronise, tag and mesh the model.
+
+        Args:
+            cells: Tag value to the surfaces of one body.
+            facets: Tag value to the curves of one facet group.
+            names: Tag value to name, for the physical groups (read by ParaView users).
+            h_max: Largest element size anywhere.
+            quadrilateral: Recombine into quadrilaterals.
+        """
+        gmsh = self.gmsh
+        if quadrilateral:
+            for surface in self._transfinite:
+                self.geo.mesh.setRecombine(2, surface)
+        self.geo.synchronize()
+        for tag, surfaces in cells.items():
+            gmsh.model.addPhysicalGroup(2, surfaces, tag, name=names[tag])
+        for tag, curves in facets.items():
+            gmsh.model.addPhysicalGroup(1, curves, tag, name=names[tag])
+
+        field = gmsh.model.mesh.field
+        thresholds = []
+        for curves, size in self._refined:
+            distance = field.add("Distance")
+            field.setNumbers(distance, "CurvesList", curves)
+            length = sum(_curve_length(gmsh, c) for c in curves)
+            field.setNumber(distance, "Sampling", max(20, math.ceil(4.0 * length / size)))
+            threshold = field.add("Threshold")
+            field.setNumber(threshold, "InField", distance)
+            field.setNumber(threshold, "SizeMin", size)
+            field.setNumber(threshold, "SizeMax", h_max)
+            field.setNumber(threshold, "DistMin", 0.0)
+            field.setNumber(threshold, "DistMax", max(h_max - size, 0.0) / GROWTH)
+            thresholds.append(threshold)
+        if thresholds:
+            smallest = field.add("Min")
+            field.setNumbers(smallest, "FieldsList", thresholds)
+            field.setAsBackgroundMesh(smallest)
+
+        gmsh.option.setNumber("Mesh.MeshSizeMax", h_max)
+        if quadrilateral:
+            # Blossom leaves triangles; "simple full-quad" plus smoothing gives only
+            # quadrilaterals with angles between about 30 and 150 degrees.
+            gmsh.option.setNumber("Mesh.Algorithm", 8)
+            gmsh.option.setNumber("Mesh.RecombineAll", 1)
+            gmsh.option.setNumber("Mesh.RecombinationAlgorithm", 2)
+            gmsh.option.setNumber("Mesh.Smoothing", 10)
+        gmsh.model.mesh.generate(2)
+
+        wanted = 3 if quadrilateral else 2
+        types = set(gmsh.model.mesh.getElementTypes(2))
+        if types != {wanted}:
+            raise RuntimeError(
+                f"gmsh produced element types {sorted(types)}, expected only type {wanted} "
+                f"({'quadrilaterals' if quadrilateral else 'triangles'})"
+            )
+
+
+def _curve_length(gmsh, curve: int) -> float:
+    """Arc length of a model curve, for the sampling density of distance fields."""
+    low, high = gmsh.model.getParametrizationBounds(1, curve)
+    samples = 64
+    parameters = [low[0] + (high[0] - low[0]) * i / samples for i in range(samples + 1)]
+    xyz = gmsh.model.getValue(1, curve, parameters)
+    return sum(
+        math.dist(xyz[3 * i : 3 * i + 2], xyz[3 * i + 3 : 3 * i + 5]) for i in range(samples)
+    )
+
+
+_OPTIONS = {
+    "General.Terminal": 0,
+    "Geometry.AutoCoherence": 0,
+    "Mesh.ElementOrder": 1,
+    "Mesh.Algorithm": 6,
+    "Mesh.RecombineAll": 0,
+    "Mesh.MeshSizeFromPoints": 0,
+    "Mesh.MeshSizeFromCurvature": 0,
+    "Mesh.MeshSizeExtendFromBoundary": 0,
+}
+
+
+def _build(
+    comm: MPI.Comm,
+    name: str,
+    construct: Callable[[_Model], None],
+) -> compat.MeshWithTags:
+    """Run ``construct`` on rank 0 inside a fresh gmsh model and distribute the mesh.
+
+    gmsh is initialised (quietly) for this call and finalised afterwards; if the caller
+    already has gmsh running, a separate model is used and removed, and the options
+    touched here are restored, so the caller's gmsh state is left as it was.
+    """
+    model = None
+    error: str | None = None
+    own_session = False
+    saved: dict[str, float] = {}
+    gmsh = None
+    if comm.rank == 0:
+        import gmsh
+
+        own_session = not gmsh.isInitialized()
+        if own_session:
+            gmsh.initialize(argv=["dolfinx_mortar"], readConfigFiles=False, interruptible=False)
+            gmsh.option.setNumber("General.Terminal", 0)
+        previous = None if own_session else gmsh.model.getCurrent()
+        try:
+            for option, value in _OPTIONS.items():
+                saved[option] = gmsh.option.getNumber(option)
+                gmsh.option.setNumber(option, value)
+            for option in ("Mesh.MeshSizeMax", "Mesh.RecombinationAlgorithm", "Mesh.Smoothing"):
+                saved[option] = gmsh.option.getNumber(option)
+            gmsh.model.add(f"dolfinx_mortar_{name}")
+            construct(_Model(gmsh))
+            model = gmsh.model
+        except Exception as exception:  # reported on every rank below
+            error = f"{type(exception).__name__}: {exception}"
+
+    def close() -> None:
+        if comm.rank != 0:
+            return
+        if own_session:
+            gmsh.finalize()
+            return
+        gmsh.model.remove()
+        for option, value in saved.items():
+            gmsh.option.setNumber(option, value)
+        if previous:
+            gmsh.model.setCurrent(previous)
+
+    error = comm.bcast(error, root=0)
+    if error is not None:
+        close()
+        raise RuntimeError(f"building the {name} mesh with gmsh failed: {error}")
+    try:
+        return compat.model_to_mesh(model, comm, 0, gdim=2)
+    finally:
+        close()
+
+
+def _tagged(
+    data: compat.MeshWithTags,
+    markers: dict[str, int],
+    aliases: dict[str, str],
+    h_contact: float,
+) -> TaggedMesh:
+    every = dict(markers)
+    for alias, target in aliases.items():
+        every[alias] = markers[target]
+    return TaggedMesh(data.mesh, data.cell_tags, data.facet_tags, every, h_contact)
+
+
+def _numbered(cells: Sequence[str], facets: Sequence[str]) -> dict[str, int]:
+    """Tag values: bodies from 1, facet groups from 11, so no value means two things."""
+    values = {name: 1 + i for i, name in enumerate(cells)}
+    values.update({name: 11 + i for i, name in enumerate(facets)})
+    return values
+
+
+def _names(markers: dict[str, int]) -> dict[int, str]:
+    return {value: name for name, value in markers.items()}
+
+
+# ---------------------------------------------------------------------------------------
+# Builders.
+
+
+def hertz_half_width(case: str, radius: float = 8.0) -> float:
+    """Nominal contact half-width a of a Hertz case, which sets its refined zone.
+
+    The values (0.39, 1.0, 0.7 at radius 8 for cases A, B, C) are those of the
+    benchmark loads; a grows like sqrt(radius) at fixed load and moduli.
+    """
+    if case not in HERTZ_CASES:
+        raise ValueError(f"case must be one of {HERTZ_CASES}, got {case!r}")
+    return _HERTZ_HALF_WIDTH[case] * math.sqrt(_check_positive("radius", radius) / 8.0)
+
+
+def hertz(
+    case: str = "B",
+    refinement: int = 0,
+    radius: float = 8.0,
+    cell_type: str = "triangle",
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> TaggedMesh:
+    """Plane-strain Hertz contact: a half-cylinder pressed onto a block or a half-cylinder.
+
+    The upper body is the lower half of the disk of radius R centred at (0, R): it
+    touches y = 0 at the origin and carries the load on its flat face y = R.
+
+    * case "A": on a plate [-R, R] x [-R/2, 0] standing for a near-rigid body (a = 0.39).
+    * case "B": on an elastic block [-4R, 4R] x [-4R, 0], much larger than a = 1.
+    * case "C": on the upper half of the disk of radius R centred at (0, -R), supported
+      on its flat face y = -R (a = 0.7). The cell tag "cylinder" is the upper body and
+      "block" the lower half-cylinder, so solvers treat all cases alike.
+
+    Every body is split by the line x = 0 (tagged ``symmetry_slave`` in the upper body,
+    ``symmetry_master`` in the lower one) so a solver can stop rigid horizontal motion
+    there. With a from :func:`hertz_half_width`, the element size is h_contact = a/5
+    (0.078, 0.2, 0.14 for A, B, C at R = 8) on both contact surfaces for |x| < min(3a,
+    R/2), R/8 on the rest of the arcs and the flat faces of the cylinders, at most R/2
+    anywhere, all divided by 2**refinement, and grows by GROWTH per unit distance.
+
+    Args:
+        case: "A", "B" or "C".
+        refinement: Halves the sizes per level.
+        radius: Cylinder radius R.
+        cell_type: "triangle" or "quadrilateral" (recombined).
+        comm: Communicator of the mesh.
+
+    Returns:
+        The mesh with cells "cylinder", "block" and facets "contact_slave" (whole arc of
+        the upper cylinder), "contact_master" (top of the block, or arc of the lower
+        cylinder), "load" (y = R), "support" (bottom of the lower body),
+        "symmetry_slave", "symmetry_master".
+    """
+    level = _check_refinement(refinement)
+    quadrilateral = _check_cell_type(cell_type)
+    R = _check_positive("radius", radius)
+    a = hertz_half_width(case, R)
+    scale = 0.5**level
+    x_zone = min(3.0 * a, 0.5 * R)
+    h_contact = a / 5.0 * scale
+    h_arc = R / 8.0 * scale
+    h_max = R / 2.0 * scale
+    markers = _numbered(
+        ["cylinder", "block"],
+        ["contact_slave", "contact_master", "load", "support", "symmetry_slave", "symmetry_master"],
+    )
+
+    def half_disk(m: _Model, sign: float) -> dict[str, list[int]]:
+        """Half disk centred at (0, sign R) whose arc passes through the origin."""
+        y_zone = sign * (R - math.sqrt(R * R - x_zone * x_zone))
+        centre = m.point(0.0, sign * R)
+        left, right = m.point(-R, sign * R), m.point(R, sign * R)
+        zone_left, zone_right = m.point(-x_zone, y_zone), m.point(x_zone, y_zone)
+        origin = m.point(0.0, 0.0)
+        arcs = [
+            m.arc(left, centre, zone_left),
+            m.arc(zone_left, centre, origin),
+            m.arc(origin, centre, zone_right),
+            m.arc(zone_right, centre, right),
+        ]
+        flats = [m.line(left, centre), m.line(centre, right)]
+        symmetry = m.line(origin, centre)
+        surfaces = [
+            m.surface([arcs[0], arcs[1], symmetry, flats[0]]),
+            m.surface([arcs[2], arcs[3], flats[1], symmetry]),
+        ]
+        m.refine_near(arcs[1:3], h_contact)
+        m.refine_near(arcs + flats, h_arc)
+        return {"surfaces": surfaces, "arc": arcs, "flat": flats, "symmetry": [symmetry]}
+
+    def block(m: _Model, half_width: float, height: float) -> dict[str, list[int]]:
+        top = [m.point(x, 0.0) for x in (-half_width, -x_zone, 0.0, x_zone, half_width)]
+        bottom = [m.point(x, -height) for x in (-half_width, 0.0, half_width)]
+        top_lines = [m.line(p, q) for p, q in zip(top[:-1], top[1:])]
+        bottom_lines = [m.line(bottom[0], bottom[1]), m.line(bottom[1], bottom[2])]
+        symmetry = m.line(top[2], bottom[1])
+        sides = [m.line(bottom[0], top[0]), m.line(top[4], bottom[2])]
+        surfaces = [
+            m.surface([*top_lines[:2], symmetry, bottom_lines[0], sides[0]]),
+            m.surface([*top_lines[2:], sides[1], bottom_lines[1], symmetry]),
+        ]
+        m.refine_near(top_lines[1:3], h_contact)
+        return {"surfaces": surfaces, "top": top_lines, "bottom": bottom_lines,
+                "symmetry": [symmetry]}
+
+    def construct(m: _Model) -> None:
+        upper = half_disk(m, 1.0)
+        if case == "C":
+            lower = half_disk(m, -1.0)
+            master, support = lower["arc"], lower["flat"]
+        else:
+            size = (R, 0.5 * R) if case == "A" else (4.0 * R, 4.0 * R)
+            lower = block(m, *size)
+            master, support = lower["top"], lower["bottom"]
+        m.mesh(
+            cells={markers["cylinder"]: upper["surfaces"], markers["block"]: lower["surfaces"]},
+            facets={
+                markers["contact_slave"]: upper["arc"],
+                markers["contact_master"]: master,
+                markers["load"]: upper["flat"],
+                markers["support"]: support,
+                markers["symmetry_slave"]: upper["symmetry"],
+                markers["symmetry_master"]: lower["symmetry"],
+            },
+            names=_names(markers),
+            h_max=h_max,
+            quadrilateral=quadrilateral,
+        )
+
+    data = _build(comm, f"hertz_{case}", construct)
+    return _tagged(data, markers, {}, h_contact)
+
+
+def patch_test(
+    ratio: Sequence[int] = (3, 2),
+    slave: str = "top",
+    refinement: int = 0,
+    cell_type: str = "triangle",
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> TaggedMesh:
+    """Contact patch test: a punch [4, 6] x [5, 7] on a foundation [0, 8] x [0, 5].
+
+    Both bodies are structured. Along the interface x in [4, 6], y = 5 the punch has
+    n_punch = ratio[0] * 2**refinement elements and the foundation n_foundation =
+    ratio[1] * 2**refinement, so non-matching interfaces are chosen exactly. Every other
+    element is close to square: the foundation uses the interface spacing 2/n_foundation
+    everywhere (2 n_foundation elements on [0, 4], n_foundation on [6, 8], about
+    2.5 n_foundation in height; it has nodes at x = 4 and x = 6), the punch 2/n_punch.
+
+    Args:
+        ratio: (n_punch, n_foundation) at refinement 0, integers >= 1.
+        slave: "top" makes the punch bottom the slave surface, "bottom" the foundation.
+        refinement: Doubles the element counts per level.
+        cell_type: "triangle" or "quadrilateral".
+        comm: Communicator of the mesh.
+
+    Returns:
+        The mesh with cells "punch", "foundation" and facets "punch_contact",
+        "foundation_contact", "punch_top", "foundation_top_free" (y = 5 outside [4, 6]),
+        "foundation_bottom"; ``h_contact`` is the slave's element size.
+    """
+    n_punch, n_foundation = _check_ratio(ratio)
+    level = _check_refinement(refinement)
+    quadrilateral = _check_cell_type(cell_type)
+    if slave not in ("top", "bottom"):
+        raise ValueError(f"slave must be 'top' or 'bottom', got {slave!r}")
+    n_punch *= 2**level
+    n_foundation *= 2**level
+    n_height = max(1, round(2.5 * n_foundation))
+    markers = _numbered(
+        ["punch", "foundation"],
+        ["punch_contact", "foundation_contact", "punch_top", "foundation_top_free",
+         "foundation_bottom"],
+    )
+    if slave == "top":
+        aliases = {"contact_slave": "punch_contact", "contact_master": "foundation_contact"}
+        h_contact = 2.0 / n_punch
+    else:
+        aliases = {"contact_slave": "foundation_contact", "contact_master": "punch_contact"}
+        h_contact = 2.0 / n_foundation
+
+    def construct(m: _Model) -> None:
+        xs = (0.0, 4.0, 6.0, 8.0)
+        counts = (2 * n_foundation, n_foundation, n_foundation)
+        bottom = [m.point(x, 0.0) for x in xs]
+        top = [m.point(x, 5.0) for x in xs]
+        verticals = [m.line(b, t, n_height + 1) for b, t in zip(bottom, top)]
+        bottoms = [m.line(bottom[i], bottom[i + 1], counts[i] + 1) for i in range(3)]
+        tops = [m.line(top[i], top[i + 1], counts[i] + 1) for i in range(3)]
+        foundation = [
+            m.surface([bottoms[i], verticals[i + 1], tops[i], verticals[i]], transfinite=True)
+            for i in range(3)
+        ]
+        corners = [m.point(x, y) for x, y in ((4.0, 5.0), (6.0, 5.0), (6.0, 7.0), (4.0, 7.0))]
+        punch_bottom = m.line(corners[0], corners[1], n_punch + 1)
+        punch_right = m.line(corners[1], corners[2], n_punch + 1)
+        punch_top = m.line(corners[2], corners[3], n_punch + 1)
+        punch_left = m.line(corners[3], corners[0], n_punch + 1)
+        punch = m.surface([punch_bottom, punch_right, punch_top, punch_left], transfinite=True)
+        m.mesh(
+            cells={markers["punch"]: [punch], markers["foundation"]: foundation},
+            facets={
+                markers["punch_contact"]: [punch_bottom],
+                markers["foundation_contact"]: [tops[1]],
+                markers["punch_top"]: [punch_top],
+                markers["foundation_top_free"]: [tops[0], tops[2]],
+                markers["foundation_bottom"]: bottoms,
+            },
+            names=_names(markers),
+            h_max=8.0,
+            quadrilateral=quadrilateral,
+        )
+
+    data = _build(comm, "patch_test", construct)
+    return _tagged(data, markers, aliases, h_contact)
+
+
+def ironing(
+    refinement: int = 0,
+    cell_type: str = "triangle",
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> TaggedMesh:
+    """Ironing: a die with a rounded bottom above an elastic block [0, 12] x [0, 4].
+
+    The die spans x in [0.2, 1.4]; its bottom is a circular arc of radius 0.75 whose
+    lowest point (0.8, 4.2) leaves an initial gap of 0.2, its side walls are vertical up
+    to the arc's ends (y = 4.5) and its top is flat at y = 5.2. Element sizes at
+    refinement 0: 0.05 on the die arc (h_contact), 0.1 along the whole block top (the
+    die slides along it), growing by GROWTH with distance up to 0.8; all divided by
+    2**refinement.
+
+    Args:
+        refinement: Halves the sizes per level.
+        cell_type: "triangle" or "quadrilateral".
+        comm: Communicator of the mesh.
+
+    Returns:
+        The mesh with cells "die", "block" and facets "die_contact" (the arc),
+        "block_contact" (y = 4), "die_top", "block_bottom"; contact_slave is the die arc.
+    """
+    level = _check_refinement(refinement)
+    quadrilateral = _check_cell_type(cell_type)
+    scale = 0.5**level
+    h_die, h_block, h_max = 0.05 * scale, 0.1 * scale, 0.8 * scale
+    markers = _numbered(
+        ["die", "block"], ["die_contact", "block_contact", "die_top", "block_bottom"]
+    )
+    aliases = {"contact_slave": "die_contact", "contact_master": "block_contact"}
+    radius, centre_x, lowest = 0.75, 0.8, 4.2
+    centre_y = lowest + radius
+    arc_end_y = centre_y - math.sqrt(radius**2 - 0.6**2)
+
+    def construct(m: _Model) -> None:
+        b = [m.point(x, y) for x, y in ((0.0, 0.0), (12.0, 0.0), (12.0, 4.0), (0.0, 4.0))]
+        block_bottom, block_right = m.line(b[0], b[1]), m.line(b[1], b[2])
+        block_top, block_left = m.line(b[2], b[3]), m.line(b[3], b[0])
+        block = m.surface([block_bottom, block_right, block_top, block_left])
+        m.refine_near([block_top], h_block)
+
+        centre = m.point(centre_x, centre_y)
+        arc_left, bottom, arc_right = (
+            m.point(centre_x - 0.6, arc_end_y),
+            m.point(centre_x, lowest),
+            m.point(centre_x + 0.6, arc_end_y),
+        )
+        top_left, top_right = m.point(centre_x - 0.6, 5.2), m.point(centre_x + 0.6, 5.2)
+        arcs = [m.arc(arc_left, centre, bottom), m.arc(bottom, centre, arc_right)]
+        walls = [m.line(arc_right, top_right), m.line(top_left, arc_left)]
+        die_top = m.line(top_right, top_left)
+        die = m.surface([*arcs, walls[0], die_top, walls[1]])
+        m.refine_near(arcs, h_die)
+        m.mesh(
+            cells={markers["die"]: [die], markers["block"]: [block]},
+            facets={
+                markers["die_contact"]: arcs,
+                markers["block_contact"]: [block_top],
+                markers["die_top"]: [die_top],
+                markers["block_bottom"]: [block_bottom],
+            },
+            names=_names(markers),
+            h_max=h_max,
+            quadrilateral=quadrilateral,
+        )
+
+    data = _build(comm, "ironing", construct)
+    return _tagged(data, markers, aliases, h_die)
+
+
+def rings(
+    refinement: int = 0,
+    inner_radius: float = 0.8,
+    outer_radius: float = 1.0,
+    gap: float = 0.0,
+    cell_type: str = "triangle",
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> TaggedMesh:
+    """Two equal rings (annuli) one above the other, touching at the origin when gap = 0.
+
+    Centres (0, c) and (0, -c) with c = outer_radius + gap/2. With t = outer_radius -
+    inner_radius, the element size is t/8 (h_contact) on the outer circles within 30
+    degrees of the contact points, t/2 on the rest of the circles and at most t/2
+    anywhere, all divided by 2**refinement, growing by GROWTH with distance.
+
+    Args:
+        refinement: Halves the sizes per level.
+        inner_radius: Radius of the holes, > 0.
+        outer_radius: Outer radius, > inner_radius.
+        gap: Initial distance between the rings, >= 0.
+        cell_type: "triangle" or "quadrilateral".
+        comm: Communicator of the mesh.
+
+    Returns:
+        The mesh with cells "ring_top", "ring_bottom" and facets "ring_top_outer",
+        "ring_bottom_outer", "ring_top_inner", "ring_bottom_inner"; contact_slave is the
+        top ring's outer circle.
+    """
+    level = _check_refinement(refinement)
+    quadrilateral = _check_cell_type(cell_type)
+    r_in = _check_positive("inner_radius", inner_radius)
+    r_out = _check_positive("outer_radius", outer_radius)
+    if r_in >= r_out:
+        raise ValueError(f"inner_radius {inner_radius} must be below outer_radius {outer_radius}")
+    gap = float(gap)
+    if not math.isfinite(gap) or gap < 0.0:
+        raise ValueError(f"gap must be a non-negative number, got {gap!r}")
+    scale = 0.5**level
+    thickness = r_out - r_in
+    h_contact, h_max = thickness / 8.0 * scale, thickness / 2.0 * scale
+    markers = _numbered(
+        ["ring_top", "ring_bottom"],
+        ["ring_top_outer", "ring_bottom_outer", "ring_top_inner", "ring_bottom_inner"],
+    )
+    aliases = {"contact_slave": "ring_top_outer", "contact_master": "ring_bottom_outer"}
+    zone = math.radians(30.0)
+
+    def ring(m: _Model, sign: float) -> tuple[int, list[int], list[int]]:
+        """Ring centred at (0, sign c); ``sign`` also points away from the other ring."""
+        cy = sign * (r_out + 0.5 * gap)
+        centre = m.point(0.0, cy)
+
+        def on_circle(radius: float, angle: float) -> int:
+            return m.point(radius * math.sin(angle), cy - sign * radius * math.cos(angle))
+
+        near = on_circle(r_out, 0.0)
+        zone_a, zone_b = on_circle(r_out, zone), on_circle(r_out, -zone)
+        far = on_circle(r_out, math.pi)
+        outer = [
+            m.arc(near, centre, zone_a),
+            m.arc(zone_a, centre, far),
+            m.arc(far, centre, zone_b),
+            m.arc(zone_b, centre, near),
+        ]
+        inner_points = [on_circle(r_in, angle) for angle in (0.0, 0.5 * math.pi, math.pi)]
+        inner_points.append(on_circle(r_in, -0.5 * math.pi))
+        inner = [
+            m.arc(inner_points[i], centre, inner_points[(i + 1) % 4]) for i in range(4)
+        ]
+        outer_loop = m.geo.addCurveLoop(outer, reorient=True)
+        inner_loop = m.geo.addCurveLoop(inner, reorient=True)
+        surface = m.geo.addPlaneSurface([outer_loop, inner_loop])
+        m.refine_near([outer[0], outer[3]], h_contact)
+        m.refine_near(outer + inner, h_max)
+        return surface, outer, inner
+
+    def construct(m: _Model) -> None:
+        top, top_outer, top_inner = ring(m, 1.0)
+        bottom, bottom_outer, bottom_inner = ring(m, -1.0)
+        m.mesh(
+            cells={markers["ring_top"]: [top], markers["ring_bottom"]: [bottom]},
+            facets={
+                markers["ring_top_outer"]: top_outer,
+                markers["ring_bottom_outer"]: bottom_outer,
+                markers["ring_top_inner"]: top_inner,
+                markers["ring_bottom_inner"]: bottom_inner,
+            },
+            names=_names(markers),
+            h_max=h_max,
+            quadrilateral=quadrilateral,
+        )
+
+    data = _build(comm, "rings", construct)
+    return _tagged(data, markers, aliases, h_contact)
+
+
+def tied_blocks(
+    ratio: Sequence[int] = (3, 4),
+    refinement: int = 0,
+    cell_type: str = "triangle",
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> TaggedMesh:
+    """The unit square cut at y = 0.5 into two separately meshed structured blocks.
+
+    The lower block [0, 1] x [0, 0.5] has n_lower = ratio[0] * 2**refinement elements
+    along x, the upper block [0, 1] x [0.5, 1] n_upper = ratio[1] * 2**refinement; each
+    has max(1, round(n/2)) elements along y, so elements are about square. It is the
+    mesh of mortar tying tests: the solution of a problem on the whole square must be
+    reproduced across the non-matching interface.
+
+    Args:
+        ratio: (n_lower, n_upper) at refinement 0, integers >= 1.
+        refinement: Doubles the element counts per level.
+        cell_type: "triangle" or "quadrilateral".
+        comm: Communicator of the mesh.
+
+    Returns:
+        The mesh with cells "lower", "upper" and facets "lower_interface",
+        "upper_interface", "boundary" (the whole outer boundary of the square);
+        contact_slave is the upper interface (the finer one when ratio[1] > ratio[0]).
+    """
+    n_lower, n_upper = _check_ratio(ratio)
+    level = _check_refinement(refinement)
+    quadrilateral = _check_cell_type(cell_type)
+    n_lower *= 2**level
+    n_upper *= 2**level
+    markers = _numbered(["lower", "upper"], ["lower_interface", "upper_interface", "boundary"])
+    aliases = {"contact_slave": "upper_interface", "contact_master": "lower_interface"}
+
+    def block(m: _Model, y0: float, n: int) -> tuple[int, int, int, list[int]]:
+        n_y = max(1, round(0.5 * n))
+        p = [m.point(x, y) for x, y in ((0.0, y0), (1.0, y0), (1.0, y0 + 0.5), (0.0, y0 + 0.5))]
+        bottom, right = m.line(p[0], p[1], n + 1), m.line(p[1], p[2], n_y + 1)
+        top, left = m.line(p[2], p[3], n + 1), m.line(p[3], p[0], n_y + 1)
+        surface = m.surface([bottom, right, top, left], transfinite=True)
+        return surface, bottom, top, [left, right]
+
+    def construct(m: _Model) -> None:
+        lower, lower_bottom, lower_top, lower_sides = block(m, 0.0, n_lower)
+        upper, upper_bottom, upper_top, upper_sides = block(m, 0.5, n_upper)
+        m.mesh(
+            cells={markers["lower"]: [lower], markers["upper"]: [upper]},
+            facets={
+                markers["lower_interface"]: [lower_top],
+                markers["upper_interface"]: [upper_bottom],
+                markers["boundary"]: [lower_bottom, *lower_sides, upper_top, *upper_sides],
+            },
+            names=_names(markers),
+            h_max=1.0,
+            quadrilateral=quadrilateral,
+        )
+
+    data = _build(comm, "tied_blocks", construct)
+    return _tagged(data, markers, aliases, 1.0 / n_upper)
+
+
+BUILDERS: dict[str, Callable[..., TaggedMesh]] = {
+    "hertz": hertz,
+    "patch_test": patch_test,
+    "ironing": ironing,
+    "rings": rings,
+    "tied_blocks": tied_blocks,
+}
+"""The builders by name, as the command line knows them."""
+
+
+def write_xdmf(tagged: TaggedMesh, path: str | pathlib.Path) -> None:
+    """Write the mesh and its cell and facet tags to one XDMF file (with its .h5).
+
+    The markers and h_contact go to ``<path without suffix>.markers.json`` since XDMF
+    keeps only the tag values.
+    """
+    path = pathlib.Path(path)
+    mesh = tagged.mesh
+    comm = mesh.comm
+    if comm.rank == 0:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    comm.Barrier()
+    mesh.name = "mesh"
+    tagged.cell_tags.name = "cell_tags"
+    tagged.facet_tags.name = "facet_tags"
+    mesh.topology.create_connectivity(mesh.topology.dim - 1, mesh.topology.dim)
+    with dolfinx.io.XDMFFile(comm, str(path), "w") as xdmf:
+        xdmf.write_mesh(mesh)
+        xdmf.write_meshtags(tagged.cell_tags, mesh.geometry)
+        xdmf.write_meshtags(tagged.facet_tags, mesh.geometry)
+    if comm.rank == 0:
+        info = {"markers": tagged.markers, "h_contact": tagged.h_contact}
+        path.with_suffix(".markers.json").write_text(json.dumps(info, indent=2) + "\n")
+
+
+def _main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(
+        prog="python3 -m dolfinx_mortar.meshes",
+        description="Build a benchmark mesh and write it with its tags to XDMF (ParaView).",
+    )
+    parser.add_argument("name", choices=sorted(BUILDERS))
+    parser.add_argument("--refinement", type=int, default=0)
+    parser.add_argument("--cell-type", default="triangle", choices=CELL_TYPES)
+    parser.add_argument("--case", default="B", choices=HERTZ_CASES, help="hertz only")
+    parser.add_argument("--output", required=True, type=pathlib.Path, help="an .xdmf file")
+    args = parser.parse_args(argv)
+    options = {"refinement": args.refinement, "cell_type": args.cell_type}
+    if args.name == "hertz":
+        options["case"] = args.case
+    try:
+        tagged = BUILDERS[args.name](**options)
+    except ValueError as error:
+        parser.error(str(error))
+    write_xdmf(tagged, args.output)
+    cells = tagged.mesh.topology.index_map(tagged.mesh.topology.dim).size_global
+    if tagged.mesh.comm.rank == 0:
+        print(f"{args.output}: {cells} cells, h_contact {tagged.h_contact:g}")
+        print(json.dumps(tagged.markers))
+
+
+if __name__ == "__main__":
+    _main()

@@ -1,0 +1,695 @@
+"""Frictionless mortar contact of deforming bodies, solved with PETSc SNES.
+
+:class:`ContactProblem` couples a bulk residual F(u; v) given in UFL with one
+or more mortar contact pairs. The unknowns are the displacements u and one
+normal multiplier z_j >= 0 (contact pressure) per slave node, assembled in
+one AIJ matrix (layout [u | z_1 | z_2 ...] per rank) and solved by Newton's
+method in PETSc SNES with our own residual and Jacobian callbacks:
+
+    R_u = F(u) - sum_pairs B(u)^T z                      (paper, eq. 1)
+    R_z = C(z, u)                                         (paper, section 5)
+
+B_j = d g~_j / dx at frozen integrals (-Dn on slave dofs, +Mn on master dofs)
+pushes the slave along -n and the master along +n. The multiplier rows C
+depend on the enforcement:
+
+* ``lagrange`` + ``semismooth``: C_j = z_j - max(0, z_j - c_n g~_j); the active
+  set {j: z_j - c_n g~_j > 0} is re-decided in every Newton iteration, and the
+  Jacobian is the exact (generalized) derivative, so Newton converges
+  quadratically once the set has settled and the solution does not depend on
+  c_n.
+* ``lagrange`` + ``fixed-point``: the active set is frozen during a full
+  Newton solve (rows c_n g~_j if active, z_j if not), then updated from the
+  averaged nodal pressure and weighted gap; repeated until it stops changing.
+* ``penalty``: z_j = max(0, -eps g~_j / A_j) (A_j = int Phi_j, so that a
+  uniform penetration d gives the pressure eps d), written as the row
+  z_j - max(0, -eps g~_j/A_j) and linearized exactly.
+* ``augmented``: z_j = max(0, lam_j - eps g~_j / A_j) with Uzawa updates
+  lam <- z after each Newton solve, until lam stops changing: the limit is the
+  Lagrange solution at any fixed eps.
+
+Slave nodes that no master facet covers cannot become active and stay
+inactive (z_j = 0) without any mortar work. With no active node the z-rows
+are identity rows, so the system is regular whenever the bulk problem is.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+import typing
+
+import dolfinx
+import dolfinx.fem.petsc
+import numpy as np
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from . import compat, kernels
+from .layout import BlockLayout, CooMatrix, csr_to_coo, dirichlet_dofs
+from .mortar import MortarInterface
+
+logger = logging.getLogger("dolfinx_mortar")
+
+METHODS = ("lagrange", "penalty", "augmented")
+ACTIVE_SET_STRATEGIES = ("semismooth", "fixed-point")
+
+
+@dataclasses.dataclass(frozen=True)
+class ContactPair:
+    """Two facet-tagged surfaces that may come into contact.
+
+    Attributes:
+        facet_tags: meshtags of the facets.
+        slave: tag of the slave (non-mortar) surface, which carries the multipliers.
+        master: tag of the master (mortar) surface.
+        name: for logs and reports.
+    """
+
+    facet_tags: dolfinx.mesh.MeshTags
+    slave: int
+    master: int
+    name: str = ""
+
+
+@dataclasses.dataclass
+class SolveReport:
+    """What one call of :meth:`ContactProblem.solve` did."""
+
+    converged: bool
+    reason: int
+    iterations: int
+    residuals: list[float]
+    active: int
+    outer_iterations: int = 1
+    timings: dict[str, float] = dataclasses.field(default_factory=dict)
+
+
+class ContactProblem:
+    """Mortar contact problem with multipliers, penalty or augmented Lagrange.
+
+    Args:
+        F: bulk residual form F(u; v) (internal minus external virtual work).
+        u: displacement Function on a P1 vector space.
+        bcs: Dirichlet conditions on u.
+        pairs: the contact pairs.
+        J: Jacobian form of F (default: its Gateaux derivative).
+        method: ``lagrange`` (default), ``penalty`` or ``augmented``.
+        integration: ``segment`` (default) or ``element`` (+ num_gauss_points).
+        normals: ``averaged`` (default), ``slave`` or ``master``.
+        active_set: ``semismooth`` (default) or ``fixed-point`` (lagrange only).
+        multipliers: ``standard`` (default) or ``dual`` basis.
+        c_n: complementarity parameter; default about E/h, estimated from the
+            bulk stiffness at the slave nodes and the slave facet length.
+        penalty: eps of penalty and augmented Lagrange; default the same E/h.
+        augmented_tolerance: Uzawa stops when max|lam_new - lam| <= this
+            times max|lam|.
+        max_outer_iterations: of the fixed-point and Uzawa loops.
+        search_margin: of the contact search (default 2 slave facet lengths).
+        configuration: ``current`` (finite deformation, default) or
+            ``reference`` (small strain: mortar integrals on the undeformed
+            surfaces, to pair with linear elasticity).
+        petsc_options: SNES/KSP options (defaults: newtonls, full steps,
+            MUMPS LU); the user's options database with the prefix wins.
+        petsc_options_prefix: prefix of those options.
+    """
+
+    def __init__(
+        self,
+        F: ufl.Form,
+        u: dolfinx.fem.Function,
+        bcs: list,
+        pairs: typing.Sequence[ContactPair],
+        *,
+        J: ufl.Form | None = None,
+        method: str = "lagrange",
+        integration: str = "segment",
+        num_gauss_points: int | None = None,
+        normals: str = "averaged",
+        active_set: str = "semismooth",
+        multipliers: str = "standard",
+        c_n: float | None = None,
+        penalty: float | None = None,
+        augmented_tolerance: float = 1e-8,
+        max_outer_iterations: int = 50,
+        search_margin: float | None = None,
+        configuration: str = "current",
+        petsc_options: dict | None = None,
+        petsc_options_prefix: str = "dolfinx_mortar_",
+    ):
+        _check_choice("method", method, METHODS)
+        _check_choice("active_set", active_set, ACTIVE_SET_STRATEGIES)
+        _check_choice("integration", integration, kernels.INTEGRATION_OPTIONS)
+        _check_choice("normals", normals, kernels.NORMAL_OPTIONS)
+        _check_choice("multipliers", multipliers, kernels.BASIS_OPTIONS)
+        if active_set == "fixed-point" and method != "lagrange":
+            raise ValueError("active_set='fixed-point' applies to method='lagrange' only")
+        if not pairs:
+            raise ValueError("ContactProblem needs at least one ContactPair")
+        for value, name in ((c_n, "c_n"), (penalty, "penalty")):
+            if value is not None and not value > 0:
+                raise ValueError(f"{name} must be positive, got {value}")
+
+        self.u = u
+        self.V = u.function_space
+        self.comm: MPI.Intracomm = self.V.mesh.comm
+        self.bcs = list(bcs)
+        self.method = method
+        self.active_set_strategy = active_set
+        self.augmented_tolerance = augmented_tolerance
+        self.max_outer_iterations = max_outer_iterations
+        self.F_form = dolfinx.fem.form(F)
+        if J is None:
+            J = ufl.derivative(F, u, ufl.TrialFunction(self.V))
+        self.J_form = dolfinx.fem.form(J)
+
+        self.pairs = list(pairs)
+        self.interfaces = [
+            MortarInterface(
+                self.V, pair.facet_tags, pair.slave, pair.master, normals=normals,
+                integration=integration, basis=multipliers,
+                num_gauss_points=num_gauss_points, search_margin=search_margin,
+                configuration=configuration,
+            )
+            for pair in self.pairs
+        ]
+        self._check_slave_body()
+        bs = self.V.dofmap.index_map_bs
+        self._fixed_dofs = dirichlet_dofs(self.bcs, self.V)
+        fixed_blocks = np.unique(self._fixed_dofs // bs)
+        fully_fixed = fixed_blocks[np.all(np.isin(fixed_blocks[:, None] * bs + np.arange(bs),
+                                                  self._fixed_dofs), axis=1)]
+        for interface in self.interfaces:
+            interface.set_crosspoints(fully_fixed)
+
+        self.layout = BlockLayout(self.comm, self.interfaces[0].num_owned_dofs,
+                                  [i.num_owned_multipliers for i in self.interfaces])
+        self.multipliers = [i.create_multiplier_vector() for i in self.interfaces]
+        self._augmented = [np.zeros(i.num_owned_multipliers) for i in self.interfaces]
+        self._frozen_active: list[np.ndarray] | None = None
+        self._row_coefficients = [
+            {name: i.create_multiplier_vector() for name in ("gap", "area")}
+            for i in self.interfaces
+        ]
+        self.active: list[np.ndarray] = [np.zeros(i.num_owned_multipliers, dtype=bool)
+                                         for i in self.interfaces]
+        self.gaps: list[np.ndarray] = [np.zeros(i.num_owned_multipliers) for i in self.interfaces]
+        self.areas: list[np.ndarray] = [np.zeros(i.num_owned_multipliers) for i in self.interfaces]
+
+        self._b_u = compat.create_vector(self.F_form)
+        self._K = compat.create_matrix(self.J_form)
+        self._system: CooMatrix | None = None
+        self._system_versions: tuple = ()
+        self.x = self.layout.create_vector()
+        self.b = self.layout.create_vector()
+        self._read_state_into_x()
+
+        self.c_n = float(c_n) if c_n is not None else self._stiffness_scale()
+        self.penalty = float(penalty) if penalty is not None else self._stiffness_scale()
+        self.timings = {"bulk assembly": 0.0, "contact search": 0.0,
+                        "mortar integration": 0.0, "linear solve": 0.0}
+        self._setup_snes(petsc_options or {}, petsc_options_prefix)
+
+    # -- setup -------------------------------------------------------------
+
+    def _check_slave_body(self) -> None:
+        """A slave facet and a master facet of one pair must not share a cell."""
+        for pair, interface in zip(self.pairs, self.interfaces, strict=True):
+            shared = np.intersect1d(interface.slave.cells, interface.master.cells).size
+            if self.comm.allreduce(shared, op=MPI.SUM):
+                raise ValueError(
+                    f"contact pair {pair.name or (pair.slave, pair.master)}: slave and master "
+                    "facets belong to the same cells; the slave surface is on the wrong body?"
+                )
+
+    def _stiffness_scale(self) -> float:
+        """About E/h: mean bulk stiffness diagonal at slave dofs over mean slave facet length."""
+        self._K.zeroEntries()
+        dolfinx.fem.petsc.assemble_matrix(self._K, self.J_form, bcs=self.bcs)
+        self._K.assemble()
+        diagonal = self._K.getDiagonal()
+        start = self._K.getOwnershipRange()[0]
+        values, lengths = [], []
+        for interface in self.interfaces:
+            owned = interface.slave.node_owned
+            dofs = interface.slave.node_dofs()[owned].reshape(-1) - start
+            values.append(np.abs(diagonal.getArray()[dofs]))
+            X = interface.slave.reference_coordinates[interface.slave.facets]
+            lengths.append(np.linalg.norm(X[:, 1] - X[:, 0], axis=1))
+        sums = self.comm.allreduce(
+            np.array([sum(v.sum() for v in values), sum(v.size for v in values),
+                      sum(v.sum() for v in lengths), sum(v.size for v in lengths)]), op=MPI.SUM)
+        diagonal.destroy()
+        if sums[1] == 0 or sums[3] == 0 or not sums[0] > 0:
+            raise ValueError("cannot estimate the stiffness scale; pass c_n and penalty")
+        return float((sums[0] / sums[1]) / (sums[2] / sums[3]))
+
+    def _setup_snes(self, petsc_options: dict, prefix: str) -> None:
+        snes = PETSc.SNES().create(self.comm)
+        snes.setOptionsPrefix(prefix)
+        defaults = {
+            "snes_type": "newtonls",
+            "snes_linesearch_type": "basic",
+            "snes_rtol": 1e-10,
+            "snes_atol": 1e-10,
+            "snes_stol": 0.0,
+            "snes_max_it": 30,
+            "ksp_type": "preonly",
+            "pc_type": "lu",
+            "pc_factor_mat_solver_type": "mumps",
+        }
+        defaults.update(petsc_options)
+        options = PETSc.Options()
+        added = []
+        for key, value in defaults.items():
+            if not options.hasName(f"{prefix}{key}"):
+                options[f"{prefix}{key}"] = value
+                added.append(key)
+        self._residual_history: list[float] = []
+        snes.setFunction(self._residual, self.b)
+        self._assemble_system()  # creates the matrix with its pattern
+        snes.setJacobian(self._jacobian, self._system.mat)
+        snes.setMonitor(lambda _snes, _it, norm: self._residual_history.append(float(norm)))
+        snes.setFromOptions()
+        snes.getKSP().setFromOptions()
+        for key in added:
+            options.delValue(f"{prefix}{key}")
+        self.snes = snes
+
+    # -- state -------------------------------------------------------------
+
+    def _read_state_into_x(self) -> None:
+        array = self.x.getArray()
+        owned = self.layout.num_u[self.comm.rank]
+        array[self.layout.owned_u] = self.u.x.array[:owned]
+        for field, z in enumerate(self.multipliers, start=1):
+            array[self.layout.owned(field)] = z.getArray(readonly=True)
+
+    def _write_x_into_state(self, x: PETSc.Vec) -> None:
+        array = x.getArray(readonly=True)
+        owned = self.layout.num_u[self.comm.rank]
+        self.u.x.array[:owned] = array[self.layout.owned_u]
+        self.u.x.scatter_forward()
+        for field, z in enumerate(self.multipliers, start=1):
+            z.getArray()[:] = array[self.layout.owned(field)]
+
+    def _inverted(self) -> bool:
+        """Collective: does any cell have a non-positive Jacobian determinant?"""
+        mesh = self.V.mesh
+        geometry = compat.geometry_dofmap(mesh)
+        num_cells = mesh.topology.index_map(mesh.topology.dim).size_local
+        X = mesh.geometry.x[:, :2][geometry[:num_cells]]
+        blocks = self.V.dofmap.list[:num_cells]
+        x = X + self.u.x.array.reshape(-1, 2)[blocks]
+        if geometry.shape[1] == 3:
+            corners = [(0, 1, 2)]
+        else:
+            corners = [(0, 1, 2), (1, 3, 0), (3, 2, 1), (2, 0, 3)]
+        bad = False
+        for a, b, c in corners:
+            current = _cross(x[:, b] - x[:, a], x[:, c] - x[:, a])
+            reference = _cross(X[:, b] - X[:, a], X[:, c] - X[:, a])
+            bad |= bool(np.any(current * reference <= 0.0))
+        return bool(self.comm.allreduce(bad, op=MPI.LOR))
+
+    # -- contact -----------------------------------------------------------
+
+    def _update_contact(self) -> None:
+        """Geometry, gaps, areas and active sets at the current state."""
+        start = time.perf_counter()
+        searching = 0.0
+        for k, interface in enumerate(self.interfaces):
+            before = interface.statistics.time_search
+            interface.update(self.u)
+            searching += interface.statistics.time_search - before
+            q = interface.quantities
+            gap_vector = self._row_coefficients[k]["gap"]
+            area_vector = self._row_coefficients[k]["area"]
+            for vector, values in ((gap_vector, q.gap.value), (area_vector, q.area.value)):
+                vector.zeroEntries()
+                vector.setValues(interface.pair_multipliers.reshape(-1).astype(PETSc.IntType),
+                                 values.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
+                vector.assemble()
+            self.gaps[k] = gap_vector.getArray(readonly=True).copy()
+            self.areas[k] = area_vector.getArray(readonly=True).copy()
+            self.active[k] = self._decide_active(k)
+        self.timings["contact search"] += searching
+        self.timings["mortar integration"] += time.perf_counter() - start - searching
+
+    def _covered(self, k: int) -> np.ndarray:
+        interface = self.interfaces[k]
+        scale = interface.reuse.margin * 1e-10
+        return self.areas[k] > scale
+
+    def _decide_active(self, k: int) -> np.ndarray:
+        z = self.multipliers[k].getArray(readonly=True)
+        covered = self._covered(k)
+        if self.method == "lagrange":
+            if self.active_set_strategy == "fixed-point" and self._frozen_active is not None:
+                return self._frozen_active[k] & covered
+            # ties go to active, and gaps within rounding of zero count as
+            # ties: bodies that touch at the start hold each other
+            touching = np.abs(self.gaps[k]) <= 1e-12 * self.interfaces[k].reuse.margin * self.areas[k]
+            gap = np.where(touching, 0.0, self.gaps[k])
+            return covered & (z - self.c_n * gap >= 0.0)
+        normalized = np.where(covered, self.gaps[k] / np.where(covered, self.areas[k], 1.0), 0.0)
+        return covered & (self._augmented[k] - self.penalty * normalized > 0.0)
+
+    def _multiplier_rows(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Residual C_j and coefficients (alpha on dg~, beta on dA, delta on dz) of owned rows."""
+        z = self.multipliers[k].getArray(readonly=True)
+        active = self.active[k]
+        gap, area = self.gaps[k], self.areas[k]
+        alpha = np.zeros_like(z)
+        beta = np.zeros_like(z)
+        delta = np.ones_like(z)
+        residual = z.copy()
+        if self.method == "lagrange":
+            residual[active] = self.c_n * gap[active]
+            alpha[active] = self.c_n
+            delta[active] = 0.0
+        else:
+            eps = self.penalty
+            safe_area = np.where(active, area, 1.0)
+            residual[active] = (z - self._augmented[k] + eps * gap / safe_area)[active]
+            alpha[active] = (eps / safe_area)[active]
+            beta[active] = (-eps * gap / safe_area**2)[active]
+        return residual, alpha, beta, delta
+
+    # -- SNES callbacks ----------------------------------------------------
+
+    def _residual(self, snes: PETSc.SNES, x: PETSc.Vec, b: PETSc.Vec) -> None:
+        self._write_x_into_state(x)
+        if self._inverted():
+            snes.setFunctionDomainError()
+            return
+        self._update_contact()
+        start = time.perf_counter()
+        b_u = self._b_u
+        with b_u.localForm() as local:
+            local.set(0.0)
+        dolfinx.fem.petsc.assemble_vector(b_u, self.F_form)
+        dolfinx.fem.petsc.apply_lifting(b_u, [self.J_form], bcs=[self.bcs],
+                                        x0=[self.u.x.petsc_vec], alpha=-1.0)
+        b_u.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        self.timings["bulk assembly"] += time.perf_counter() - start
+        start = time.perf_counter()
+        for interface, z in zip(self.interfaces, self.multipliers, strict=True):
+            interface.contact_force(z, b_u)
+        compat.set_bc(b_u, self.bcs, self.u.x.petsc_vec, -1.0)
+        array = b.getArray()
+        array[self.layout.owned_u] = b_u.getArray(readonly=True)
+        for k in range(len(self.interfaces)):
+            array[self.layout.owned(k + 1)] = self._multiplier_rows(k)[0]
+        self.timings["mortar integration"] += time.perf_counter() - start
+
+    def _jacobian(self, snes, x, A, P) -> None:
+        self._assemble_system()
+
+    def _assemble_system(self) -> PETSc.Mat:
+        start = time.perf_counter()
+        K = self._K
+        K.zeroEntries()
+        dolfinx.fem.petsc.assemble_matrix(K, self.J_form, bcs=self.bcs)
+        K.assemble()
+        self.timings["bulk assembly"] += time.perf_counter() - start
+        start = time.perf_counter()
+        versions = tuple(i._pattern_version for i in self.interfaces)
+        blocks = [self._contact_blocks(k) for k in range(len(self.interfaces))]
+        if self._system is None or versions != self._system_versions:
+            rows, cols, _ = csr_to_coo(K)
+            all_rows = [self.layout.u(rows)] + [b[0] for b in blocks]
+            all_cols = [self.layout.u(cols)] + [b[1] for b in blocks]
+            if self._system is not None:
+                self._system.destroy()
+            self._system = self.layout.create_matrix(np.concatenate(all_rows),
+                                                     np.concatenate(all_cols))
+            self._system_versions = versions
+            if hasattr(self, "snes"):
+                self.snes.setJacobian(self._jacobian, self._system.mat)
+        values = [K.getValuesCSR()[2]] + [b[2] for b in blocks]
+        matrix = self._system.assemble(np.concatenate(values))
+        matrix.zeroRows(self.layout.u(self._fixed_dofs).astype(PETSc.IntType), diag=1.0)
+        self.timings["mortar integration"] += time.perf_counter() - start
+        return matrix
+
+    def _contact_blocks(self, k: int):
+        """COO (rows, cols, values) of pair k's blocks in the monolithic numbering."""
+        interface = self.interfaces[k]
+        layout = self.layout
+        field = k + 1
+        owned_rows = interface.multiplier_offset + np.arange(interface.num_owned_multipliers)
+        if interface.quantities is None:
+            # before the first residual evaluation: an identity block, no pairs yet
+            diagonal = layout.z(owned_rows, field)
+            return diagonal, diagonal, np.ones(diagonal.size)
+        q = interface.quantities
+        z_pair = interface.node_values(self.multipliers[k])[interface.pair_nodes[:, 1:3]]
+        coefficients = interface._force_coefficients(q)  # (n, j, 4, 2)
+        force_dofs = layout.u(interface._force_columns())  # (n, 8)
+        pair_dofs = layout.u(interface.pair_dofs)  # (n, 12)
+        pair_z = layout.z(interface.pair_multipliers, field)  # (n, 2)
+        n = force_dofs.shape[0]
+        # d(-B^T z)/du
+        tangent = -np.einsum("nj,njkcv->nkcv", z_pair, coefficients.grad).reshape(n, 8, 12)
+        # d(-B^T z)/dz
+        coupling = -coefficients.value.reshape(n, 2, 8).transpose(0, 2, 1)
+        residual, alpha, beta, delta = self._multiplier_rows(k)
+        vectors = self._row_coefficients[k]
+        vectors["gap"].getArray()[:] = alpha
+        vectors["area"].getArray()[:] = beta
+        alpha_pair = interface.node_values(vectors["gap"])[interface.pair_nodes[:, 1:3]]
+        beta_pair = interface.node_values(vectors["area"])[interface.pair_nodes[:, 1:3]]
+        constraint = (alpha_pair[:, :, None] * q.gap.grad + beta_pair[:, :, None] * q.area.grad)
+        diagonal = layout.z(owned_rows, field)
+        rows = np.concatenate([
+            np.broadcast_to(force_dofs[:, :, None], (n, 8, 12)).reshape(-1),
+            np.broadcast_to(force_dofs[:, :, None], (n, 8, 2)).reshape(-1),
+            np.broadcast_to(pair_z[:, :, None], (n, 2, 12)).reshape(-1),
+            diagonal,
+        ])
+        cols = np.concatenate([
+            np.broadcast_to(pair_dofs[:, None, :], (n, 8, 12)).reshape(-1),
+            np.broadcast_to(pair_z[:, None, :], (n, 8, 2)).reshape(-1),
+            np.broadcast_to(pair_dofs[:, None, :], (n, 2, 12)).reshape(-1),
+            diagonal,
+        ])
+        values = np.concatenate([tangent.reshape(-1), coupling.reshape(-1),
+                                 constraint.reshape(-1), delta])
+        return rows, cols, values
+
+    # -- solving -----------------------------------------------------------
+
+    def solve(self) -> SolveReport:
+        """Solve one load step from the current state (u and multipliers).
+
+        Returns a report; does not raise when Newton fails (the load stepper
+        cuts the step back), but raises for errors in the input.
+        """
+        start = time.perf_counter()
+        before = dict(self.timings)
+        self._apply_dirichlet_values()
+        self._read_state_into_x()
+        if self.method == "lagrange" and self.active_set_strategy == "semismooth":
+            report = self._newton()
+        elif self.method == "lagrange":
+            report = self._fixed_point()
+        elif self.method == "penalty":
+            self._augmented = [np.zeros_like(a) for a in self._augmented]
+            report = self._newton()
+        else:
+            report = self._uzawa()
+        total = time.perf_counter() - start
+        spent = {key: self.timings[key] - before[key] for key in self.timings}
+        spent["linear solve"] = max(0.0, total - sum(spent.values()))
+        self.timings["linear solve"] += spent["linear solve"]
+        spent["total"] = total
+        report.timings = spent
+        report.active = self.num_active()
+        return report
+
+    def _newton(self) -> SolveReport:
+        self._residual_history = []
+        self.snes.solve(None, self.x)
+        reason = self.snes.getConvergedReason()
+        self._write_x_into_state(self.x)
+        return SolveReport(converged=reason > 0, reason=reason,
+                           iterations=self.snes.getIterationNumber(),
+                           residuals=list(self._residual_history), active=0)
+
+    def _fixed_point(self) -> SolveReport:
+        """Outer loop of the fixed-point active-set strategy (paper, section 5)."""
+        self._frozen_active = None
+        self._write_x_into_state(self.x)
+        self._update_contact()
+        covered = [self._covered(k) for k in range(len(self.interfaces))]
+        z_now = [z.getArray(readonly=True) for z in self.multipliers]
+        self._frozen_active = [c & ((z > 0) | (g <= 0)) for c, z, g in
+                               zip(covered, z_now, self.gaps, strict=True)]
+        total_iterations, residuals = 0, []
+        for outer in range(1, self.max_outer_iterations + 1):
+            report = self._newton()
+            total_iterations += report.iterations
+            residuals += report.residuals
+            if not report.converged:
+                report.iterations, report.residuals, report.outer_iterations = (
+                    total_iterations, residuals, outer)
+                return report
+            changed = 0
+            new_sets = []
+            for k, interface in enumerate(self.interfaces):
+                pressure = self._averaged_pressure(k)
+                active = self._frozen_active[k].copy()
+                active[active & (pressure < 0.0)] = False
+                active[~self._frozen_active[k] & (self.gaps[k] < 0.0) & self._covered(k)] = True
+                changed += int(np.count_nonzero(active != self._frozen_active[k]))
+                new_sets.append(active)
+            changed = self.comm.allreduce(changed, op=MPI.SUM)
+            self._frozen_active = new_sets
+            if changed == 0:
+                return SolveReport(converged=True, reason=report.reason,
+                                   iterations=total_iterations, residuals=residuals,
+                                   active=0, outer_iterations=outer)
+        return SolveReport(converged=False, reason=-100, iterations=total_iterations,
+                           residuals=residuals, active=0, outer_iterations=self.max_outer_iterations)
+
+    def _averaged_pressure(self, k: int) -> np.ndarray:
+        """p_j = int N_j lambda / int N_j = (D^T z)_j / (D^T 1)_j at owned slave nodes."""
+        interface = self.interfaces[k]
+        D, _ = interface.mortar_matrices()
+        z = self.multipliers[k]
+        ones = z.duplicate()
+        ones.set(1.0)
+        weighted, weights = D.createVecRight(), D.createVecRight()
+        D.multTranspose(z, weighted)
+        D.multTranspose(ones, weights)
+        local = interface.owned_multiplier_blocks - interface.V.dofmap.index_map.local_range[0]
+        numerator = weighted.getArray(readonly=True)[local]
+        denominator = weights.getArray(readonly=True)[local]
+        for vector in (ones, weighted, weights):
+            vector.destroy()
+        return np.where(np.abs(denominator) > 0, numerator / np.where(denominator != 0, denominator, 1), 0.0)
+
+    def _uzawa(self) -> SolveReport:
+        """Augmented Lagrange: Newton at fixed lam, then lam <- z, until lam settles."""
+        total_iterations, residuals = 0, []
+        for outer in range(1, self.max_outer_iterations + 1):
+            report = self._newton()
+            total_iterations += report.iterations
+            residuals += report.residuals
+            if not report.converged:
+                report.iterations, report.residuals, report.outer_iterations = (
+                    total_iterations, residuals, outer)
+                return report
+            change, size = 0.0, 0.0
+            for k, z in enumerate(self.multipliers):
+                new = z.getArray(readonly=True).copy()
+                change = max(change, float(np.max(np.abs(new - self._augmented[k]), initial=0.0)))
+                size = max(size, float(np.max(np.abs(new), initial=0.0)))
+                self._augmented[k] = new
+            change = self.comm.allreduce(change, op=MPI.MAX)
+            size = self.comm.allreduce(size, op=MPI.MAX)
+            if change <= self.augmented_tolerance * max(size, np.finfo(float).tiny):
+                return SolveReport(converged=True, reason=report.reason,
+                                   iterations=total_iterations, residuals=residuals,
+                                   active=0, outer_iterations=outer)
+        return SolveReport(converged=False, reason=-101, iterations=total_iterations,
+                           residuals=residuals, active=0, outer_iterations=self.max_outer_iterations)
+
+    def _apply_dirichlet_values(self) -> None:
+        """Put the current boundary values into u, so Newton corrections vanish there."""
+        compat.set_bc_values(self.u, self.bcs)
+
+    # -- state for load stepping --------------------------------------------
+
+    def save_state(self) -> dict:
+        return {
+            "u": self.u.x.array.copy(),
+            "z": [z.getArray(readonly=True).copy() for z in self.multipliers],
+            "augmented": [a.copy() for a in self._augmented],
+        }
+
+    def restore_state(self, state: dict) -> None:
+        self.u.x.array[:] = state["u"]
+        for z, values in zip(self.multipliers, state["z"], strict=True):
+            z.getArray()[:] = values
+        self._augmented = [a.copy() for a in state["augmented"]]
+        self._read_state_into_x()
+
+    # -- results -----------------------------------------------------------
+
+    def num_active(self) -> int:
+        return int(self.comm.allreduce(sum(int(a.sum()) for a in self.active), op=MPI.SUM))
+
+    def contact_pressure(self, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """(reference coordinates, nodal pressure z_j) of pair k's owned slave nodes."""
+        interface = self.interfaces[k]
+        return (interface.owned_multiplier_coordinates.copy(),
+                self.multipliers[k].getArray(readonly=True).copy())
+
+    def gathered_pressure(self, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """The same on every rank, for all slave nodes, sorted by x coordinate."""
+        coordinates, pressure = self.contact_pressure(k)
+        coordinates = np.vstack(self.comm.allgather(coordinates))
+        pressure = np.concatenate(self.comm.allgather(pressure))
+        order = np.lexsort((coordinates[:, 1], coordinates[:, 0]))
+        return coordinates[order], pressure[order]
+
+    def contact_forces(self, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Total contact force (2-vector) on the slave and on the master side of pair k."""
+        interface = self.interfaces[k]
+        q = interface.quantities
+        if q is None:
+            return np.zeros(2), np.zeros(2)
+        z_pair = interface.node_values(self.multipliers[k])[interface.pair_nodes[:, 1:3]]
+        slave = -np.einsum("nj,njkc->c", z_pair, q.Dn.value)
+        master = np.einsum("nj,njlc->c", z_pair, q.Mn.value)
+        return (self.comm.allreduce(slave, op=MPI.SUM), self.comm.allreduce(master, op=MPI.SUM))
+
+    def pressure_function(self, k: int = 0, function: dolfinx.fem.Function | None = None):
+        """A P1 scalar Function with the contact pressure at the slave nodes (0 elsewhere)."""
+        if function is None:
+            space = dolfinx.fem.functionspace(self.V.mesh, ("Lagrange", 1))
+            function = dolfinx.fem.Function(space, name="contact_pressure")
+        interface = self.interfaces[k]
+        local = interface.owned_multiplier_blocks - self.V.dofmap.index_map.local_range[0]
+        function.x.array[:] = 0.0
+        function.x.array[local] = self.multipliers[k].getArray(readonly=True)
+        function.x.scatter_forward()
+        return function
+
+    def statistics(self) -> dict:
+        result = {}
+        for pair, interface in zip(self.pairs, self.interfaces, strict=True):
+            s = interface.statistics
+            key = pair.name or f"{pair.slave}-{pair.master}"
+            result[key] = {
+                "pairs": self.comm.allreduce(s.pairs, op=MPI.SUM),
+                "segments": self.comm.allreduce(s.segments, op=MPI.SUM),
+                "searches_done": s.searches_done,
+                "searches_skipped": s.searches_skipped,
+                "evaluations": s.evaluations,
+            }
+        return result
+
+    def destroy(self) -> None:
+        self.snes.destroy()
+        if self._system is not None:
+            self._system.destroy()
+        self._K.destroy()
+        self._b_u.destroy()
+        self.x.destroy()
+        self.b.destroy()
+        for interface in self.interfaces:
+            interface.destroy()
+
+
+def _check_choice(name: str, value, allowed) -> None:
+    if value not in allowed:
+        raise ValueError(f"unknown {name} {value!r}; expected one of {tuple(allowed)}")
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
