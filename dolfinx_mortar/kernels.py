@@ -133,7 +133,8 @@ def _project_onto_slave(s0: Dual, s1: Dual, n0: Dual, n1: Dual, point: Dual) -> 
     safe = dual.where(ok, discriminant, Dual.constant(np.zeros_like(discriminant.value), b.grad.shape[-1]))
     sign = np.where(b.value >= 0.0, 1.0, -1.0)
     denominator = b + dual.sqrt(safe) * sign
-    ok &= np.abs(denominator.value) > _PARALLEL_TOLERANCE * np.abs(b.value).max(initial=1.0)
+    scale = np.linalg.norm(s1.value, axis=-1) * np.linalg.norm(n0.value, axis=-1)
+    ok &= np.abs(denominator.value) > _PARALLEL_TOLERANCE * scale
     denominator = dual.where(ok, denominator, Dual.constant(np.ones_like(b.value), b.grad.shape[-1]))
     return c * (-2.0) / denominator, ok
 
@@ -147,6 +148,7 @@ def pair_quantities(
     basis: BasisOption = "standard",
     num_gauss_points: int = 3,
     crosspoint: np.ndarray | None = None,
+    slave_facet: np.ndarray | None = None,
 ) -> PairQuantities:
     """Mortar contributions of every pair, with derivatives.
 
@@ -168,6 +170,11 @@ def pair_quantities(
             (constants stay representable: the patch test passes) and the
             system stays regular (a dual Phi at a crosspoint is orthogonal to
             every linear function vanishing there and would couple to nothing).
+        slave_facet: (n,) which slave facet each pair belongs to; element-based
+            integration gives each slave Gauss point to one master facet only
+            (a point on a shared master node would otherwise count twice, or
+            not at all after rounding). Default: every pair is a facet of its
+            own (no sharing decided).
     """
     if integration not in INTEGRATION_OPTIONS:
         raise ValueError(f"unknown integration {integration!r}; expected one of {INTEGRATION_OPTIONS}")
@@ -219,7 +226,9 @@ def pair_quantities(
 
     weight = weight * jacobian[:, None]
     if integration == "element":
-        on_master = (np.abs(eta.value) <= 1.0) & valid[:, None]
+        if slave_facet is None:
+            slave_facet = np.arange(num_pairs)
+        on_master = _one_master_facet_per_point(eta.value, valid, np.asarray(slave_facet).reshape(-1))
         overlapping = on_master.any(axis=1)
         overlap = np.where(on_master, weights, 0.0).sum(axis=1)
     else:
@@ -295,3 +304,17 @@ def _merge_crosspoints(Phi: Dual, crosspoint: np.ndarray) -> Dual:
     phi_a = dual.where(both, zero, phi_a)
     phi_b = dual.where(both, zero, phi_b)
     return dual.stack([phi_a, phi_b], axis=-1)
+
+
+def _one_master_facet_per_point(eta: np.ndarray, valid: np.ndarray, slave_facet: np.ndarray) -> np.ndarray:
+    """(n, g) mask: each Gauss point of a slave facet goes to the master facet it
+    projects into most centrally (smallest |eta|, within 1e-12 of [-1, 1])."""
+    num_pairs, num_points = eta.shape
+    score = np.where((np.abs(eta) <= 1.0 + 1e-12) & valid[:, None], np.abs(eta), np.inf).ravel()
+    key = (slave_facet[:, None] * num_points + np.arange(num_points)).ravel()
+    order = np.lexsort((score, key))
+    first = np.ones(order.size, dtype=bool)
+    first[1:] = key[order][1:] != key[order][:-1]
+    winner = np.zeros(order.size, dtype=bool)
+    winner[order[first]] = True
+    return (winner & np.isfinite(score)).reshape(num_pairs, num_points)

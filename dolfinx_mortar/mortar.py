@@ -290,6 +290,7 @@ class MortarInterface:
             basis=self.basis,
             num_gauss_points=self.num_gauss_points,
             crosspoint=self.pair_crosspoint,
+            slave_facet=self.pair_slave_facets,
         )
 
     def _with_current_gap(self, reference: kernels.PairQuantities) -> kernels.PairQuantities:

@@ -383,7 +383,9 @@ class ContactProblem:
     def _residual(self, snes: PETSc.SNES, x: PETSc.Vec, b: PETSc.Vec) -> None:
         self._write_x_into_state(x)
         if self._inverted():
-            snes.setFunctionDomainError()
+            # an inverted element: a NaN residual makes SNES stop with
+            # DIVERGED_FNORM_NAN, and the load stepper cuts the step back
+            b.set(np.nan)
             return
         self._update_contact()
         start = time.perf_counter()
@@ -490,7 +492,6 @@ class ContactProblem:
         """
         start = time.perf_counter()
         before = dict(self.timings)
-        self._apply_dirichlet_values()
         self._read_state_into_x()
         if self.method == "lagrange" and self.active_set_strategy == "semismooth":
             report = self._newton()
@@ -597,10 +598,6 @@ class ContactProblem:
                                    active=0, outer_iterations=outer)
         return SolveReport(converged=False, reason=-101, iterations=total_iterations,
                            residuals=residuals, active=0, outer_iterations=self.max_outer_iterations)
-
-    def _apply_dirichlet_values(self) -> None:
-        """Put the current boundary values into u, so Newton corrections vanish there."""
-        compat.set_bc_values(self.u, self.bcs)
 
     # -- state for load stepping --------------------------------------------
 
