@@ -79,7 +79,7 @@ def l2_pressure_error(x_nodes, p_nodes, a, p0, samples_per_facet=64) -> tuple[fl
     return math.sqrt(error2), math.sqrt(error2 / norm2)
 
 
-def main(argv=None) -> dict:
+def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--case", choices=tuple(CASES), default="B")
@@ -98,7 +98,6 @@ def main(argv=None) -> dict:
     parser.add_argument("--output", type=pathlib.Path, help="directory for ParaView files and PNG")
     add_common_arguments(parser)
     args = parser.parse_args(argv)
-    comm = MPI.COMM_WORLD
     configure_logging(comm)
     case = CASES[args.case]
     load = args.load if args.load is not None else case["load"]

@@ -47,7 +47,7 @@ def die_displacement(t: float, depth: float, slide: float) -> tuple[float, float
     return slide * (t - 1.0), -depth
 
 
-def main(argv=None) -> dict:
+def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--refinement", type=int, default=0)
@@ -59,7 +59,6 @@ def main(argv=None) -> dict:
     parser.add_argument("--output", type=pathlib.Path, help="directory for CSV, PNG, ParaView")
     add_common_arguments(parser)
     args = parser.parse_args(argv)
-    comm = MPI.COMM_WORLD
     configure_logging(comm)
     start = time.perf_counter()
     tagged = meshes.ironing(refinement=args.refinement, cell_type=args.cell_type, comm=comm)

@@ -99,7 +99,7 @@ def fitted_rate(h, error) -> float:
     return float(np.polyfit(np.log(h), np.log(error), 1)[0])
 
 
-def main(argv=None) -> dict:
+def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--refinements", type=int, default=5, help="number of meshes (each halves h)")
     parser.add_argument("--ratio", default="3:4", help="interface elements lower:upper, e.g. 3:4 or 1:7")
@@ -109,7 +109,6 @@ def main(argv=None) -> dict:
     parser.add_argument("--json", type=Path, help="write the summary here")
     parser.add_argument("--png", type=Path, help="write the convergence plot here")
     args = parser.parse_args(argv)
-    comm = MPI.COMM_WORLD
     ratio = tuple(int(n) for n in args.ratio.split(":"))
     runs = []
     for refinement in range(args.refinements):

@@ -36,7 +36,7 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--integration", choices=("segment", "element"), default="segment")
     parser.add_argument("--gauss-points", type=int, default=None, help="per segment / slave facet")
     parser.add_argument("--normals", choices=("averaged", "slave", "master"), default="averaged")
-    parser.add_argument("--multipliers", choices=("standard", "dual"), default="standard")
+    parser.add_argument("--multipliers", choices=("standard", "dual"), default="dual")
     parser.add_argument("--active-set", choices=("semismooth", "fixed-point"), default="semismooth")
     parser.add_argument("--c-n", type=float, default=None, help="complementarity parameter")
     parser.add_argument("--penalty", type=float, default=None, help="penalty parameter eps")
@@ -56,7 +56,7 @@ def problem_options(args) -> dict:
     }
 
 
-def main(argv=None) -> dict:
+def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--ratio", default="3:2", help="punch:foundation interface elements")
@@ -67,7 +67,6 @@ def main(argv=None) -> dict:
                         default="linear")
     add_common_arguments(parser)
     args = parser.parse_args(argv)
-    comm = MPI.COMM_WORLD
     ratio = tuple(int(n) for n in args.ratio.split(":"))
     start = time.perf_counter()
     tagged = meshes.patch_test(ratio=ratio, slave=args.slave, refinement=args.refinement,

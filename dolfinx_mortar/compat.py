@@ -49,9 +49,13 @@ def model_to_mesh(model, comm, rank: int, gdim: int) -> MeshWithTags:
 
 
 def geometry_dofmap(mesh: dolfinx.mesh.Mesh):
-    """The (num_cells, nodes_per_cell) array of geometry node indices."""
-    dofmap = mesh.geometry.dofmap
-    return dofmap
+    """The (num_cells, nodes_per_cell) array of geometry node indices.
+
+    dolfinx 0.10 onwards keeps one dofmap per cell type (``dofmaps``).
+    """
+    if DOLFINX_VERSION >= (0, 10):
+        return mesh.geometry.dofmaps[0]
+    return mesh.geometry.dofmap
 
 
 def create_matrix(form):

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import json
 import math
 import operator
@@ -149,10 +150,15 @@ class _Model:
         """The circular arc (less than half a circle) from ``start`` to ``end``."""
         return self.geo.addCircleArc(start, centre, end)
 
-    def surface(self, curves: Sequence[int], transfinite: bool = False) -> int:
-        """The plane surface bounded by ``curves`` (any order of orientation)."""
-        loop = self.geo.addCurveLoop(list(curves), reorient=True)
-        tag = self.geo.addPlaneSurface([loop])
+    def surface(
+        self,
+        curves: Sequence[int],
+        transfinite: bool = False,
+        holes: Sequence[Sequence[int]] = (),
+    ) -> int:
+        """The plane surface bounded by ``curves`` minus ``holes`` (curves in any order)."""
+        loops = [self.geo.addCurveLoop(list(c), reorient=True) for c in (curves, *holes)]
+        tag = self.geo.addPlaneSurface(loops)
         if transfinite:
             self.geo.mesh.setTransfiniteSurface(tag)
             self._transfinite.append(tag)
@@ -210,9 +216,9 @@ class _Model:
 
         gmsh.option.setNumber("Mesh.MeshSizeMax", h_max)
         if quadrilateral:
-            # Blossom leaves triangles; "simple full-quad" plus smoothing gives only
-            # quadrilaterals with angles between about 30 and 150 degrees.
-            gmsh.option.setNumber("Mesh.Algorithm", 8)
+            # Blossom leaves triangles; Frontal-Delaunay triangles, "simple full-quad"
+            # recombination and smoothing give only quadrilaterals, with angles between
+            # about 30 and 145 degrees on gmsh 4.13 and 4.15.
             gmsh.option.setNumber("Mesh.RecombineAll", 1)
             gmsh.option.setNumber("Mesh.RecombinationAlgorithm", 2)
             gmsh.option.setNumber("Mesh.Smoothing", 10)
@@ -424,7 +430,7 @@ def hertz(
     def block(m: _Model, half_width: float, height: float) -> dict[str, list[int]]:
         top = [m.point(x, 0.0) for x in (-half_width, -x_zone, 0.0, x_zone, half_width)]
         bottom = [m.point(x, -height) for x in (-half_width, 0.0, half_width)]
-        top_lines = [m.line(p, q) for p, q in zip(top[:-1], top[1:])]
+        top_lines = [m.line(p, q) for p, q in itertools.pairwise(top)]
         bottom_lines = [m.line(bottom[0], bottom[1]), m.line(bottom[1], bottom[2])]
         symmetry = m.line(top[2], bottom[1])
         sides = [m.line(bottom[0], top[0]), m.line(top[4], bottom[2])]
@@ -433,8 +439,12 @@ def hertz(
             m.surface([*top_lines[2:], sides[1], bottom_lines[1], symmetry]),
         ]
         m.refine_near(top_lines[1:3], h_contact)
-        return {"surfaces": surfaces, "top": top_lines, "bottom": bottom_lines,
-                "symmetry": [symmetry]}
+        return {
+            "surfaces": surfaces,
+            "top": top_lines,
+            "bottom": bottom_lines,
+            "symmetry": [symmetry],
+        }
 
     def construct(m: _Model) -> None:
         upper = half_disk(m, 1.0)
@@ -502,8 +512,13 @@ def patch_test(
     n_height = max(1, round(2.5 * n_foundation))
     markers = _numbered(
         ["punch", "foundation"],
-        ["punch_contact", "foundation_contact", "punch_top", "foundation_top_free",
-         "foundation_bottom"],
+        [
+            "punch_contact",
+            "foundation_contact",
+            "punch_top",
+            "foundation_top_free",
+            "foundation_bottom",
+        ],
     )
     if slave == "top":
         aliases = {"contact_slave": "punch_contact", "contact_master": "foundation_contact"}
@@ -517,7 +532,7 @@ def patch_test(
         counts = (2 * n_foundation, n_foundation, n_foundation)
         bottom = [m.point(x, 0.0) for x in xs]
         top = [m.point(x, 5.0) for x in xs]
-        verticals = [m.line(b, t, n_height + 1) for b, t in zip(bottom, top)]
+        verticals = [m.line(b, t, n_height + 1) for b, t in zip(bottom, top, strict=True)]
         bottoms = [m.line(bottom[i], bottom[i + 1], counts[i] + 1) for i in range(3)]
         tops = [m.line(top[i], top[i + 1], counts[i] + 1) for i in range(3)]
         foundation = [
@@ -685,12 +700,8 @@ def rings(
         ]
         inner_points = [on_circle(r_in, angle) for angle in (0.0, 0.5 * math.pi, math.pi)]
         inner_points.append(on_circle(r_in, -0.5 * math.pi))
-        inner = [
-            m.arc(inner_points[i], centre, inner_points[(i + 1) % 4]) for i in range(4)
-        ]
-        outer_loop = m.geo.addCurveLoop(outer, reorient=True)
-        inner_loop = m.geo.addCurveLoop(inner, reorient=True)
-        surface = m.geo.addPlaneSurface([outer_loop, inner_loop])
+        inner = [m.arc(inner_points[i], centre, inner_points[(i + 1) % 4]) for i in range(4)]
+        surface = m.surface(outer, holes=[inner])
         m.refine_near([outer[0], outer[3]], h_contact)
         m.refine_near(outer + inner, h_max)
         return surface, outer, inner

@@ -100,10 +100,16 @@ class ContactProblem:
         integration: ``segment`` (default) or ``element`` (+ num_gauss_points).
         normals: ``averaged`` (default), ``slave`` or ``master``.
         active_set: ``semismooth`` (default) or ``fixed-point`` (lagrange only).
-        multipliers: ``standard`` (default) or ``dual`` basis.
+        multipliers: ``dual`` (default) or ``standard`` basis. Dual is the
+            default: the conditions decouple node by node, and on Hertz it
+            puts the contact edge within one element where standard does not
+            (docs/benchmarks.md).
         c_n: complementarity parameter; default about E/h, estimated from the
             bulk stiffness at the slave nodes and the slave facet length.
-        penalty: eps of penalty and augmented Lagrange; default the same E/h.
+        penalty: eps of penalty and augmented Lagrange; default the same E/h
+            (10 E/h for augmented Lagrange, whose Uzawa updates converge
+            faster with a stiffer eps: measured 0.87 per update at E/h, 0.43 at
+            10 E/h on Hertz).
         augmented_tolerance: Uzawa stops when max|lam_new - lam| <= this
             times max|lam|.
         max_outer_iterations: of the fixed-point and Uzawa loops.
@@ -129,11 +135,11 @@ class ContactProblem:
         num_gauss_points: int | None = None,
         normals: str = "averaged",
         active_set: str = "semismooth",
-        multipliers: str = "standard",
+        multipliers: str = "dual",
         c_n: float | None = None,
         penalty: float | None = None,
         augmented_tolerance: float = 1e-8,
-        max_outer_iterations: int = 50,
+        max_outer_iterations: int = 100,
         search_margin: float | None = None,
         configuration: str = "current",
         petsc_options: dict | None = None,
@@ -207,7 +213,11 @@ class ContactProblem:
         self._read_state_into_x()
 
         self.c_n = float(c_n) if c_n is not None else self._stiffness_scale()
-        self.penalty = float(penalty) if penalty is not None else self._stiffness_scale()
+        if penalty is None:
+            # Uzawa contracts like 1 / (1 + eps * contact compliance): a stiffer
+            # eps makes augmented Lagrange converge in far fewer updates
+            penalty = self._stiffness_scale() * (10.0 if method == "augmented" else 1.0)
+        self.penalty = float(penalty)
         self.timings = {"bulk assembly": 0.0, "contact search": 0.0,
                         "mortar integration": 0.0, "linear solve": 0.0}
         self._setup_snes(petsc_options or {}, petsc_options_prefix)
@@ -215,13 +225,19 @@ class ContactProblem:
     # -- setup -------------------------------------------------------------
 
     def _check_slave_body(self) -> None:
-        """A slave facet and a master facet of one pair must not share a cell."""
+        """Slave and master surfaces of a pair must lie on different bodies."""
+        from .surface import body_labels
+
+        labels = body_labels(self.V.mesh)
         for pair, interface in zip(self.pairs, self.interfaces, strict=True):
-            shared = np.intersect1d(interface.slave.cells, interface.master.cells).size
-            if self.comm.allreduce(shared, op=MPI.SUM):
+            slave = np.unique(np.concatenate(self.comm.allgather(labels[interface.slave.cells])))
+            master = np.unique(np.concatenate(self.comm.allgather(labels[interface.master.cells])))
+            if np.intersect1d(slave, master).size:
                 raise ValueError(
-                    f"contact pair {pair.name or (pair.slave, pair.master)}: slave and master "
-                    "facets belong to the same cells; the slave surface is on the wrong body?"
+                    f"contact pair {pair.name or (pair.slave, pair.master)}: the slave surface "
+                    f"(tag {pair.slave}) and the master surface (tag {pair.master}) lie on the "
+                    "same body; is the slave surface on the wrong body? (self-contact is not "
+                    "supported)"
                 )
 
     def _stiffness_scale(self) -> float:

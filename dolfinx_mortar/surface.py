@@ -186,3 +186,52 @@ def check_disjoint(slave: ContactSurface, master: ContactSurface, comm: MPI.Intr
             f"{comm.allreduce(shared, op=MPI.SUM)} facets are tagged both slave "
             f"({slave.marker}) and master ({master.marker})"
         )
+
+
+def body_labels(mesh: dolfinx.mesh.Mesh) -> np.ndarray:
+    """A body number for each local cell: cells joined through vertices share it.
+
+    Components are found on each rank (scipy), then joined across ranks
+    through the shared vertices with a small union-find that every rank does
+    on the gathered links. The numbers are the same on every rank count up
+    to renaming; only equality between them is meaningful.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    comm = mesh.comm
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim, 0)
+    vertex_map = mesh.topology.index_map(0)
+    num_vertices = vertex_map.size_local + vertex_map.num_ghosts
+    cell_vertices = mesh.topology.connectivity(tdim, 0)
+    vertices_per_cell = cell_vertices.offsets[1] - cell_vertices.offsets[0]
+    cells = cell_vertices.array.reshape(-1, vertices_per_cell)
+    rows = np.repeat(cells[:, 0], vertices_per_cell - 1)
+    cols = cells[:, 1:].reshape(-1)
+    graph = coo_matrix((np.ones(rows.size), (rows, cols)), shape=(num_vertices, num_vertices))
+    count, local = connected_components(graph, directed=False)
+    offset = comm.exscan(count) or 0
+    label = local.astype(np.int64) + offset
+    links = np.zeros((0, 2), dtype=np.int64)
+    if comm.size > 1:
+        shared = dolfinx.la.vector(vertex_map, 1)
+        shared.array[: vertex_map.size_local] = label[: vertex_map.size_local]
+        shared.scatter_forward()
+        ghost_labels = shared.array[vertex_map.size_local : num_vertices].astype(np.int64)
+        links = np.unique(np.column_stack([label[vertex_map.size_local :], ghost_labels]), axis=0)
+    links = np.vstack(comm.allgather(links)) if comm.size > 1 else links
+    parent = np.arange(comm.allreduce(count, op=MPI.SUM), dtype=np.int64)
+
+    def find(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for a, b in links:
+        root_a, root_b = find(int(a)), find(int(b))
+        if root_a != root_b:
+            parent[max(root_a, root_b)] = min(root_a, root_b)
+    roots = np.array([find(i) for i in range(parent.size)], dtype=np.int64)
+    return roots[label[cells[:, 0]]]

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from dolfinx_mortar import meshes
+from dolfinx_mortar import compat, meshes
 from dolfinx_mortar.layout import csr_to_coo
 from dolfinx_mortar.mortar import MortarInterface
 from dolfinx_mortar.surface import SurfaceError
@@ -17,7 +17,7 @@ def node_identity(V) -> dict[int, int]:
     """Global dof block -> gmsh input node index, for every block on any rank."""
     mesh = V.mesh
     input_index = mesh.geometry.input_global_indices
-    geometry = mesh.geometry.dofmap
+    geometry = compat.geometry_dofmap(mesh)
     blocks = V.dofmap.list
     local_blocks = blocks.reshape(-1)
     local_input = np.asarray(input_index)[geometry.reshape(-1)]

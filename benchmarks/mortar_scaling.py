@@ -1,0 +1,266 @@
+"""Time of one full mortar evaluation against the number of slave facets (serial).
+
+Two thin strips of quadrilaterals, built with ``dolfinx.mesh.create_mesh``
+from numpy arrays (no gmsh, so that large sizes are cheap to set up):
+
+* lower body (master): x in [0, 1], y in [-w, 0], ``round(N / 1.37)`` cells
+  along x, one cell thick;
+* upper body (slave): x in [0, 1], y in [0, w], ``N`` cells along x;
+
+w = 1 / N, the bodies share no node and the meshes do not match. The slave
+(tag 1) and master (tag 2) surfaces are the exterior facets at y = 0, told
+apart by the centroid of their cell. Both bodies are bent by the same smooth
+vertical displacement (so the normals turn), the upper one is pushed a tenth
+of a cell into the lower one and slid sideways a little.
+
+For each N the interface is built with default options (averaged normals,
+segment integration, standard basis, 3 Gauss points), updated once (first
+search), then, ``--repeats`` times (medians reported):
+
+* (a) ``update`` with a forced new search (``reuse.invalidate()`` first):
+  search + segmentation + integration + derivatives; split into its
+  ``search`` and ``integration`` parts from ``MortarInterface.statistics``;
+* (c) PETSc assembly right after that search, so the matrix patterns are
+  rebuilt too: D and M, weighted gap, gap Jacobian, constraint matrix B,
+  force Jacobian at z = 1;
+* (b) ``update`` that reuses the search (a Newton iteration);
+* (c') the same assembly again, with the patterns reused;
+* total = (a) + (c), one full evaluation after a search.
+
+Prints a markdown table, the log-log slope of the total against N (least
+squares over all N) and the total at the largest N. The goal is linear
+growth (slope <= 1.1) and under a second for 1e5 slave facets.
+
+    tools/run python3 benchmarks/mortar_scaling.py
+    tools/run python3 benchmarks/mortar_scaling.py --sizes 1000 10000 --repeats 3 \\
+        --json scratch/scaling.json --png scratch/scaling.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import platform
+import statistics
+import sys
+import time
+
+import basix.ufl
+import dolfinx
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+from dolfinx_mortar import kernels
+from dolfinx_mortar.mortar import MortarInterface
+
+DEFAULT_SIZES = (1000, 2000, 5000, 10000, 20000, 50000, 100000)
+SLAVE_TAG, MASTER_TAG = 1, 2
+RATIO = 1.37
+PHASES = ("update_search", "search", "integration", "assembly", "update_reuse", "assembly_reuse", "total")
+LABELS = {
+    "update_search": "(a) update, new search",
+    "search": "  of which search",
+    "integration": "  of which integration",
+    "assembly": "(c) assembly after search",
+    "update_reuse": "(b) update, search reused",
+    "assembly_reuse": "(c') assembly, pattern reused",
+    "total": "total (a)+(c)",
+}
+
+
+def _strip(num_cells: int, y0: float, y1: float, first_node: int) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes and quadrilaterals (dolfinx tensor-product vertex order) of a strip one cell thick."""
+    x = np.linspace(0.0, 1.0, num_cells + 1)
+    nodes = np.vstack([np.column_stack([x, np.full_like(x, y0)]), np.column_stack([x, np.full_like(x, y1)])])
+    i = np.arange(num_cells, dtype=np.int64)
+    top = num_cells + 1
+    cells = first_node + np.column_stack([i, i + 1, top + i, top + i + 1])
+    return nodes, cells
+
+
+def two_strips(num_slave: int, comm: MPI.Intracomm = MPI.COMM_WORLD):
+    """Mesh, facet tags and cell masks (upper, lower) of the two strips."""
+    num_master = max(1, round(num_slave / RATIO))
+    width = 1.0 / num_slave
+    if comm.rank == 0:
+        lower_x, lower_cells = _strip(num_master, -width, 0.0, 0)
+        upper_x, upper_cells = _strip(num_slave, 0.0, width, lower_x.shape[0])
+        x = np.vstack([lower_x, upper_x])
+        cells = np.vstack([lower_cells, upper_cells])
+    else:
+        x = np.zeros((0, 2))
+        cells = np.zeros((0, 4), dtype=np.int64)
+    domain = ufl.Mesh(basix.ufl.element("Lagrange", "quadrilateral", 1, shape=(2,)))
+    # keywords: dolfinx 0.9 takes (comm, cells, x, e), 0.10 onwards (comm, cells, e, x)
+    mesh = dolfinx.mesh.create_mesh(comm, cells=cells, x=x, e=domain)
+    tdim, fdim = mesh.topology.dim, mesh.topology.dim - 1
+    mesh.topology.create_connectivity(fdim, tdim)
+    facets = dolfinx.mesh.exterior_facet_indices(mesh.topology)
+    midpoints = dolfinx.mesh.compute_midpoints(mesh, fdim, facets)
+    on_interface = facets[np.abs(midpoints[:, 1]) < 0.25 * width]
+    f_to_c = mesh.topology.connectivity(fdim, tdim)
+    facet_cells = f_to_c.array[f_to_c.offsets[on_interface]]
+    centroid_y = dolfinx.mesh.compute_midpoints(mesh, tdim, facet_cells)[:, 1]
+    values = np.where(centroid_y > 0.0, SLAVE_TAG, MASTER_TAG).astype(np.int32)
+    order = np.argsort(on_interface)
+    tags = dolfinx.mesh.meshtags(mesh, fdim, on_interface[order].astype(np.int32), values[order])
+    cell_map = mesh.topology.index_map(tdim)
+    all_cells = np.arange(cell_map.size_local + cell_map.num_ghosts, dtype=np.int32)
+    cell_y = dolfinx.mesh.compute_midpoints(mesh, tdim, all_cells)[:, 1]
+    return mesh, tags, all_cells[cell_y > 0.0], all_cells[cell_y < 0.0], width
+
+
+def displacement(V, upper, lower, width: float) -> dolfinx.fem.Function:
+    """Both bodies bent alike (a slope of ~0.06); the upper one pushed 0.1 w down and 0.3 w sideways."""
+    u = dolfinx.fem.Function(V)
+    amplitude = 0.01
+
+    def bend(x):
+        return amplitude * np.sin(2.0 * np.pi * x[0]) + 0.3 * amplitude * np.cos(5.0 * x[0])
+
+    u.interpolate(lambda x: np.vstack([np.full(x.shape[1], 0.3 * width), bend(x) - 0.1 * width]), upper)
+    u.interpolate(lambda x: np.vstack([np.zeros(x.shape[1]), bend(x)]), lower)
+    u.x.scatter_forward()
+    return u
+
+
+def _assemble(interface: MortarInterface, z) -> None:
+    interface.mortar_matrices()
+    interface.weighted_gap()
+    interface.gap_jacobian()
+    interface.constraint_matrix()
+    interface.force_jacobian(z)
+
+
+def measure(num_slave: int, repeats: int, normals: str, integration: str) -> dict:
+    """Median times (seconds) of each phase at one size, and counters."""
+    mesh, tags, upper, lower, width = two_strips(num_slave)
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    u = displacement(V, upper, lower, width)
+    interface = MortarInterface(V, tags, SLAVE_TAG, MASTER_TAG, normals=normals, integration=integration)
+    interface.update(u)  # first search (and warm-up)
+    z = interface.create_multiplier_vector()
+    z.set(1.0)
+    _assemble(interface, z)
+    samples: dict[str, list[float]] = {phase: [] for phase in PHASES}
+    stats = interface.statistics
+    for _ in range(repeats):
+        gc.collect()
+        search_before, integration_before = stats.time_search, stats.time_integration
+        interface.reuse.invalidate()
+        start = time.perf_counter()
+        interface.update(u)
+        samples["update_search"].append(time.perf_counter() - start)
+        samples["search"].append(stats.time_search - search_before)
+        samples["integration"].append(stats.time_integration - integration_before)
+        start = time.perf_counter()
+        _assemble(interface, z)
+        samples["assembly"].append(time.perf_counter() - start)
+        samples["total"].append(samples["update_search"][-1] + samples["assembly"][-1])
+        searches = stats.searches_done
+        start = time.perf_counter()
+        interface.update(u)
+        samples["update_reuse"].append(time.perf_counter() - start)
+        if stats.searches_done != searches:
+            raise RuntimeError("the second update searched again; the benchmark expects reuse")
+        start = time.perf_counter()
+        _assemble(interface, z)
+        samples["assembly_reuse"].append(time.perf_counter() - start)
+    result = {phase: statistics.median(values) for phase, values in samples.items()}
+    result.update(
+        N=num_slave,
+        master_facets=interface.master.num_facets,
+        pairs=stats.pairs,
+        segments=stats.segments,
+        weighted_gap_sum=float(interface.weighted_gap().sum()),
+    )
+    z.destroy()
+    interface.destroy()
+    return result
+
+
+def loglog_slope(sizes, times) -> float:
+    return float(np.polyfit(np.log(np.asarray(sizes, float)), np.log(np.asarray(times, float)), 1)[0])
+
+
+def markdown_table(results: list[dict]) -> str:
+    header = "| phase | " + " | ".join(f"N={r['N']:.0e}".replace("e+0", "e") for r in results) + " | slope |"
+    lines = [header, "|" + "---|" * (len(results) + 2)]
+    sizes = [r["N"] for r in results]
+    for phase in PHASES:
+        times = [r[phase] for r in results]
+        slope = f"{loglog_slope(sizes, times):.2f}" if len(results) > 1 and min(times) > 0 else "-"
+        cells = " | ".join(f"{1e3 * t:.1f}" for t in times)
+        lines.append(f"| {LABELS[phase]} | {cells} | {slope} |")
+    lines.append("| pairs | " + " | ".join(str(r["pairs"]) for r in results) + " | |")
+    return "\n".join(lines)
+
+
+def plot(results: list[dict], path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sizes = np.array([r["N"] for r in results], dtype=float)
+    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    for phase in PHASES:
+        ax.loglog(sizes, [r[phase] for r in results], "o-" if phase == "total" else ".--",
+                  label=LABELS[phase].strip(), linewidth=2.0 if phase == "total" else 1.0)
+    reference = results[-1]["total"] * sizes / sizes[-1]
+    ax.loglog(sizes, reference, "k:", label="slope 1")
+    ax.axhline(1.0, color="grey", linewidth=0.5)
+    ax.set_xlabel("slave facets N")
+    ax.set_ylabel("time [s] (median)")
+    ax.set_title("dolfinx_mortar: one mortar evaluation, serial")
+    ax.grid(True, which="both", linewidth=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--sizes", type=float, nargs="+", default=DEFAULT_SIZES,
+                        help="numbers of slave facets (default: 1e3 ... 1e5)")
+    parser.add_argument("--repeats", type=int, default=5, help="timed repeats per size (median; default 5)")
+    parser.add_argument("--json", help="write the results to this file")
+    parser.add_argument("--png", help="write a log-log plot of the phases to this file")
+    parser.add_argument("--normals", default="averaged", choices=kernels.NORMAL_OPTIONS)
+    parser.add_argument("--integration", default="segment", choices=kernels.INTEGRATION_OPTIONS)
+    args = parser.parse_args(argv)
+    if MPI.COMM_WORLD.size != 1:
+        parser.error("the benchmark is serial; run it without mpirun")
+    sizes = [int(round(n)) for n in args.sizes]
+    results = []
+    for n in sizes:
+        result = measure(n, args.repeats, args.normals, args.integration)
+        results.append(result)
+        print(f"N={n}: total {1e3 * result['total']:.1f} ms "
+              f"(search {1e3 * result['search']:.1f}, integration {1e3 * result['integration']:.1f}, "
+              f"assembly {1e3 * result['assembly']:.1f}); {result['pairs']} pairs", file=sys.stderr, flush=True)
+    print(f"\nmedian times in ms, {args.repeats} repeats, normals={args.normals}, "
+          f"integration={args.integration}, dolfinx {dolfinx.__version__}\n")
+    print(markdown_table(results))
+    summary = {}
+    if len(results) > 1:
+        summary["slope_total"] = loglog_slope(sizes, [r["total"] for r in results])
+        print(f"\nlog-log slope of the total over N = {sizes[0]} ... {sizes[-1]}: {summary['slope_total']:.2f}")
+    summary["largest_N"] = sizes[-1]
+    summary["total_at_largest_N"] = results[-1]["total"]
+    print(f"total at N = {sizes[-1]}: {results[-1]['total']:.3f} s")
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({"options": {"normals": args.normals, "integration": args.integration,
+                                   "repeats": args.repeats, "dolfinx": dolfinx.__version__,
+                                   "numpy": np.__version__, "python": platform.python_version()},
+                       "summary": summary, "results": results}, f, indent=1)
+    if args.png:
+        plot(results, args.png)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,239 @@
+"""ContactProblem: patch tests, parameter independence, convergence, exact Jacobian, errors."""
+
+from __future__ import annotations
+
+import importlib.util
+import pathlib
+
+import dolfinx
+import numpy as np
+import pytest
+import ufl
+from mpi4py import MPI
+
+from dolfinx_mortar import compat, meshes
+from dolfinx_mortar.loading import LoadSteppingError, solve_load_steps
+from dolfinx_mortar.materials import Material, internal_work
+from dolfinx_mortar.problem import ContactPair, ContactProblem
+from dolfinx_mortar.surface import SurfaceError
+
+DEMOS = pathlib.Path(__file__).parents[1] / "demos"
+
+
+def demo(name: str):
+    spec = importlib.util.spec_from_file_location(f"demo_{name}", DEMOS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("ratio", ["1:1", "2:3", "3:7", "1:7"])
+@pytest.mark.parametrize("slave", ["top", "bottom"])
+def test_patch_test_segment_lagrange_is_exact(ratio, slave):
+    summary = demo("patch_test").main(["--ratio", ratio, "--slave", slave])
+    assert summary["converged"]
+    assert summary["max_pressure_deviation_rel"] <= 1e-10
+    assert summary["max_stress_deviation_rel"] <= 1e-10
+    forces = np.array(summary["slave_force"]) + np.array(summary["master_force"])
+    assert np.linalg.norm(forces) <= 1e-10 * summary["total_force_expected"]
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("options", [["--multipliers", "standard"], ["--normals", "slave"],
+                                     ["--normals", "master"], ["--active-set", "fixed-point"],
+                                     ["--method", "augmented"], ["--cell-type", "quadrilateral"]])
+def test_patch_test_options_are_exact(options):
+    summary = demo("patch_test").main(["--ratio", "3:7", *options])
+    assert summary["max_pressure_deviation_rel"] <= 1e-10
+
+
+@pytest.mark.parametrize("gauss_points", [2, 4, 8])
+def test_patch_test_element_based_is_not_exact(gauss_points):
+    """Element-based integration is close but never exact; the deviation is reported."""
+    summary = demo("patch_test").main(["--ratio", "3:7", "--integration", "element",
+                                       "--gauss-points", str(gauss_points)])
+    assert 1e-6 < summary["max_pressure_deviation_rel"] < 0.1
+
+
+@pytest.mark.parametrize("factor", [0.1, 1.0, 10.0])
+def test_patch_test_penalty_gives_uniform_pressure_and_penetration(factor):
+    lagrange = demo("patch_test").main(["--ratio", "3:7"])
+    penalty = lagrange["penalty_used"] * factor
+    summary = demo("patch_test").main(["--ratio", "3:7", "--method", "penalty",
+                                       "--penalty", str(penalty)])
+    # a uniform pressure needs a uniform penetration p / eps: the pressure is exact
+    assert summary["max_pressure_deviation_rel"] <= 1e-10
+
+
+def hertz(args, comm=MPI.COMM_WORLD):
+    return demo("hertz").main(["--refinement", "0", "--steps", "2", *args], comm=comm)
+
+
+def test_semismooth_solution_does_not_depend_on_c_n():
+    reference = hertz([])
+    scale = reference["c_n"]
+    for factor in (1e-2, 1e-1, 10.0):
+        other = hertz(["--c-n", str(scale * factor)])
+        assert other["p_max"] == pytest.approx(reference["p_max"], rel=1e-8)
+        assert other["a_contact"] == pytest.approx(reference["a_contact"], rel=1e-8)
+        assert other["l2_pressure_error"] == pytest.approx(reference["l2_pressure_error"], rel=1e-8)
+
+
+def test_penalty_converges_to_lagrange_and_augmented_reaches_it():
+    reference = hertz([])
+    scale = reference["penalty_used"]
+    errors = []
+    for factor in (1.0, 10.0, 100.0, 1000.0):
+        penalty = hertz(["--method", "penalty", "--penalty", str(scale * factor)])
+        errors.append(abs(penalty["p_max"] - reference["p_max"]) / reference["p_max"])
+    assert all(b < a for a, b in zip(errors, errors[1:], strict=False))
+    assert errors[-1] < 1e-2 * errors[0]
+    augmented = hertz(["--method", "augmented", "--penalty", str(10 * scale)])
+    assert augmented["p_max"] == pytest.approx(reference["p_max"], rel=1e-6)
+
+
+def test_semismooth_newton_converges_quadratically():
+    summary = hertz([])
+    residuals = np.array(summary["residuals_last_step"])
+    assert max(summary["newton_iterations"]) <= 8
+    # the iterations before the final rounding-level one: order of convergence ~2
+    r = residuals[residuals > 1e-10 * residuals[0]]
+    assert len(r) >= 3
+    order = np.log(r[-1] / r[-2]) / np.log(r[-2] / r[-3])
+    assert order > 1.7, residuals
+
+
+def penetrating_blocks(normals: str, method: str = "lagrange", material: str = "neo-hookean"):
+    tagged = meshes.tied_blocks(ratio=(3, 5), refinement=0)
+    mesh = tagged.mesh
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    u = dolfinx.fem.Function(V)
+    v = ufl.TestFunction(V)
+    F = internal_work(u, v, {0: Material(10.0, 0.3, material)})
+    bottom = dolfinx.mesh.locate_entities_boundary(mesh, 1, lambda x: np.isclose(x[1], 0.0))
+    top = dolfinx.mesh.locate_entities_boundary(mesh, 1, lambda x: np.isclose(x[1], 1.0))
+    bcs = [dolfinx.fem.dirichletbc(np.zeros(2), dolfinx.fem.locate_dofs_topological(V, 1, b), V)
+           for b in (bottom, top)]
+    pair = ContactPair(tagged.facet_tags, tagged.markers["contact_slave"],
+                       tagged.markers["contact_master"])
+    problem = ContactProblem(F, u, bcs, [pair], normals=normals, method=method)
+    rng = np.random.default_rng(7)
+    u.x.array[:] = 0.01 * rng.standard_normal(u.x.array.size)
+    upper = tagged.cell_tags.find(tagged.markers["upper"])
+    lower = tagged.cell_tags.find(tagged.markers["lower"])
+    shift = dolfinx.fem.Function(V)
+    shift.interpolate(lambda x: np.vstack([0.0 * x[0], -0.02 + 0.0 * x[0]]), upper)
+    shift.interpolate(lambda x: np.vstack([0.0 * x[0], 0.02 + 0.0 * x[0]]), lower)
+    u.x.array[:] += shift.x.array
+    # a state that satisfies the boundary conditions, as every Newton iterate after the first
+    compat.set_bc_values(u, bcs)
+    for z in problem.multipliers:
+        z.setArray(rng.uniform(0.5, 1.5, z.getLocalSize()))
+    problem._read_state_into_x()
+    return problem
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("normals", ["averaged", "slave", "master"])
+@pytest.mark.parametrize("method", ["lagrange", "penalty"])
+def test_contact_jacobian_taylor(normals, method):
+    """Residual R(x) of the whole contact system: |R(x+eh) - R(x) - e J h| = O(e^2)."""
+    problem = penetrating_blocks(normals, method)
+    snes = problem.snes
+    x0 = problem.x.copy()
+    r0 = problem.b.duplicate()
+    problem._residual(snes, x0, r0)
+    active = [a.copy() for a in problem.active]
+    assert problem.num_active() > 0
+    J = problem._assemble_system()
+    rng = np.random.default_rng(11 + problem.comm.rank)
+    h = x0.duplicate()
+    h.setArray(rng.standard_normal(h.getLocalSize()))
+    # no change of the active set within the steps, and none at Dirichlet dofs
+    h.getArray()[np.isin(np.arange(*h.getOwnershipRange()), problem.layout.u(problem._fixed_dofs))] = 0.0
+    Jh = h.duplicate()
+    J.mult(h, Jh)
+    remainders = []
+    steps = 1e-4 * 0.5 ** np.arange(5)
+    for eps in steps:
+        x = x0.copy()
+        x.axpy(eps, h)
+        r = r0.duplicate()
+        problem._residual(snes, x, r)
+        assert all(np.array_equal(a, b) for a, b in zip(active, problem.active, strict=True))
+        r.axpy(-1.0, r0)
+        r.axpy(-eps, Jh)
+        remainders.append(r.norm())
+    slope = np.polyfit(np.log(steps), np.log(remainders), 1)[0]
+    assert slope == pytest.approx(2.0, abs=0.1), remainders
+
+
+def test_bad_options_and_inputs():
+    tagged = meshes.patch_test(ratio=(2, 3))
+    V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (2,)))
+    u = dolfinx.fem.Function(V)
+    F = internal_work(u, ufl.TestFunction(V), {0: Material(1.0, 0.3, "linear")})
+    markers = tagged.markers
+    pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"])
+    for key, value in (("method", "lagrangian"), ("integration", "nodal"), ("normals", "up"),
+                       ("active_set", "smooth"), ("multipliers", "mortar")):
+        with pytest.raises(ValueError, match=f"unknown {key}"):
+            ContactProblem(F, u, [], [pair], **{key: value})
+    with pytest.raises(ValueError, match="fixed-point"):
+        ContactProblem(F, u, [], [pair], method="penalty", active_set="fixed-point")
+    with pytest.raises(ValueError, match="c_n must be positive"):
+        ContactProblem(F, u, [], [pair], c_n=-1.0)
+    with pytest.raises(SurfaceError, match="marks no facet"):
+        ContactProblem(F, u, [], [ContactPair(tagged.facet_tags, 999, markers["contact_master"])])
+    # a slave surface on the master's body: both tags on the foundation
+    wrong = ContactPair(tagged.facet_tags, markers["foundation_top_free"], markers["foundation_contact"])
+    with pytest.raises(ValueError, match="wrong body"):
+        ContactProblem(F, u, [], [wrong])
+    with pytest.raises(ValueError, match="at least one"):
+        ContactProblem(F, u, [], [])
+
+
+def test_load_stepping_gives_up_with_a_clear_error():
+    """A load no Newton solve can follow (SNES limited to one iteration) fails cleanly."""
+    tagged = meshes.patch_test(ratio=(2, 3))
+    mesh, markers = tagged.mesh, tagged.markers
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    u = dolfinx.fem.Function(V)
+    v = ufl.TestFunction(V)
+    ds = ufl.Measure("ds", domain=mesh, subdomain_data=tagged.facet_tags)
+    traction = dolfinx.fem.Constant(mesh, np.zeros(2))
+    F = internal_work(u, v, {0: Material(1000.0, 0.4, "neo-hookean")}) - ufl.inner(traction, v) * ds(markers["punch_top"])
+    bottom = tagged.facet_tags.find(markers["foundation_bottom"])
+    bcs = [dolfinx.fem.dirichletbc(np.zeros(2), dolfinx.fem.locate_dofs_topological(V, 1, bottom), V)]
+    pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"])
+    problem = ContactProblem(F, u, bcs, [pair], petsc_options={"snes_max_it": 1})
+
+    def apply_load(t):
+        traction.value[:] = (3.0e3 * t, -1.0e4 * t)
+
+    with pytest.raises(LoadSteppingError, match="after 2 cut-backs"):
+        solve_load_steps(problem, apply_load, 1, max_cutbacks=2)
+    problem.destroy()
+
+
+def test_separated_bodies_have_no_active_node_and_a_regular_system():
+    """Bodies far apart: no pairs, no active node, Newton converges (identity z-rows)."""
+    tagged = meshes.tied_blocks(ratio=(2, 3))
+    mesh = tagged.mesh
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    u = dolfinx.fem.Function(V)
+    F = internal_work(u, ufl.TestFunction(V), {0: Material(10.0, 0.3, "neo-hookean")})
+    outer = dolfinx.mesh.locate_entities_boundary(mesh, 1, lambda x: np.isclose(x[1], 0.0))
+    bcs = [dolfinx.fem.dirichletbc(np.zeros(2), dolfinx.fem.locate_dofs_topological(V, 1, outer), V)]
+    pair = ContactPair(tagged.facet_tags, tagged.markers["contact_slave"],
+                       tagged.markers["contact_master"])
+    top_dofs = dolfinx.fem.locate_dofs_topological(
+        V, 1, dolfinx.mesh.locate_entities_boundary(mesh, 1, lambda x: np.isclose(x[1], 1.0)))
+    bcs.append(dolfinx.fem.dirichletbc(np.array([0.0, 0.3]), top_dofs, V))
+    problem = ContactProblem(F, u, bcs, [pair], search_margin=0.05)
+    report = problem.solve()
+    assert report.converged
+    assert report.active == 0
+    assert problem.statistics()[f"{pair.slave}-{pair.master}"]["pairs"] == 0
+    problem.destroy()
