@@ -41,6 +41,7 @@ class MortarStatistics:
     searches_done: int = 0
     searches_skipped: int = 0
     evaluations: int = 0
+    evaluations_skipped: int = 0
     time_search: float = 0.0
     time_exchange: float = 0.0
     time_integration: float = 0.0
@@ -115,6 +116,8 @@ class MortarInterface:
         self.basis = basis
         self.configuration = configuration
         self._reference_quantities: kernels.PairQuantities | None = None
+        self._evaluated_x: np.ndarray | None = None
+        self._evaluated_version = -1
         self.num_gauss_points = num_gauss_points or DEFAULT_GAUSS_POINTS[integration]
         if self.num_gauss_points < 1:
             raise ValueError("num_gauss_points must be >= 1")
@@ -274,8 +277,17 @@ class MortarInterface:
             if self._reference_quantities is None:
                 self._reference_quantities = self._evaluate(self._reference_node_x)
             self.quantities = self._with_current_gap(self._reference_quantities)
+        elif (self.quantities is not None and self._evaluated_version == self._pattern_version
+              and np.array_equal(self._evaluated_x, self._node_x)):
+            # nothing moved since the last evaluation (a Jacobian after its
+            # residual, a repeated line-search point): keep the quantities
+            stats.evaluations_skipped += 1
+            stats.time_integration += time.perf_counter() - start
+            return self.quantities
         else:
             self.quantities = self._evaluate(self._node_x)
+            self._evaluated_x = self._node_x.copy()
+            self._evaluated_version = self._pattern_version
         stats.segments = int(np.count_nonzero(self.quantities.valid))
         stats.evaluations += 1
         stats.time_integration += time.perf_counter() - start

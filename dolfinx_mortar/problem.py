@@ -675,7 +675,7 @@ class ContactProblem:
 
     def statistics(self) -> dict:
         result = {}
-        for pair, interface in zip(self.pairs, self.interfaces, strict=True):
+        for k, (pair, interface) in enumerate(zip(self.pairs, self.interfaces, strict=True)):
             s = interface.statistics
             key = pair.name or f"{pair.slave}-{pair.master}"
             result[key] = {
@@ -684,6 +684,12 @@ class ContactProblem:
                 "searches_done": s.searches_done,
                 "searches_skipped": s.searches_skipped,
                 "evaluations": s.evaluations,
+                "evaluations_skipped": s.evaluations_skipped,
+                "slave_nodes": interface.num_global_multipliers,
+                "slave_nodes_uncovered": self.comm.allreduce(
+                    int(np.count_nonzero(~self._covered(k))), op=MPI.SUM),
+                "time_search": s.time_search,
+                "time_integration": s.time_integration,
             }
         return result
 

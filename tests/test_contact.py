@@ -94,14 +94,19 @@ def test_penalty_converges_to_lagrange_and_augmented_reaches_it():
 
 
 def test_semismooth_newton_converges_quadratically():
-    summary = hertz([])
-    residuals = np.array(summary["residuals_last_step"])
+    """Once the active set has settled, r_{k+1}/r_0 <= 10 (r_k/r_0)^2 (Neo-Hookean Hertz;
+    the linear material converges in one step once the set is right)."""
+    summary = demo("hertz").main(["--refinement", "2", "--steps", "2", "--material", "neo-hookean"])
     assert max(summary["newton_iterations"]) <= 8
-    # the iterations before the final rounding-level one: order of convergence ~2
-    r = residuals[residuals > 1e-10 * residuals[0]]
-    assert len(r) >= 3
-    order = np.log(r[-1] / r[-2]) / np.log(r[-2] / r[-3])
-    assert order > 1.7, residuals
+    for residuals in summary["residuals_per_step"]:
+        r = np.array(residuals)
+        q = r / r[0]
+        # pairs past the active-set search and above the rounding floor (~1e-12 here)
+        asymptotic = [(a, b) for a, b, rb in zip(q[:-1], q[1:], r[1:], strict=True)
+                      if a < 0.1 and rb > 1e-11]
+        assert asymptotic, residuals
+        for a, b in asymptotic:
+            assert b <= 10.0 * a**2, residuals
 
 
 def penetrating_blocks(normals: str, method: str = "lagrange", material: str = "neo-hookean"):
@@ -169,6 +174,7 @@ def test_contact_jacobian_taylor(normals, method):
     assert slope == pytest.approx(2.0, abs=0.1), remainders
 
 
+@pytest.mark.parallel
 def test_bad_options_and_inputs():
     tagged = meshes.patch_test(ratio=(2, 3))
     V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (2,)))
@@ -194,6 +200,7 @@ def test_bad_options_and_inputs():
         ContactProblem(F, u, [], [])
 
 
+@pytest.mark.parallel
 def test_load_stepping_gives_up_with_a_clear_error():
     """A load no Newton solve can follow (SNES limited to one iteration) fails cleanly."""
     tagged = meshes.patch_test(ratio=(2, 3))
@@ -217,6 +224,7 @@ def test_load_stepping_gives_up_with_a_clear_error():
     problem.destroy()
 
 
+@pytest.mark.parallel
 def test_separated_bodies_have_no_active_node_and_a_regular_system():
     """Bodies far apart: no pairs, no active node, Newton converges (identity z-rows)."""
     tagged = meshes.tied_blocks(ratio=(2, 3))
