@@ -16,7 +16,10 @@ COPY tools/debian-packages.txt tools/pip-packages.txt /tmp/dolfinx_mortar/
 RUN apt-get update \
     && sed -e 's/#.*//' /tmp/dolfinx_mortar/debian-packages.txt | xargs apt-get install -y --no-install-recommends \
     && rm -rf /var/lib/apt/lists/*
-RUN sed -e 's/#.*//' /tmp/dolfinx_mortar/pip-packages.txt | xargs -r python3 -m pip install --no-cache-dir --break-system-packages
+# behind a TLS-intercepting proxy: --build-arg PIP_CERT=/path/to/its/ca-bundle (mounted into the build)
+ARG PIP_CERT=
+RUN if [ -z "$PIP_CERT" ]; then unset PIP_CERT; fi; \
+    sed -e 's/#.*//' /tmp/dolfinx_mortar/pip-packages.txt | xargs -r python3 -m pip install --no-cache-dir --break-system-packages
 
 WORKDIR /opt/dolfinx_mortar
 COPY . .

@@ -50,8 +50,12 @@ def hertz_solution(load, radius, E1, nu1, E2, nu2, case) -> dict:
     effective_modulus = 1.0 / ((1 - nu1**2) / E1 + (1 - nu2**2) / E2)
     effective_radius = radius / 2.0 if case == "C" else radius
     a = math.sqrt(4.0 * load * effective_radius / (math.pi * effective_modulus))
-    return {"a": a, "p0": 2.0 * load / (math.pi * a), "E_star": effective_modulus,
-            "R_star": effective_radius}
+    return {
+        "a": a,
+        "p0": 2.0 * load / (math.pi * a),
+        "E_star": effective_modulus,
+        "R_star": effective_radius,
+    }
 
 
 def hertz_pressure(x, a, p0):
@@ -80,8 +84,9 @@ def l2_pressure_error(x_nodes, p_nodes, a, p0, samples_per_facet=64) -> tuple[fl
 
 
 def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--case", choices=tuple(CASES), default="B")
     parser.add_argument("--radius", type=float, default=8.0)
     parser.add_argument("--load", type=float, default=None, help="force P per unit thickness")
@@ -89,9 +94,12 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     parser.add_argument("--nu-cylinder", type=float, default=0.3)
     parser.add_argument("--E-block", type=float, default=None)
     parser.add_argument("--nu-block", type=float, default=None)
-    parser.add_argument("--material", choices=("linear", "neo-hookean", "saint-venant-kirchhoff"),
-                        default="linear",
-                        help="linear (small strain, what Hertz theory assumes) or finite-strain models")
+    parser.add_argument(
+        "--material",
+        choices=("linear", "neo-hookean", "saint-venant-kirchhoff"),
+        default="linear",
+        help="linear (small strain, what Hertz theory assumes) or finite-strain models",
+    )
     parser.add_argument("--refinement", type=int, default=2)
     parser.add_argument("--cell-type", choices=("triangle", "quadrilateral"), default="triangle")
     parser.add_argument("--steps", type=int, default=2, help="load steps")
@@ -103,12 +111,18 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     load = args.load if args.load is not None else case["load"]
     E_block = args.E_block if args.E_block is not None else case["E_block"]
     nu_block = args.nu_block if args.nu_block is not None else case["nu_block"]
-    exact = hertz_solution(load, args.radius, args.E_cylinder, args.nu_cylinder, E_block, nu_block,
-                           args.case)
+    exact = hertz_solution(
+        load, args.radius, args.E_cylinder, args.nu_cylinder, E_block, nu_block, args.case
+    )
     start = time.perf_counter()
 
-    tagged = meshes.hertz(case=args.case, refinement=args.refinement, radius=args.radius,
-                          cell_type=args.cell_type, comm=comm)
+    tagged = meshes.hertz(
+        case=args.case,
+        refinement=args.refinement,
+        radius=args.radius,
+        cell_type=args.cell_type,
+        comm=comm,
+    )
     mesh, markers = tagged.mesh, tagged.markers
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
     u = dolfinx.fem.Function(V, name="displacement")
@@ -119,21 +133,32 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     }
     ds = ufl.Measure("ds", domain=mesh, subdomain_data=tagged.facet_tags)
     traction = dolfinx.fem.Constant(mesh, np.array([0.0, 0.0]))
-    F = internal_work(u, v, materials, tagged.cell_tags) - ufl.inner(traction, v) * ds(markers["load"])
+    F = internal_work(u, v, materials, tagged.cell_tags) - ufl.inner(traction, v) * ds(
+        markers["load"]
+    )
 
     fdim = mesh.topology.dim - 1
     support = tagged.facet_tags.find(markers["support"])
-    bcs = [dolfinx.fem.dirichletbc(np.zeros(2), dolfinx.fem.locate_dofs_topological(V, fdim, support), V)]
+    bcs = [
+        dolfinx.fem.dirichletbc(
+            np.zeros(2), dolfinx.fem.locate_dofs_topological(V, fdim, support), V
+        )
+    ]
     for name in ("symmetry_slave", "symmetry_master"):
         facets = tagged.facet_tags.find(markers[name])
         dofs = dolfinx.fem.locate_dofs_topological(V.sub(0), fdim, facets)
         bcs.append(dolfinx.fem.dirichletbc(np.float64(0.0), dofs, V.sub(0)))
 
     configuration = "reference" if args.material == "linear" else "current"
-    pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"],
-                       name="cylinder-block")
-    problem = ContactProblem(F, u, bcs, [pair], configuration=configuration,
-                             **problem_options(args))
+    pair = ContactPair(
+        tagged.facet_tags,
+        markers["contact_slave"],
+        markers["contact_master"],
+        name="cylinder-block",
+    )
+    problem = ContactProblem(
+        F, u, bcs, [pair], configuration=configuration, **problem_options(args)
+    )
 
     # start the floating cylinder pressed into the block by a fraction of the
     # Hertz approach, so that Newton's first iterate already has active nodes
@@ -156,7 +181,9 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     coordinates, pressure = problem.gathered_pressure()
     x_nodes = coordinates[:, 0]
     in_contact = pressure > 1e-8 * exact["p0"]
-    a_contact = 0.5 * (x_nodes[in_contact].max() - x_nodes[in_contact].min()) if in_contact.any() else 0.0
+    a_contact = (
+        0.5 * (x_nodes[in_contact].max() - x_nodes[in_contact].min()) if in_contact.any() else 0.0
+    )
     zone = np.abs(x_nodes) < 3.0 * exact["a"]
     spacing = float(np.max(np.diff(x_nodes[zone]))) if zone.sum() > 1 else float("nan")
     error, error_rel = l2_pressure_error(x_nodes[zone], pressure[zone], exact["a"], exact["p0"])
@@ -193,16 +220,27 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         "active_nodes": records[-1].active,
         "cutbacks": sum(r.cutbacks for r in records),
         "wall_time_s": wall_time,
-        "timings": {key: sum(r.report.timings.get(key, 0.0) for r in records)
-                    for key in ("bulk assembly", "contact search", "mortar integration",
-                                "linear solve", "total")},
+        "timings": {
+            key: sum(r.report.timings.get(key, 0.0) for r in records)
+            for key in (
+                "bulk assembly",
+                "contact search",
+                "mortar integration",
+                "linear solve",
+                "total",
+            )
+        },
         "contact_statistics": problem.statistics(),
     }
     if comm.rank == 0:
-        print(f"Hertz case {args.case}: p_max {summary['p_max']:.4f} (exact p0 {exact['p0']:.4f}, "
-              f"{100 * summary['p_max_error_rel']:+.2f} %), a {a_contact:.4f} (exact {exact['a']:.4f}), "
-              f"total force {summary['total_force']:.10g} (load {load}), "
-              f"L2 pressure error {100 * error_rel:.2f} %", flush=True)
+        print(
+            f"Hertz case {args.case}: p_max {summary['p_max']:.4f} (exact p0 {exact['p0']:.4f}, "
+            f"{100 * summary['p_max_error_rel']:+.2f} %), "
+            f"a {a_contact:.4f} (exact {exact['a']:.4f}), "
+            f"total force {summary['total_force']:.10g} (load {load}), "
+            f"L2 pressure error {100 * error_rel:.2f} %",
+            flush=True,
+        )
         if args.json:
             args.json.parent.mkdir(parents=True, exist_ok=True)
             args.json.write_text(json.dumps(summary, indent=2))
@@ -224,8 +262,13 @@ def plot(path: pathlib.Path, x_nodes, pressure, exact, summary) -> None:
     zone = np.abs(x_nodes) < 1.5 * a
     fig, ax = plt.subplots(figsize=(6, 4))
     ax.plot(x, hertz_pressure(x, a, p0), "k-", label="Hertz")
-    ax.plot(x_nodes[zone], pressure[zone], "o-", ms=3,
-            label=f"mortar ({summary['method']}, {summary['integration']})")
+    ax.plot(
+        x_nodes[zone],
+        pressure[zone],
+        "o-",
+        ms=3,
+        label=f"mortar ({summary['method']}, {summary['integration']})",
+    )
     ax.set_xlabel("x")
     ax.set_ylabel("contact pressure")
     ax.set_title(f"Hertz case {summary['case']}: p_max {summary['p_max']:.3f} vs p0 {p0:.3f}")

@@ -48,10 +48,13 @@ def die_displacement(t: float, depth: float, slide: float) -> tuple[float, float
 
 
 def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--refinement", type=int, default=0)
-    parser.add_argument("--cell-type", choices=("triangle", "quadrilateral"), default="quadrilateral")
+    parser.add_argument(
+        "--cell-type", choices=("triangle", "quadrilateral"), default="quadrilateral"
+    )
     parser.add_argument("--steps", type=int, default=200, help="load steps over t in [0, 2]")
     parser.add_argument("--end-time", type=float, default=2.0, help="stop early (t <= 2)")
     parser.add_argument("--depth", type=float, default=1.0, help="downward stroke of the die")
@@ -66,42 +69,58 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
     u = dolfinx.fem.Function(V, name="displacement")
     v = ufl.TestFunction(V)
-    materials = {markers["die"]: Material(DIE_E, NU, "neo-hookean"),
-                 markers["block"]: Material(BLOCK_E, NU, "neo-hookean")}
+    materials = {
+        markers["die"]: Material(DIE_E, NU, "neo-hookean"),
+        markers["block"]: Material(BLOCK_E, NU, "neo-hookean"),
+    }
     F = internal_work(u, v, materials, tagged.cell_tags)
     fdim = mesh.topology.dim - 1
     bottom = tagged.facet_tags.find(markers["block_bottom"])
     top = tagged.facet_tags.find(markers["die_top"])
     die_motion = dolfinx.fem.Function(V)
     bcs = [
-        dolfinx.fem.dirichletbc(np.zeros(2), dolfinx.fem.locate_dofs_topological(V, fdim, bottom), V),
+        dolfinx.fem.dirichletbc(
+            np.zeros(2), dolfinx.fem.locate_dofs_topological(V, fdim, bottom), V
+        ),
         dolfinx.fem.dirichletbc(die_motion, dolfinx.fem.locate_dofs_topological(V, fdim, top)),
     ]
-    pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"],
-                       name="die-block")
+    pair = ContactPair(
+        tagged.facet_tags, markers["contact_slave"], markers["contact_master"], name="die-block"
+    )
     problem = ContactProblem(F, u, bcs, [pair], **problem_options(args))
 
     def apply_load(t: float) -> None:
         ux, uy = die_displacement(t, args.depth, args.slide)
-        die_motion.interpolate(lambda x: np.vstack([np.full(x.shape[1], ux), np.full(x.shape[1], uy)]))
+        die_motion.interpolate(
+            lambda x: np.vstack([np.full(x.shape[1], ux), np.full(x.shape[1], uy)])
+        )
         die_motion.x.scatter_forward()
 
     history = []
 
     def record(step) -> None:
         slave, master = problem.contact_forces()
-        history.append({
-            "t": step.load, "newton_iterations": step.iterations, "active": step.active,
-            # force the block exerts on the die (slave) and the die on the block (master)
-            "slave_force_x": float(slave[0]), "slave_force_y": float(slave[1]),
-            "master_force_x": float(master[0]), "master_force_y": float(master[1]),
-            "balance_rel": float(np.linalg.norm(slave + master) / max(np.linalg.norm(slave), 1e-300)),
-        })
+        history.append(
+            {
+                "t": step.load,
+                "newton_iterations": step.iterations,
+                "active": step.active,
+                # force the block exerts on the die (slave) and the die on the block (master)
+                "slave_force_x": float(slave[0]),
+                "slave_force_y": float(slave[1]),
+                "master_force_x": float(master[0]),
+                "master_force_y": float(master[1]),
+                "balance_rel": float(
+                    np.linalg.norm(slave + master) / max(np.linalg.norm(slave), 1e-300)
+                ),
+            }
+        )
 
     output = ContactOutput(problem, args.output / "paraview") if args.output else None
     steps = max(1, round(args.steps * args.end_time / 2.0))
-    records = solve_load_steps(problem, apply_load, steps, output=output, on_step=record,
-                               end=args.end_time)
+    records = solve_load_steps(
+        problem, apply_load, steps, output=output, on_step=record, end=args.end_time
+    )
     if output is not None:
         output.close()
     wall_time = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
@@ -129,12 +148,18 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         "contact_statistics": problem.statistics(),
     }
     if summary["vertical_force_plateau_mean"] is not None:
-        summary["plateau_error_rel"] = summary["vertical_force_plateau_mean"] / REFERENCE_PLATEAU - 1.0
+        summary["plateau_error_rel"] = (
+            summary["vertical_force_plateau_mean"] / REFERENCE_PLATEAU - 1.0
+        )
     if comm.rank == 0:
-        print(f"ironing: {len(records)} steps to t = {summary['end_time']:.3f}, "
-              f"max Newton iterations {summary['max_newton_iterations']}, "
-              f"plateau {summary['vertical_force_plateau_mean']} (reference {REFERENCE_PLATEAU:.3g}), "
-              f"force balance {summary['max_force_balance_rel']:.2e}", flush=True)
+        print(
+            f"ironing: {len(records)} steps to t = {summary['end_time']:.3f}, "
+            f"max Newton iterations {summary['max_newton_iterations']}, "
+            f"plateau {summary['vertical_force_plateau_mean']} "
+            f"(reference {REFERENCE_PLATEAU:.3g}), "
+            f"force balance {summary['max_force_balance_rel']:.2e}",
+            flush=True,
+        )
         if args.json:
             args.json.parent.mkdir(parents=True, exist_ok=True)
             args.json.write_text(json.dumps(summary, indent=2))

@@ -26,7 +26,7 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-from dolfinx_mortar import meshes
+from dolfinx_mortar import compat, meshes
 from dolfinx_mortar.tying import MeshTying
 
 E, NU = 1.0, 0.3
@@ -37,10 +37,12 @@ LMBDA = E * NU / ((1 + NU) * (1 - 2 * NU))
 def exact_displacement(x, solution: str):
     if solution == "linear":
         return ufl.as_vector([0.1 + 0.2 * x[0] - 0.3 * x[1], -0.05 + 0.15 * x[0] + 0.25 * x[1]])
-    return ufl.as_vector([
-        ufl.sin(ufl.pi * x[0]) * ufl.cos(ufl.pi * x[1]),
-        x[0] * x[1] * ufl.exp(x[0]) + 0.5 * ufl.sin(2.0 * x[1]),
-    ])
+    return ufl.as_vector(
+        [
+            ufl.sin(ufl.pi * x[0]) * ufl.cos(ufl.pi * x[1]),
+            x[0] * x[1] * ufl.exp(x[0]) + 0.5 * ufl.sin(2.0 * x[1]),
+        ]
+    )
 
 
 def sigma(v):
@@ -48,8 +50,14 @@ def sigma(v):
     return 2.0 * MU * eps + LMBDA * ufl.tr(eps) * ufl.Identity(2)
 
 
-def solve(refinement: int, ratio: tuple[int, int], solution: str, basis: str, cell_type: str,
-          comm: MPI.Intracomm) -> dict:
+def solve(
+    refinement: int,
+    ratio: tuple[int, int],
+    solution: str,
+    basis: str,
+    cell_type: str,
+    comm: MPI.Intracomm,
+) -> dict:
     tagged = meshes.tied_blocks(ratio=ratio, refinement=refinement, cell_type=cell_type, comm=comm)
     mesh = tagged.mesh
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
@@ -62,13 +70,21 @@ def solve(refinement: int, ratio: tuple[int, int], solution: str, basis: str, ce
 
     boundary = tagged.facet_tags.find(tagged.markers["boundary"])
     u_boundary = dolfinx.fem.Function(V)
-    u_boundary.interpolate(dolfinx.fem.Expression(u_exact, V.element.interpolation_points()))
+    u_boundary.interpolate(dolfinx.fem.Expression(u_exact, compat.interpolation_points(V)))
     bc = dolfinx.fem.dirichletbc(u_boundary, dolfinx.fem.locate_dofs_topological(V, 1, boundary))
 
     uh = dolfinx.fem.Function(V, name="displacement")
     start = time.perf_counter()
-    tying = MeshTying(a, L, uh, [bc], tagged.facet_tags,
-                      tagged.markers["contact_slave"], tagged.markers["contact_master"], basis=basis)
+    tying = MeshTying(
+        a,
+        L,
+        uh,
+        [bc],
+        tagged.facet_tags,
+        tagged.markers["contact_slave"],
+        tagged.markers["contact_master"],
+        basis=basis,
+    )
     tying.solve()
     wall = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
 
@@ -100,9 +116,15 @@ def fitted_rate(h, error) -> float:
 
 
 def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--refinements", type=int, default=5, help="number of meshes (each halves h)")
-    parser.add_argument("--ratio", default="3:4", help="interface elements lower:upper, e.g. 3:4 or 1:7")
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        "--refinements", type=int, default=5, help="number of meshes (each halves h)"
+    )
+    parser.add_argument(
+        "--ratio", default="3:4", help="interface elements lower:upper, e.g. 3:4 or 1:7"
+    )
     parser.add_argument("--solution", choices=("smooth", "linear"), default="smooth")
     parser.add_argument("--basis", choices=("standard", "dual"), default="standard")
     parser.add_argument("--cell-type", choices=("triangle", "quadrilateral"), default="triangle")
@@ -115,8 +137,11 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         run = solve(refinement, ratio, args.solution, args.basis, args.cell_type, comm)
         runs.append(run)
         if comm.rank == 0:
-            print(f"refinement {refinement}: dofs {run['num_dofs']:7d}  L2 {run['l2_error']:.3e}  "
-                  f"H1 {run['h1_error']:.3e}  {run['wall_time_s']:.2f} s", flush=True)
+            print(
+                f"refinement {refinement}: dofs {run['num_dofs']:7d}  L2 {run['l2_error']:.3e}  "
+                f"H1 {run['h1_error']:.3e}  {run['wall_time_s']:.2f} s",
+                flush=True,
+            )
     h = np.array([r["h"] for r in runs])
     summary = {
         "solution": args.solution,
@@ -136,9 +161,11 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         summary["h1_rate_finest"] = fitted_rate(h[finest], [r["h1_error"] for r in runs][finest])
     if comm.rank == 0:
         if "l2_rate" in summary:
-            print(f"fitted rates: L2 {summary['l2_rate']:.3f}, H1 {summary['h1_rate']:.3f} "
-                  f"(finest 4 meshes: L2 {summary['l2_rate_finest']:.3f}, "
-                  f"H1 {summary['h1_rate_finest']:.3f})")
+            print(
+                f"fitted rates: L2 {summary['l2_rate']:.3f}, H1 {summary['h1_rate']:.3f} "
+                f"(finest 4 meshes: L2 {summary['l2_rate_finest']:.3f}, "
+                f"H1 {summary['h1_rate_finest']:.3f})"
+            )
         if args.json:
             args.json.parent.mkdir(parents=True, exist_ok=True)
             args.json.write_text(json.dumps(summary, indent=2))
@@ -149,8 +176,12 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
             import matplotlib.pyplot as plt
 
             fig, ax = plt.subplots(figsize=(5, 4))
-            ax.loglog(h, [r["l2_error"] for r in runs], "o-", label=f"L2 (rate {summary['l2_rate']:.2f})")
-            ax.loglog(h, [r["h1_error"] for r in runs], "s-", label=f"H1 (rate {summary['h1_rate']:.2f})")
+            ax.loglog(
+                h, [r["l2_error"] for r in runs], "o-", label=f"L2 (rate {summary['l2_rate']:.2f})"
+            )
+            ax.loglog(
+                h, [r["h1_error"] for r in runs], "s-", label=f"H1 (rate {summary['h1_rate']:.2f})"
+            )
             ax.set_xlabel("h (lower block)")
             ax.set_ylabel("error")
             ax.set_title(f"mortar mesh tying, ratio {args.ratio}, {args.basis} basis")

@@ -23,7 +23,7 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-from dolfinx_mortar import meshes
+from dolfinx_mortar import compat, meshes
 from dolfinx_mortar.materials import Material, internal_work
 from dolfinx_mortar.problem import ContactPair, ContactProblem
 
@@ -32,7 +32,9 @@ E, NU, PRESSURE = 1000.0, 0.4, 10.0
 
 def add_common_arguments(parser: argparse.ArgumentParser) -> None:
     """Options every contact demo shares (method, integration, normals, ...)."""
-    parser.add_argument("--method", choices=("lagrange", "penalty", "augmented"), default="lagrange")
+    parser.add_argument(
+        "--method", choices=("lagrange", "penalty", "augmented"), default="lagrange"
+    )
     parser.add_argument("--integration", choices=("segment", "element"), default="segment")
     parser.add_argument("--gauss-points", type=int, default=None, help="per segment / slave facet")
     parser.add_argument("--normals", choices=("averaged", "slave", "master"), default="averaged")
@@ -57,20 +59,27 @@ def problem_options(args) -> dict:
 
 
 def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--ratio", default="3:2", help="punch:foundation interface elements")
     parser.add_argument("--slave", choices=("top", "bottom"), default="top")
     parser.add_argument("--refinement", type=int, default=0)
     parser.add_argument("--cell-type", choices=("triangle", "quadrilateral"), default="triangle")
-    parser.add_argument("--material", choices=("linear", "neo-hookean", "saint-venant-kirchhoff"),
-                        default="linear")
+    parser.add_argument(
+        "--material", choices=("linear", "neo-hookean", "saint-venant-kirchhoff"), default="linear"
+    )
     add_common_arguments(parser)
     args = parser.parse_args(argv)
     ratio = tuple(int(n) for n in args.ratio.split(":"))
     start = time.perf_counter()
-    tagged = meshes.patch_test(ratio=ratio, slave=args.slave, refinement=args.refinement,
-                               cell_type=args.cell_type, comm=comm)
+    tagged = meshes.patch_test(
+        ratio=ratio,
+        slave=args.slave,
+        refinement=args.refinement,
+        cell_type=args.cell_type,
+        comm=comm,
+    )
     mesh, markers = tagged.mesh, tagged.markers
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
     u = dolfinx.fem.Function(V, name="displacement")
@@ -79,27 +88,36 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     ds = ufl.Measure("ds", domain=mesh, subdomain_data=tagged.facet_tags)
     traction = dolfinx.fem.Constant(mesh, np.array([0.0, -PRESSURE]))
     F = internal_work(u, v, {0: material}) - ufl.inner(traction, v) * (
-        ds(markers["punch_top"]) + ds(markers["foundation_top_free"]))
+        ds(markers["punch_top"]) + ds(markers["foundation_top_free"])
+    )
 
     # exact lateral strain of the uniform state (plane strain, sigma_xx = 0)
     strain_xx = PRESSURE * NU * (1.0 + NU) / E
     fdim = mesh.topology.dim - 1
     bottom = tagged.facet_tags.find(markers["foundation_bottom"])
-    bcs = [dolfinx.fem.dirichletbc(np.float64(0.0),
-                                   dolfinx.fem.locate_dofs_topological(V.sub(1), fdim, bottom),
-                                   V.sub(1))]
+    bcs = [
+        dolfinx.fem.dirichletbc(
+            np.float64(0.0), dolfinx.fem.locate_dofs_topological(V.sub(1), fdim, bottom), V.sub(1)
+        )
+    ]
     mesh.topology.create_connectivity(0, mesh.topology.dim)
     for corner in ((0.0, 0.0), (4.0, 7.0)):
         vertices = dolfinx.mesh.locate_entities(
-            mesh, 0, lambda x, c=corner: np.isclose(x[0], c[0]) & np.isclose(x[1], c[1]))
+            mesh, 0, lambda x, c=corner: np.isclose(x[0], c[0]) & np.isclose(x[1], c[1])
+        )
         dofs = dolfinx.fem.locate_dofs_topological(V.sub(0), 0, vertices)
         bcs.append(dolfinx.fem.dirichletbc(np.float64(strain_xx * corner[0]), dofs, V.sub(0)))
 
-    pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"],
-                       name="punch-foundation")
+    pair = ContactPair(
+        tagged.facet_tags,
+        markers["contact_slave"],
+        markers["contact_master"],
+        name="punch-foundation",
+    )
     configuration = "reference" if args.material == "linear" else "current"
-    problem = ContactProblem(F, u, bcs, [pair], configuration=configuration,
-                             **problem_options(args))
+    problem = ContactProblem(
+        F, u, bcs, [pair], configuration=configuration, **problem_options(args)
+    )
     report = problem.solve()
     if not report.converged:
         raise RuntimeError(f"patch test did not converge (SNES reason {report.reason})")
@@ -108,18 +126,23 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     interior = (coordinates[:, 0] > 4.0 + 1e-9) & (coordinates[:, 0] < 6.0 - 1e-9)
     # the pressure of every slave node, ends included, must be uniform
     deviation = float(np.max(np.abs(pressure - PRESSURE)) / PRESSURE)
-    deviation_interior = float(np.max(np.abs(pressure[interior] - PRESSURE), initial=0.0) / PRESSURE)
+    deviation_interior = float(
+        np.max(np.abs(pressure[interior] - PRESSURE), initial=0.0) / PRESSURE
+    )
     stress = material.stress(u)
     if args.material != "linear":
         F_def = ufl.Identity(2) + ufl.grad(u)
         stress = stress * F_def.T / ufl.det(F_def)
     W = dolfinx.fem.functionspace(mesh, ("DG", 0))
     sigma_yy = dolfinx.fem.Function(W)
-    sigma_yy.interpolate(dolfinx.fem.Expression(stress[1, 1], W.element.interpolation_points()))
+    sigma_yy.interpolate(dolfinx.fem.Expression(stress[1, 1], compat.interpolation_points(W)))
     num_cells = mesh.topology.index_map(mesh.topology.dim).size_local
-    stress_deviation = comm.allreduce(
-        float(np.max(np.abs(sigma_yy.x.array[:num_cells] + PRESSURE), initial=0.0)), op=MPI.MAX
-    ) / PRESSURE
+    stress_deviation = (
+        comm.allreduce(
+            float(np.max(np.abs(sigma_yy.x.array[:num_cells] + PRESSURE), initial=0.0)), op=MPI.MAX
+        )
+        / PRESSURE
+    )
     slave_force, master_force = problem.contact_forces()
     summary = {
         "ratio": list(ratio),
@@ -149,10 +172,14 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         "timings": report.timings,
     }
     if comm.rank == 0:
-        print(f"patch test {args.ratio} slave={args.slave} {args.method}/{args.integration}: "
-              f"pressure deviation {deviation:.3e} (non-uniformity "
-              f"{summary['pressure_nonuniformity_rel']:.1e}), stress deviation {stress_deviation:.3e}, "
-              f"{report.iterations} Newton iterations", flush=True)
+        print(
+            f"patch test {args.ratio} slave={args.slave} {args.method}/{args.integration}: "
+            f"pressure deviation {deviation:.3e} (non-uniformity "
+            f"{summary['pressure_nonuniformity_rel']:.1e}), "
+            f"stress deviation {stress_deviation:.3e}, "
+            f"{report.iterations} Newton iterations",
+            flush=True,
+        )
         if args.json:
             args.json.parent.mkdir(parents=True, exist_ok=True)
             args.json.write_text(json.dumps(summary, indent=2))

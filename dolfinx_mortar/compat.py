@@ -18,7 +18,8 @@ MINIMUM_DOLFINX_VERSION = (0, 9)
 
 if DOLFINX_VERSION < MINIMUM_DOLFINX_VERSION:  # pragma: no cover
     raise ImportError(
-        f"dolfinx_mortar needs dolfinx >= {MINIMUM_DOLFINX_VERSION[0]}.{MINIMUM_DOLFINX_VERSION[1]}, "
+        "dolfinx_mortar needs dolfinx >= "
+        f"{MINIMUM_DOLFINX_VERSION[0]}.{MINIMUM_DOLFINX_VERSION[1]}, "
         f"found {dolfinx.__version__}"
     )
 
@@ -75,7 +76,8 @@ def create_vector(form):
 
 def coordinate_element_degree(mesh: dolfinx.mesh.Mesh) -> int:
     """Polynomial degree of the mesh geometry."""
-    return int(mesh.geometry.cmap.degree)
+    cmap = mesh.geometry.cmaps[0] if DOLFINX_VERSION >= (0, 10) else mesh.geometry.cmap
+    return int(cmap.degree)
 
 
 def is_linear_lagrange(V: dolfinx.fem.FunctionSpace) -> bool:
@@ -109,3 +111,9 @@ def set_bc_values(u: dolfinx.fem.Function, bcs) -> None:
     for bc in bcs:
         bc.set(u.x.array)
     u.x.scatter_forward()
+
+
+def interpolation_points(V: dolfinx.fem.FunctionSpace):
+    """Reference points for interpolating an Expression into V (a method until 0.9)."""
+    points = V.element.interpolation_points
+    return points if DOLFINX_VERSION >= (0, 10) else points()

@@ -122,20 +122,31 @@ def solve_load_steps(
                     f"cut-backs (last SNES reason {report.reason}, {report.iterations} iterations)"
                 )
             increment *= 0.5
-            _log(problem, f"step {step + 1}: t = {target:.6g} failed (SNES reason {report.reason}); "
-                          f"cut back to increment {increment:.4g}")
+            _log(
+                problem,
+                f"step {step + 1}: t = {target:.6g} failed (SNES reason {report.reason}); "
+                f"cut back to increment {increment:.4g}",
+            )
             continue
         step += 1
         t = target
         record = StepRecord(
-            step=step, load=t, iterations=report.iterations, active=report.active,
+            step=step,
+            load=t,
+            iterations=report.iterations,
+            active=report.active,
             residual=report.residuals[-1] if report.residuals else float("nan"),
-            wall_time=elapsed, cutbacks=cutbacks, report=report,
+            wall_time=elapsed,
+            cutbacks=cutbacks,
+            report=report,
         )
         records.append(record)
-        _log(problem, f"step {step:4d}  t = {t:.6g}  newton {report.iterations:2d}  "
-                      f"active {report.active:5d}  residual {record.residual:.3e}  "
-                      f"time {elapsed:.3f} s")
+        _log(
+            problem,
+            f"step {step:4d}  t = {t:.6g}  newton {report.iterations:2d}  "
+            f"active {report.active:5d}  residual {record.residual:.3e}  "
+            f"time {elapsed:.3f} s",
+        )
         if output is not None:
             output.write(t)
         if on_step is not None:

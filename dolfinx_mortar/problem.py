@@ -174,9 +174,15 @@ class ContactProblem:
         self.pairs = list(pairs)
         self.interfaces = [
             MortarInterface(
-                self.V, pair.facet_tags, pair.slave, pair.master, normals=normals,
-                integration=integration, basis=multipliers,
-                num_gauss_points=num_gauss_points, search_margin=search_margin,
+                self.V,
+                pair.facet_tags,
+                pair.slave,
+                pair.master,
+                normals=normals,
+                integration=integration,
+                basis=multipliers,
+                num_gauss_points=num_gauss_points,
+                search_margin=search_margin,
                 configuration=configuration,
             )
             for pair in self.pairs
@@ -185,13 +191,17 @@ class ContactProblem:
         bs = self.V.dofmap.index_map_bs
         self._fixed_dofs = dirichlet_dofs(self.bcs, self.V)
         fixed_blocks = np.unique(self._fixed_dofs // bs)
-        fully_fixed = fixed_blocks[np.all(np.isin(fixed_blocks[:, None] * bs + np.arange(bs),
-                                                  self._fixed_dofs), axis=1)]
+        fully_fixed = fixed_blocks[
+            np.all(np.isin(fixed_blocks[:, None] * bs + np.arange(bs), self._fixed_dofs), axis=1)
+        ]
         for interface in self.interfaces:
             interface.set_crosspoints(fully_fixed)
 
-        self.layout = BlockLayout(self.comm, self.interfaces[0].num_owned_dofs,
-                                  [i.num_owned_multipliers for i in self.interfaces])
+        self.layout = BlockLayout(
+            self.comm,
+            self.interfaces[0].num_owned_dofs,
+            [i.num_owned_multipliers for i in self.interfaces],
+        )
         self.multipliers = [i.create_multiplier_vector() for i in self.interfaces]
         self._augmented = [np.zeros(i.num_owned_multipliers) for i in self.interfaces]
         self._frozen_active: list[np.ndarray] | None = None
@@ -199,8 +209,9 @@ class ContactProblem:
             {name: i.create_multiplier_vector() for name in ("gap", "area")}
             for i in self.interfaces
         ]
-        self.active: list[np.ndarray] = [np.zeros(i.num_owned_multipliers, dtype=bool)
-                                         for i in self.interfaces]
+        self.active: list[np.ndarray] = [
+            np.zeros(i.num_owned_multipliers, dtype=bool) for i in self.interfaces
+        ]
         self.gaps: list[np.ndarray] = [np.zeros(i.num_owned_multipliers) for i in self.interfaces]
         self.areas: list[np.ndarray] = [np.zeros(i.num_owned_multipliers) for i in self.interfaces]
 
@@ -218,8 +229,12 @@ class ContactProblem:
             # eps makes augmented Lagrange converge in far fewer updates
             penalty = self._stiffness_scale() * (10.0 if method == "augmented" else 1.0)
         self.penalty = float(penalty)
-        self.timings = {"bulk assembly": 0.0, "contact search": 0.0,
-                        "mortar integration": 0.0, "linear solve": 0.0}
+        self.timings = {
+            "bulk assembly": 0.0,
+            "contact search": 0.0,
+            "mortar integration": 0.0,
+            "linear solve": 0.0,
+        }
         self._setup_snes(petsc_options or {}, petsc_options_prefix)
 
     # -- setup -------------------------------------------------------------
@@ -255,8 +270,16 @@ class ContactProblem:
             X = interface.slave.reference_coordinates[interface.slave.facets]
             lengths.append(np.linalg.norm(X[:, 1] - X[:, 0], axis=1))
         sums = self.comm.allreduce(
-            np.array([sum(v.sum() for v in values), sum(v.size for v in values),
-                      sum(v.sum() for v in lengths), sum(v.size for v in lengths)]), op=MPI.SUM)
+            np.array(
+                [
+                    sum(v.sum() for v in values),
+                    sum(v.size for v in values),
+                    sum(v.sum() for v in lengths),
+                    sum(v.size for v in lengths),
+                ]
+            ),
+            op=MPI.SUM,
+        )
         diagonal.destroy()
         if sums[1] == 0 or sums[3] == 0 or not sums[0] > 0:
             raise ValueError("cannot estimate the stiffness scale; pass c_n and penalty")
@@ -345,8 +368,11 @@ class ContactProblem:
             area_vector = self._row_coefficients[k]["area"]
             for vector, values in ((gap_vector, q.gap.value), (area_vector, q.area.value)):
                 vector.zeroEntries()
-                vector.setValues(interface.pair_multipliers.reshape(-1).astype(PETSc.IntType),
-                                 values.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
+                vector.setValues(
+                    interface.pair_multipliers.reshape(-1).astype(PETSc.IntType),
+                    values.reshape(-1),
+                    addv=PETSc.InsertMode.ADD_VALUES,
+                )
                 vector.assemble()
             self.gaps[k] = gap_vector.getArray(readonly=True).copy()
             self.areas[k] = area_vector.getArray(readonly=True).copy()
@@ -367,7 +393,9 @@ class ContactProblem:
                 return self._frozen_active[k] & covered
             # ties go to active, and gaps within rounding of zero count as
             # ties: bodies that touch at the start hold each other
-            touching = np.abs(self.gaps[k]) <= 1e-12 * self.interfaces[k].reuse.margin * self.areas[k]
+            touching = (
+                np.abs(self.gaps[k]) <= 1e-12 * self.interfaces[k].reuse.margin * self.areas[k]
+            )
             gap = np.where(touching, 0.0, self.gaps[k])
             return covered & (z - self.c_n * gap >= 0.0)
         normalized = np.where(covered, self.gaps[k] / np.where(covered, self.areas[k], 1.0), 0.0)
@@ -409,8 +437,9 @@ class ContactProblem:
         with b_u.localForm() as local:
             local.set(0.0)
         dolfinx.fem.petsc.assemble_vector(b_u, self.F_form)
-        dolfinx.fem.petsc.apply_lifting(b_u, [self.J_form], bcs=[self.bcs],
-                                        x0=[self.u.x.petsc_vec], alpha=-1.0)
+        dolfinx.fem.petsc.apply_lifting(
+            b_u, [self.J_form], bcs=[self.bcs], x0=[self.u.x.petsc_vec], alpha=-1.0
+        )
         b_u.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         self.timings["bulk assembly"] += time.perf_counter() - start
         start = time.perf_counter()
@@ -442,8 +471,9 @@ class ContactProblem:
             all_cols = [self.layout.u(cols)] + [b[1] for b in blocks]
             if self._system is not None:
                 self._system.destroy()
-            self._system = self.layout.create_matrix(np.concatenate(all_rows),
-                                                     np.concatenate(all_cols))
+            self._system = self.layout.create_matrix(
+                np.concatenate(all_rows), np.concatenate(all_cols)
+            )
             self._system_versions = versions
             if hasattr(self, "snes"):
                 self.snes.setJacobian(self._jacobian, self._system.mat)
@@ -480,22 +510,27 @@ class ContactProblem:
         vectors["area"].getArray()[:] = beta
         alpha_pair = interface.node_values(vectors["gap"])[interface.pair_nodes[:, 1:3]]
         beta_pair = interface.node_values(vectors["area"])[interface.pair_nodes[:, 1:3]]
-        constraint = (alpha_pair[:, :, None] * q.gap.grad + beta_pair[:, :, None] * q.area.grad)
+        constraint = alpha_pair[:, :, None] * q.gap.grad + beta_pair[:, :, None] * q.area.grad
         diagonal = layout.z(owned_rows, field)
-        rows = np.concatenate([
-            np.broadcast_to(force_dofs[:, :, None], (n, 8, 12)).reshape(-1),
-            np.broadcast_to(force_dofs[:, :, None], (n, 8, 2)).reshape(-1),
-            np.broadcast_to(pair_z[:, :, None], (n, 2, 12)).reshape(-1),
-            diagonal,
-        ])
-        cols = np.concatenate([
-            np.broadcast_to(pair_dofs[:, None, :], (n, 8, 12)).reshape(-1),
-            np.broadcast_to(pair_z[:, None, :], (n, 8, 2)).reshape(-1),
-            np.broadcast_to(pair_dofs[:, None, :], (n, 2, 12)).reshape(-1),
-            diagonal,
-        ])
-        values = np.concatenate([tangent.reshape(-1), coupling.reshape(-1),
-                                 constraint.reshape(-1), delta])
+        rows = np.concatenate(
+            [
+                np.broadcast_to(force_dofs[:, :, None], (n, 8, 12)).reshape(-1),
+                np.broadcast_to(force_dofs[:, :, None], (n, 8, 2)).reshape(-1),
+                np.broadcast_to(pair_z[:, :, None], (n, 2, 12)).reshape(-1),
+                diagonal,
+            ]
+        )
+        cols = np.concatenate(
+            [
+                np.broadcast_to(pair_dofs[:, None, :], (n, 8, 12)).reshape(-1),
+                np.broadcast_to(pair_z[:, None, :], (n, 8, 2)).reshape(-1),
+                np.broadcast_to(pair_dofs[:, None, :], (n, 2, 12)).reshape(-1),
+                diagonal,
+            ]
+        )
+        values = np.concatenate(
+            [tangent.reshape(-1), coupling.reshape(-1), constraint.reshape(-1), delta]
+        )
         return rows, cols, values
 
     # -- solving -----------------------------------------------------------
@@ -532,9 +567,13 @@ class ContactProblem:
         self.snes.solve(None, self.x)
         reason = self.snes.getConvergedReason()
         self._write_x_into_state(self.x)
-        return SolveReport(converged=reason > 0, reason=reason,
-                           iterations=self.snes.getIterationNumber(),
-                           residuals=list(self._residual_history), active=0)
+        return SolveReport(
+            converged=reason > 0,
+            reason=reason,
+            iterations=self.snes.getIterationNumber(),
+            residuals=list(self._residual_history),
+            active=0,
+        )
 
     def _fixed_point(self) -> SolveReport:
         """Outer loop of the fixed-point active-set strategy (paper, section 5)."""
@@ -543,8 +582,9 @@ class ContactProblem:
         self._update_contact()
         covered = [self._covered(k) for k in range(len(self.interfaces))]
         z_now = [z.getArray(readonly=True) for z in self.multipliers]
-        self._frozen_active = [c & ((z > 0) | (g <= 0)) for c, z, g in
-                               zip(covered, z_now, self.gaps, strict=True)]
+        self._frozen_active = [
+            c & ((z > 0) | (g <= 0)) for c, z, g in zip(covered, z_now, self.gaps, strict=True)
+        ]
         total_iterations, residuals = 0, []
         for outer in range(1, self.max_outer_iterations + 1):
             report = self._newton()
@@ -552,11 +592,14 @@ class ContactProblem:
             residuals += report.residuals
             if not report.converged:
                 report.iterations, report.residuals, report.outer_iterations = (
-                    total_iterations, residuals, outer)
+                    total_iterations,
+                    residuals,
+                    outer,
+                )
                 return report
             changed = 0
             new_sets = []
-            for k, interface in enumerate(self.interfaces):
+            for k in range(len(self.interfaces)):
                 pressure = self._averaged_pressure(k)
                 active = self._frozen_active[k].copy()
                 active[active & (pressure < 0.0)] = False
@@ -566,11 +609,22 @@ class ContactProblem:
             changed = self.comm.allreduce(changed, op=MPI.SUM)
             self._frozen_active = new_sets
             if changed == 0:
-                return SolveReport(converged=True, reason=report.reason,
-                                   iterations=total_iterations, residuals=residuals,
-                                   active=0, outer_iterations=outer)
-        return SolveReport(converged=False, reason=-100, iterations=total_iterations,
-                           residuals=residuals, active=0, outer_iterations=self.max_outer_iterations)
+                return SolveReport(
+                    converged=True,
+                    reason=report.reason,
+                    iterations=total_iterations,
+                    residuals=residuals,
+                    active=0,
+                    outer_iterations=outer,
+                )
+        return SolveReport(
+            converged=False,
+            reason=-100,
+            iterations=total_iterations,
+            residuals=residuals,
+            active=0,
+            outer_iterations=self.max_outer_iterations,
+        )
 
     def _averaged_pressure(self, k: int) -> np.ndarray:
         """p_j = int N_j lambda / int N_j = (D^T z)_j / (D^T 1)_j at owned slave nodes."""
@@ -587,7 +641,9 @@ class ContactProblem:
         denominator = weights.getArray(readonly=True)[local]
         for vector in (ones, weighted, weights):
             vector.destroy()
-        return np.where(np.abs(denominator) > 0, numerator / np.where(denominator != 0, denominator, 1), 0.0)
+        return np.where(
+            np.abs(denominator) > 0, numerator / np.where(denominator != 0, denominator, 1), 0.0
+        )
 
     def _uzawa(self) -> SolveReport:
         """Augmented Lagrange: Newton at fixed lam, then lam <- z, until lam settles."""
@@ -598,7 +654,10 @@ class ContactProblem:
             residuals += report.residuals
             if not report.converged:
                 report.iterations, report.residuals, report.outer_iterations = (
-                    total_iterations, residuals, outer)
+                    total_iterations,
+                    residuals,
+                    outer,
+                )
                 return report
             change, size = 0.0, 0.0
             for k, z in enumerate(self.multipliers):
@@ -609,11 +668,22 @@ class ContactProblem:
             change = self.comm.allreduce(change, op=MPI.MAX)
             size = self.comm.allreduce(size, op=MPI.MAX)
             if change <= self.augmented_tolerance * max(size, np.finfo(float).tiny):
-                return SolveReport(converged=True, reason=report.reason,
-                                   iterations=total_iterations, residuals=residuals,
-                                   active=0, outer_iterations=outer)
-        return SolveReport(converged=False, reason=-101, iterations=total_iterations,
-                           residuals=residuals, active=0, outer_iterations=self.max_outer_iterations)
+                return SolveReport(
+                    converged=True,
+                    reason=report.reason,
+                    iterations=total_iterations,
+                    residuals=residuals,
+                    active=0,
+                    outer_iterations=outer,
+                )
+        return SolveReport(
+            converged=False,
+            reason=-101,
+            iterations=total_iterations,
+            residuals=residuals,
+            active=0,
+            outer_iterations=self.max_outer_iterations,
+        )
 
     # -- state for load stepping --------------------------------------------
 
@@ -639,8 +709,10 @@ class ContactProblem:
     def contact_pressure(self, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """(reference coordinates, nodal pressure z_j) of pair k's owned slave nodes."""
         interface = self.interfaces[k]
-        return (interface.owned_multiplier_coordinates.copy(),
-                self.multipliers[k].getArray(readonly=True).copy())
+        return (
+            interface.owned_multiplier_coordinates.copy(),
+            self.multipliers[k].getArray(readonly=True).copy(),
+        )
 
     def gathered_pressure(self, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """The same on every rank, for all slave nodes, sorted by x coordinate."""
@@ -687,7 +759,8 @@ class ContactProblem:
                 "evaluations_skipped": s.evaluations_skipped,
                 "slave_nodes": interface.num_global_multipliers,
                 "slave_nodes_uncovered": self.comm.allreduce(
-                    int(np.count_nonzero(~self._covered(k))), op=MPI.SUM),
+                    int(np.count_nonzero(~self._covered(k))), op=MPI.SUM
+                ),
                 "time_search": s.time_search,
                 "time_integration": s.time_integration,
             }

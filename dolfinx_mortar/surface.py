@@ -124,7 +124,8 @@ def extract_surface(
     if comm.allreduce(facets.size, op=MPI.SUM) == 0:
         present = np.unique(np.concatenate(comm.allgather(np.unique(facet_tags.values))))
         raise SurfaceError(
-            f"{name}: facet tag {marker} marks no facet on any rank (tags present: {present.tolist()})"
+            f"{name}: facet tag {marker} marks no facet on any rank "
+            f"(tags present: {present.tolist()})"
         )
 
     f_to_c = mesh.topology.connectivity(fdim, tdim)

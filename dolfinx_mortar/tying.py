@@ -63,8 +63,13 @@ class MeshTying:
         self.a = dolfinx.fem.form(a)
         self.L = dolfinx.fem.form(L)
         self.interface = MortarInterface(
-            self.V, facet_tags, slave_marker, master_marker,
-            normals="slave", integration=integration, basis=basis,
+            self.V,
+            facet_tags,
+            slave_marker,
+            master_marker,
+            normals="slave",
+            integration=integration,
+            basis=basis,
             num_gauss_points=num_gauss_points,
         )
         comm = self.V.mesh.comm
@@ -72,10 +77,14 @@ class MeshTying:
         bs = self.V.dofmap.index_map_bs
         fixed = dirichlet_dofs(bcs, self.V)
         fixed_blocks = np.unique(fixed // bs)
-        fully_fixed = fixed_blocks[np.isin(fixed_blocks * bs, fixed) & np.isin(fixed_blocks * bs + 1, fixed)]
+        fully_fixed = fixed_blocks[
+            np.isin(fixed_blocks * bs, fixed) & np.isin(fixed_blocks * bs + 1, fixed)
+        ]
         interface.set_crosspoints(fully_fixed)
         interface.update(None)
-        self.layout = BlockLayout(comm, interface.num_owned_dofs, bs * interface.num_owned_multipliers)
+        self.layout = BlockLayout(
+            comm, interface.num_owned_dofs, bs * interface.num_owned_multipliers
+        )
 
         D_mat, M_mat = interface.mortar_matrices()
         constraint = []

@@ -40,9 +40,17 @@ def test_patch_test_segment_lagrange_is_exact(ratio, slave):
 
 
 @pytest.mark.parallel
-@pytest.mark.parametrize("options", [["--multipliers", "standard"], ["--normals", "slave"],
-                                     ["--normals", "master"], ["--active-set", "fixed-point"],
-                                     ["--method", "augmented"], ["--cell-type", "quadrilateral"]])
+@pytest.mark.parametrize(
+    "options",
+    [
+        ["--multipliers", "standard"],
+        ["--normals", "slave"],
+        ["--normals", "master"],
+        ["--active-set", "fixed-point"],
+        ["--method", "augmented"],
+        ["--cell-type", "quadrilateral"],
+    ],
+)
 def test_patch_test_options_are_exact(options):
     summary = demo("patch_test").main(["--ratio", "3:7", *options])
     assert summary["max_pressure_deviation_rel"] <= 1e-10
@@ -51,8 +59,9 @@ def test_patch_test_options_are_exact(options):
 @pytest.mark.parametrize("gauss_points", [2, 4, 8])
 def test_patch_test_element_based_is_not_exact(gauss_points):
     """Element-based integration is close but never exact; the deviation is reported."""
-    summary = demo("patch_test").main(["--ratio", "3:7", "--integration", "element",
-                                       "--gauss-points", str(gauss_points)])
+    summary = demo("patch_test").main(
+        ["--ratio", "3:7", "--integration", "element", "--gauss-points", str(gauss_points)]
+    )
     assert 1e-6 < summary["max_pressure_deviation_rel"] < 0.1
 
 
@@ -60,8 +69,9 @@ def test_patch_test_element_based_is_not_exact(gauss_points):
 def test_patch_test_penalty_gives_uniform_pressure_and_penetration(factor):
     lagrange = demo("patch_test").main(["--ratio", "3:7"])
     penalty = lagrange["penalty_used"] * factor
-    summary = demo("patch_test").main(["--ratio", "3:7", "--method", "penalty",
-                                       "--penalty", str(penalty)])
+    summary = demo("patch_test").main(
+        ["--ratio", "3:7", "--method", "penalty", "--penalty", str(penalty)]
+    )
     # a uniform pressure needs a uniform penetration p / eps: the pressure is exact
     assert summary["max_pressure_deviation_rel"] <= 1e-10
 
@@ -102,8 +112,9 @@ def test_semismooth_newton_converges_quadratically():
         r = np.array(residuals)
         q = r / r[0]
         # pairs past the active-set search and above the rounding floor (~1e-12 here)
-        asymptotic = [(a, b) for a, b, rb in zip(q[:-1], q[1:], r[1:], strict=True)
-                      if a < 0.1 and rb > 1e-11]
+        asymptotic = [
+            (a, b) for a, b, rb in zip(q[:-1], q[1:], r[1:], strict=True) if a < 0.1 and rb > 1e-11
+        ]
         assert asymptotic, residuals
         for a, b in asymptotic:
             assert b <= 10.0 * a**2, residuals
@@ -118,10 +129,13 @@ def penetrating_blocks(normals: str, method: str = "lagrange", material: str = "
     F = internal_work(u, v, {0: Material(10.0, 0.3, material)})
     bottom = dolfinx.mesh.locate_entities_boundary(mesh, 1, lambda x: np.isclose(x[1], 0.0))
     top = dolfinx.mesh.locate_entities_boundary(mesh, 1, lambda x: np.isclose(x[1], 1.0))
-    bcs = [dolfinx.fem.dirichletbc(np.zeros(2), dolfinx.fem.locate_dofs_topological(V, 1, b), V)
-           for b in (bottom, top)]
-    pair = ContactPair(tagged.facet_tags, tagged.markers["contact_slave"],
-                       tagged.markers["contact_master"])
+    bcs = [
+        dolfinx.fem.dirichletbc(np.zeros(2), dolfinx.fem.locate_dofs_topological(V, 1, b), V)
+        for b in (bottom, top)
+    ]
+    pair = ContactPair(
+        tagged.facet_tags, tagged.markers["contact_slave"], tagged.markers["contact_master"]
+    )
     problem = ContactProblem(F, u, bcs, [pair], normals=normals, method=method)
     rng = np.random.default_rng(7)
     u.x.array[:] = 0.01 * rng.standard_normal(u.x.array.size)
@@ -156,7 +170,9 @@ def test_contact_jacobian_taylor(normals, method):
     h = x0.duplicate()
     h.setArray(rng.standard_normal(h.getLocalSize()))
     # no change of the active set within the steps, and none at Dirichlet dofs
-    h.getArray()[np.isin(np.arange(*h.getOwnershipRange()), problem.layout.u(problem._fixed_dofs))] = 0.0
+    h.getArray()[
+        np.isin(np.arange(*h.getOwnershipRange()), problem.layout.u(problem._fixed_dofs))
+    ] = 0.0
     Jh = h.duplicate()
     J.mult(h, Jh)
     remainders = []
@@ -182,8 +198,13 @@ def test_bad_options_and_inputs():
     F = internal_work(u, ufl.TestFunction(V), {0: Material(1.0, 0.3, "linear")})
     markers = tagged.markers
     pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"])
-    for key, value in (("method", "lagrangian"), ("integration", "nodal"), ("normals", "up"),
-                       ("active_set", "smooth"), ("multipliers", "mortar")):
+    for key, value in (
+        ("method", "lagrangian"),
+        ("integration", "nodal"),
+        ("normals", "up"),
+        ("active_set", "smooth"),
+        ("multipliers", "mortar"),
+    ):
         with pytest.raises(ValueError, match=f"unknown {key}"):
             ContactProblem(F, u, [], [pair], **{key: value})
     with pytest.raises(ValueError, match="fixed-point"):
@@ -193,7 +214,9 @@ def test_bad_options_and_inputs():
     with pytest.raises(SurfaceError, match="marks no facet"):
         ContactProblem(F, u, [], [ContactPair(tagged.facet_tags, 999, markers["contact_master"])])
     # a slave surface on the master's body: both tags on the foundation
-    wrong = ContactPair(tagged.facet_tags, markers["foundation_top_free"], markers["foundation_contact"])
+    wrong = ContactPair(
+        tagged.facet_tags, markers["foundation_top_free"], markers["foundation_contact"]
+    )
     with pytest.raises(ValueError, match="wrong body"):
         ContactProblem(F, u, [], [wrong])
     with pytest.raises(ValueError, match="at least one"):
@@ -210,9 +233,13 @@ def test_load_stepping_gives_up_with_a_clear_error():
     v = ufl.TestFunction(V)
     ds = ufl.Measure("ds", domain=mesh, subdomain_data=tagged.facet_tags)
     traction = dolfinx.fem.Constant(mesh, np.zeros(2))
-    F = internal_work(u, v, {0: Material(1000.0, 0.4, "neo-hookean")}) - ufl.inner(traction, v) * ds(markers["punch_top"])
+    F = internal_work(u, v, {0: Material(1000.0, 0.4, "neo-hookean")}) - ufl.inner(
+        traction, v
+    ) * ds(markers["punch_top"])
     bottom = tagged.facet_tags.find(markers["foundation_bottom"])
-    bcs = [dolfinx.fem.dirichletbc(np.zeros(2), dolfinx.fem.locate_dofs_topological(V, 1, bottom), V)]
+    bcs = [
+        dolfinx.fem.dirichletbc(np.zeros(2), dolfinx.fem.locate_dofs_topological(V, 1, bottom), V)
+    ]
     pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"])
     problem = ContactProblem(F, u, bcs, [pair], petsc_options={"snes_max_it": 1})
 
@@ -233,11 +260,15 @@ def test_separated_bodies_have_no_active_node_and_a_regular_system():
     u = dolfinx.fem.Function(V)
     F = internal_work(u, ufl.TestFunction(V), {0: Material(10.0, 0.3, "neo-hookean")})
     outer = dolfinx.mesh.locate_entities_boundary(mesh, 1, lambda x: np.isclose(x[1], 0.0))
-    bcs = [dolfinx.fem.dirichletbc(np.zeros(2), dolfinx.fem.locate_dofs_topological(V, 1, outer), V)]
-    pair = ContactPair(tagged.facet_tags, tagged.markers["contact_slave"],
-                       tagged.markers["contact_master"])
+    bcs = [
+        dolfinx.fem.dirichletbc(np.zeros(2), dolfinx.fem.locate_dofs_topological(V, 1, outer), V)
+    ]
+    pair = ContactPair(
+        tagged.facet_tags, tagged.markers["contact_slave"], tagged.markers["contact_master"]
+    )
     top_dofs = dolfinx.fem.locate_dofs_topological(
-        V, 1, dolfinx.mesh.locate_entities_boundary(mesh, 1, lambda x: np.isclose(x[1], 1.0)))
+        V, 1, dolfinx.mesh.locate_entities_boundary(mesh, 1, lambda x: np.isclose(x[1], 1.0))
+    )
     bcs.append(dolfinx.fem.dirichletbc(np.array([0.0, 0.3]), top_dofs, V))
     problem = ContactProblem(F, u, bcs, [pair], search_margin=0.05)
     report = problem.solve()

@@ -19,12 +19,18 @@ from mpi4py import MPI
 DEMOS = pathlib.Path(__file__).parents[1] / "demos"
 
 CONFIGURATIONS = {
-    "hertz": (["--refinement", "0", "--steps", "2"],
-              ["p_max", "a_contact", "total_force", "l2_pressure_error_rel", "newton_iterations"]),
-    "patch_test": (["--ratio", "3:7", "--slave", "bottom"],
-                   ["max_pressure_deviation_rel", "pressure_max", "newton_iterations"]),
-    "ironing": (["--steps", "20", "--end-time", "0.3"],
-                ["steps_completed", "newton_iterations", "max_force_balance_rel"]),
+    "hertz": (
+        ["--refinement", "0", "--steps", "2"],
+        ["p_max", "a_contact", "total_force", "l2_pressure_error_rel", "newton_iterations"],
+    ),
+    "patch_test": (
+        ["--ratio", "3:7", "--slave", "bottom"],
+        ["max_pressure_deviation_rel", "pressure_max", "newton_iterations"],
+    ),
+    "ironing": (
+        ["--steps", "20", "--end-time", "0.3"],
+        ["steps_completed", "newton_iterations", "max_force_balance_rel"],
+    ),
     "mesh_tying": (["--refinements", "3"], ["l2_rate", "h1_rate", "max_l2_error"]),
 }
 
@@ -43,8 +49,9 @@ def assert_close(serial, parallel, key, tolerance=1e-8):
             assert_close(a, b, key, tolerance)
     elif isinstance(serial, int | float):
         scale = max(abs(serial), 1e-300)
-        assert math.isclose(serial, parallel, rel_tol=tolerance, abs_tol=tolerance * scale) or \
-            abs(serial - parallel) <= tolerance * max(1.0, scale), (key, serial, parallel)
+        assert math.isclose(serial, parallel, rel_tol=tolerance, abs_tol=tolerance * scale) or abs(
+            serial - parallel
+        ) <= tolerance * max(1.0, scale), (key, serial, parallel)
     else:
         assert serial == parallel, key
 
@@ -65,17 +72,39 @@ def test_demo_serial_equals_parallel(name, tmp_path_factory):
 def test_demo_outputs(tmp_path):
     """JSON, PNG and ParaView files where the options say."""
     output = tmp_path / "hertz"
-    load("hertz").main(["--refinement", "0", "--steps", "1", "--output", str(output),
-                        "--json", str(output / "summary.json")], comm=MPI.COMM_SELF)
+    load("hertz").main(
+        [
+            "--refinement",
+            "0",
+            "--steps",
+            "1",
+            "--output",
+            str(output),
+            "--json",
+            str(output / "summary.json"),
+        ],
+        comm=MPI.COMM_SELF,
+    )
     summary = json.loads((output / "summary.json").read_text())
-    for key in ("p_max", "a_contact", "total_force", "p0_exact", "a_exact", "l2_pressure_error_rel",
-                "newton_iterations", "num_dofs", "wall_time_s", "timings"):
+    for key in (
+        "p_max",
+        "a_contact",
+        "total_force",
+        "p0_exact",
+        "a_exact",
+        "l2_pressure_error_rel",
+        "newton_iterations",
+        "num_dofs",
+        "wall_time_s",
+        "timings",
+    ):
         assert key in summary
     assert (output / "hertz_pressure.png").stat().st_size > 1000
     assert (output / "paraview" / "displacement.bp").exists()
     assert (output / "paraview" / "contact_pressure.bp").exists()
     iron = tmp_path / "ironing"
-    load("ironing").main(["--steps", "40", "--end-time", "0.3", "--output", str(iron)],
-                         comm=MPI.COMM_SELF)
+    load("ironing").main(
+        ["--steps", "40", "--end-time", "0.3", "--output", str(iron)], comm=MPI.COMM_SELF
+    )
     assert (iron / "ironing_forces.csv").read_text().count("\n") >= 3
     assert (iron / "ironing_forces.png").stat().st_size > 1000

@@ -38,10 +38,18 @@ def keyed_entries(matrix, row_key, col_key) -> dict:
 
 
 def interface(tagged, u=None, **options) -> MortarInterface:
-    V = u.function_space if u is not None else dolfinx.fem.functionspace(
-        tagged.mesh, ("Lagrange", 1, (2,)))
-    mortar = MortarInterface(V, tagged.facet_tags, tagged.markers["contact_slave"],
-                             tagged.markers["contact_master"], **options)
+    V = (
+        u.function_space
+        if u is not None
+        else dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (2,)))
+    )
+    mortar = MortarInterface(
+        V,
+        tagged.facet_tags,
+        tagged.markers["contact_slave"],
+        tagged.markers["contact_master"],
+        **options,
+    )
     mortar.update(u)
     return mortar
 
@@ -52,8 +60,15 @@ def perturbed_displacement(tagged, amplitude=0.02, seed=3):
     u = dolfinx.fem.Function(V)
     upper = tagged.cell_tags.find(tagged.markers["upper"])
     lower = tagged.cell_tags.find(tagged.markers["lower"])
-    u.interpolate(lambda x: np.vstack([amplitude * np.sin(7 * x[0] + 1), amplitude * np.cos(5 * x[0])]), upper)
-    u.interpolate(lambda x: np.vstack([-amplitude * np.sin(3 * x[0]), -0.5 * amplitude * np.cos(4 * x[0] + 2) - 0.01]), lower)
+    u.interpolate(
+        lambda x: np.vstack([amplitude * np.sin(7 * x[0] + 1), amplitude * np.cos(5 * x[0])]), upper
+    )
+    u.interpolate(
+        lambda x: np.vstack(
+            [-amplitude * np.sin(3 * x[0]), -0.5 * amplitude * np.cos(4 * x[0] + 2) - 0.01]
+        ),
+        lower,
+    )
     u.x.scatter_forward()
     return u
 
@@ -115,22 +130,31 @@ def test_serial_equals_parallel(integration, normals):
         identity = node_identity(u.function_space)
         multiplier_key = {
             int(m): identity[int(b)]
-            for m, b in zip(mortar.multiplier_offset + np.arange(mortar.num_owned_multipliers),
-                            mortar.owned_multiplier_blocks, strict=True)
+            for m, b in zip(
+                mortar.multiplier_offset + np.arange(mortar.num_owned_multipliers),
+                mortar.owned_multiplier_blocks,
+                strict=True,
+            )
         }
         multiplier_key = {k: v for part in comm.allgather(multiplier_key) for k, v in part.items()}
         D, M = mortar.mortar_matrices()
         G = mortar.gap_jacobian()
         gap = mortar.weighted_gap()
-        owned_gap = {multiplier_key[int(mortar.multiplier_offset + i)]: v
-                     for i, v in enumerate(gap.getArray())}
+        owned_gap = {
+            multiplier_key[int(mortar.multiplier_offset + i)]: v
+            for i, v in enumerate(gap.getArray())
+        }
         owned_gap = {k: v for part in comm.allgather(owned_gap) for k, v in part.items()}
-        results.append({
-            "D": keyed_entries(D, multiplier_key.get, identity.get),
-            "M": keyed_entries(M, multiplier_key.get, identity.get),
-            "G": keyed_entries(G, multiplier_key.get, lambda c: (identity[int(c) // 2], int(c) % 2)),
-            "gap": owned_gap,
-        })
+        results.append(
+            {
+                "D": keyed_entries(D, multiplier_key.get, identity.get),
+                "M": keyed_entries(M, multiplier_key.get, identity.get),
+                "G": keyed_entries(
+                    G, multiplier_key.get, lambda c, ids=identity: (ids[int(c) // 2], int(c) % 2)
+                ),
+                "gap": owned_gap,
+            }
+        )
     serial, parallel = results
     for name in ("D", "M", "G", "gap"):
         assert serial[name].keys() == parallel[name].keys(), name
@@ -144,8 +168,10 @@ def test_penetrating_blocks_weighted_gap():
     tagged = meshes.tied_blocks(ratio=(2, 5), refinement=0)
     V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (2,)))
     u = dolfinx.fem.Function(V)
-    u.interpolate(lambda x: np.vstack([0.0 * x[0], 0.01 + 0.0 * x[0]]),
-                  tagged.cell_tags.find(tagged.markers["lower"]))
+    u.interpolate(
+        lambda x: np.vstack([0.0 * x[0], 0.01 + 0.0 * x[0]]),
+        tagged.cell_tags.find(tagged.markers["lower"]),
+    )
     u.x.scatter_forward()
     for basis in ("standard", "dual"):
         mortar = interface(tagged, u, basis=basis)
@@ -176,6 +202,8 @@ def test_bad_input():
         MortarInterface(quadratic, tagged.facet_tags, slave, master)
     mesh3d = dolfinx.mesh.create_unit_cube(MPI.COMM_WORLD, 2, 2, 2)
     V3 = dolfinx.fem.functionspace(mesh3d, ("Lagrange", 1, (3,)))
-    tags3 = dolfinx.mesh.meshtags(mesh3d, 2, np.zeros(0, dtype=np.int32), np.zeros(0, dtype=np.int32))
+    tags3 = dolfinx.mesh.meshtags(
+        mesh3d, 2, np.zeros(0, dtype=np.int32), np.zeros(0, dtype=np.int32)
+    )
     with pytest.raises(NotImplementedError, match="3D contact is not yet supported"):
         MortarInterface(V3, tags3, 1, 2)

@@ -22,8 +22,20 @@ def load_demo():
 @pytest.mark.parametrize("cell_type", ["triangle", "quadrilateral"])
 @pytest.mark.parametrize("ratio", ["3:4", "1:7", "5:2"])
 def test_linear_field_is_reproduced(basis, cell_type, ratio):
-    summary = load_demo().main(["--solution", "linear", "--refinements", "2", "--ratio", ratio,
-                                "--basis", basis, "--cell-type", cell_type])
+    summary = load_demo().main(
+        [
+            "--solution",
+            "linear",
+            "--refinements",
+            "2",
+            "--ratio",
+            ratio,
+            "--basis",
+            basis,
+            "--cell-type",
+            cell_type,
+        ]
+    )
     assert summary["max_l2_error"] < 1e-12
     assert summary["max_h1_error"] < 1e-11
 
@@ -31,7 +43,8 @@ def test_linear_field_is_reproduced(basis, cell_type, ratio):
 @pytest.mark.parallel
 @pytest.mark.parametrize("basis", ["standard", "dual"])
 def test_optimal_convergence_rates(basis):
-    summary = load_demo().main(["--solution", "smooth", "--refinements", "5", "--ratio", "3:4",
-                                "--basis", basis])
+    summary = load_demo().main(
+        ["--solution", "smooth", "--refinements", "5", "--ratio", "3:4", "--basis", basis]
+    )
     assert summary["l2_rate_finest"] == pytest.approx(2.0, abs=0.1)
     assert summary["h1_rate_finest"] == pytest.approx(1.0, abs=0.1)
