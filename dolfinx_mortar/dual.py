@@ -102,6 +102,46 @@ class Dual:
         return Dual(value, -self.grad * (value * inverse)[..., None])
 
 
+class RowSubsetDual(Dual):
+    """A Dual whose gradient is zero outside some rows of its leading axis.
+
+    Only those rows' gradients are kept (``rows``; ``grad_rows``, given as an
+    array or as a function that computes it when first needed); ``grad`` is
+    built in full on first access and kept. ``factors`` is whatever the
+    producer attaches to let consumers combine gradients before expanding
+    them (the mortar kernels attach their factorized derivatives). Most
+    candidate pairs of a mortar interface do not overlap: their rows are
+    never stored.
+    """
+
+    __slots__ = ("rows", "factors", "_grad_rows", "_full")
+
+    def __init__(self, value, rows, grad_rows, factors=None):
+        self.value = np.asarray(value, dtype=np.float64)
+        self.rows = np.asarray(rows)
+        self.factors = factors
+        self._grad_rows = grad_rows
+        self._full = None
+
+    @property
+    def grad_rows(self) -> np.ndarray:
+        if callable(self._grad_rows):
+            self._grad_rows = np.asarray(self._grad_rows(), dtype=np.float64)
+        return self._grad_rows
+
+    @property
+    def grad(self) -> np.ndarray:
+        if self._full is None:
+            full = np.zeros(self.value.shape + (self.grad_rows.shape[-1],))
+            full[self.rows] = self.grad_rows
+            self._full = full
+        return self._full
+
+    @grad.setter
+    def grad(self, grad) -> None:
+        self._full = np.asarray(grad, dtype=np.float64)
+
+
 def sqrt(a: Dual) -> Dual:
     root = np.sqrt(a.value)
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -107,18 +107,25 @@ class CooMatrix:
     The pattern is given once; :meth:`assemble` may then be called any number
     of times with new values in the same order. Duplicates are summed,
     entries with a negative row or column are dropped, rows owned by another
-    rank are sent to it by PETSc. The matrix is preallocated exactly (PETSc's
+    rank are sent to it by PETSc. The matrix is preallocated exactly (from
+    the pattern in CSR form when this rank owns all its rows, else PETSc's
     preallocator) and refuses new nonzeros, so assembly never allocates.
     (petsc4py 3.22 has no MatSetValuesCOO; this is its equivalent.)
+
+    :meth:`from_blocks` builds the same matrix for a pattern made of dense
+    blocks, one per group (a mortar pair), without sorting the entries, and
+    :meth:`assemble_groups` assembles the values of a few groups only (the
+    others are zero): most candidate pairs of a contact search never overlap.
     """
 
     def __init__(self, comm: MPI.Intracomm, rows, cols, row_sizes, col_sizes):
         rows = np.asarray(rows, dtype=np.int64).reshape(-1)
         cols = np.asarray(cols, dtype=np.int64).reshape(-1)
         self.num_entries = rows.size
+        self._blocks = None
         self._keep = np.flatnonzero((rows >= 0) & (cols >= 0))
         rows, cols = rows[self._keep], cols[self._keep]
-        order = np.lexsort((cols, rows))
+        order = self._sorting_order(rows, cols)
         rows, cols = rows[order], cols[order]
         first = np.ones(rows.size, dtype=bool)
         first[1:] = (rows[1:] != rows[:-1]) | (cols[1:] != cols[:-1])
@@ -131,33 +138,219 @@ class CooMatrix:
         self._rowmap = self._rowmap.astype(PETSc.IntType)
         self._indptr = np.concatenate([[0], np.cumsum(counts)]).astype(PETSc.IntType)
         self._indices = unique_cols.astype(PETSc.IntType)
+        self._create(comm, row_sizes, col_sizes)
 
-        preallocator = PETSc.Mat().create(comm=comm)
-        preallocator.setType(PETSc.Mat.Type.PREALLOCATOR)
-        preallocator.setSizes((row_sizes, col_sizes))
-        preallocator.setUp()
-        preallocator.setValuesIJV(self._indptr, self._indices, np.zeros(self._num_unique),
-                                  addv=PETSc.InsertMode.INSERT_VALUES, rowmap=self._rowmap)
-        preallocator.assemble()
+    @staticmethod
+    def _sorting_order(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """The stable order by (row, col): one adaptive sort of a combined key when it fits."""
+        if rows.size == 0:
+            return np.zeros(0, dtype=np.int64)
+        width = int(cols.max()) + 1
+        if int(rows.max()) < (2**62) // width:
+            return np.argsort(rows * width + cols, kind="stable")
+        return np.lexsort((cols, rows))
+
+    @classmethod
+    def from_blocks(cls, comm: MPI.Intracomm, row_blocks, col_blocks, block_shape,
+                    row_sizes, col_sizes) -> CooMatrix:
+        """The matrix of ``CooMatrix(comm, rows, cols, ...)`` for a pattern of dense blocks.
+
+        Group g has the entries (row_blocks[g, i] * br + a, col_blocks[g, j] * bc + b)
+        for a < br, b < bc, in the order (g, i, a, j, b); a negative block
+        drops its rows or columns. The block pattern is a sparse product of
+        the groups' row- and column-block incidences (no sort of the
+        entries); where a group's blocks go is looked up when the group is
+        first assembled.
+        """
+        self = cls.__new__(cls)
+        row_blocks = np.asarray(row_blocks, dtype=np.int64)
+        col_blocks = np.asarray(col_blocks, dtype=np.int64)
+        num_groups, rows_per_group = row_blocks.shape
+        cols_per_group = col_blocks.shape[1]
+        br, bc = (int(b) for b in block_shape)
+        self.num_entries = num_groups * rows_per_group * br * cols_per_group * bc
+        self._block_shape = (rows_per_group, br, cols_per_group, bc)
+        # the block numbering: the global one unless it is much larger than the data
+        row_numbers, row_local, num_row_numbers = _compact_numbering(row_blocks)
+        col_numbers, col_local, num_col_numbers = _compact_numbering(col_blocks)
+        incidence_rows = _incidence(row_local, num_row_numbers).T.tocsr()
+        pattern = (incidence_rows @ _incidence(col_local, num_col_numbers)).tocsr()
+        pattern.sort_indices()
+        block_indptr = pattern.indptr.astype(np.int64)
+        per_row = np.diff(block_indptr)
+        present = np.flatnonzero(per_row)
+        num_blocks = pattern.nnz
+        global_rows = present if row_numbers is None else row_numbers[present]
+        block_cols = pattern.indices if col_numbers is None else col_numbers[pattern.indices]
+        block_cols = _interleave(block_cols, bc)  # PETSc integers
+        # the CSR form (rows sorted, each row's columns sorted), for the preallocation:
+        # row (r, a) holds the columns c * bc + b of the blocks c of block row r
+        self._rowmap = _interleave(global_rows, br)
+        row_lengths = np.repeat(per_row[present] * bc, br)
+        indptr = np.zeros(row_lengths.size + 1, dtype=np.int64)
+        np.cumsum(row_lengths, out=indptr[1:])
+        self._indptr = indptr.astype(PETSc.IntType)
+        if br == 1:  # the rows' runs of block columns follow each other
+            self._indices = block_cols
+        else:
+            gather = np.arange(int(indptr[-1]), dtype=np.int64)
+            segment_start = np.repeat(block_indptr[present] * bc, br)
+            gather -= np.repeat(indptr[:-1] - segment_start, row_lengths)
+            self._indices = block_cols[gather].astype(PETSc.IntType)
+        self._num_unique = num_blocks * br * bc
+        # the values are kept as (a, block, b): then row (r, a) is one contiguous
+        # run, and the rows go to PETSc grouped by a
+        self._ijv = (
+            np.concatenate([a * num_blocks * bc + block_indptr[present] * bc for a in range(br)]
+                           + [[br * num_blocks * bc]]).astype(PETSc.IntType),
+            self._indices if br == 1 else np.tile(block_cols, br),
+            np.concatenate([global_rows * br + a for a in range(br)]).astype(PETSc.IntType),
+        )
+        pattern.data = np.arange(num_blocks, dtype=np.float64)
+        self._blocks = {
+            "pattern": pattern, "rows": row_local, "cols": col_local, "count": num_blocks,
+            "position": np.empty((num_groups, rows_per_group, cols_per_group),
+                                 dtype=np.int32 if num_blocks < 2**31 - 1 else np.int64),
+            "known": np.zeros(num_groups, dtype=bool),
+        }
+        self._create(comm, row_sizes, col_sizes)
+        del self._indptr, self._indices  # the preallocation was their only use
+        return self
+
+    def _create(self, comm: MPI.Intracomm, row_sizes, col_sizes) -> None:
         self.mat = PETSc.Mat().create(comm=comm)
         self.mat.setType(PETSc.Mat.Type.AIJ)
         self.mat.setSizes((row_sizes, col_sizes))
-        preallocator.preallocatorPreallocate(self.mat, fill=True)
-        preallocator.destroy()
+        num_local = int(row_sizes[0] if isinstance(row_sizes, (tuple, list)) else row_sizes)
+        first = comm.exscan(max(num_local, 0)) or 0
+        local = num_local >= 0 and bool(
+            np.all((self._rowmap >= first) & (self._rowmap < first + num_local)))
+        if comm.allreduce(local, op=MPI.LAND):
+            # this rank owns all its rows: the pattern is the preallocation
+            counts = np.zeros(num_local, dtype=PETSc.IntType)
+            counts[self._rowmap - first] = np.diff(self._indptr)
+            indptr = np.zeros(num_local + 1, dtype=PETSc.IntType)
+            np.cumsum(counts, out=indptr[1:])
+            self.mat.setPreallocationCSR((indptr, self._indices))
+        else:
+            preallocator = PETSc.Mat().create(comm=comm)
+            preallocator.setType(PETSc.Mat.Type.PREALLOCATOR)
+            preallocator.setSizes((row_sizes, col_sizes))
+            preallocator.setUp()
+            preallocator.setValuesIJV(self._indptr, self._indices, np.zeros(self._num_unique),
+                                      addv=PETSc.InsertMode.INSERT_VALUES, rowmap=self._rowmap)
+            preallocator.assemble()
+            preallocator.preallocatorPreallocate(self.mat, fill=True)
+            preallocator.destroy()
         self.mat.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
         self.mat.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True)
+
+    def _set(self, summed: np.ndarray, ijv=None) -> PETSc.Mat:
+        indptr, indices, rowmap = ijv or (self._indptr, self._indices, self._rowmap)
+        self.mat.zeroEntries()
+        self.mat.setValuesIJV(indptr, indices, summed, addv=PETSc.InsertMode.ADD_VALUES,
+                              rowmap=rowmap)
+        self.mat.assemble()
+        return self.mat
 
     def assemble(self, values) -> PETSc.Mat:
         """Replace the matrix values by the summed ``values`` (same order as the pattern)."""
         values = np.asarray(values, dtype=PETSc.ScalarType).reshape(-1)
         if values.size != self.num_entries:
             raise ValueError(f"expected {self.num_entries} values, got {values.size}")
+        if self._blocks is not None:
+            num_groups = self._blocks["known"].size
+            grouped = values.reshape((num_groups,) + self._block_shape)
+            return self.assemble_groups(np.moveaxis(grouped, 0, -1), np.arange(num_groups))
         summed = np.bincount(self._slot, weights=values[self._keep], minlength=self._num_unique)
-        self.mat.zeroEntries()
-        self.mat.setValuesIJV(self._indptr, self._indices, summed,
-                              addv=PETSc.InsertMode.ADD_VALUES, rowmap=self._rowmap)
-        self.mat.assemble()
-        return self.mat
+        return self._set(summed)
+
+    def assemble_groups(self, values, groups) -> PETSc.Mat:
+        """Replace the matrix values by those of the listed groups (all others are zero).
+
+        Only for a matrix built by :meth:`from_blocks`. ``values`` has the
+        shape (nr, br, nc, bc, len(groups)) (or any shape with those
+        entries in that order): the group axis last.
+        """
+        if self._blocks is None:
+            raise TypeError("assemble_groups needs a matrix built by CooMatrix.from_blocks")
+        groups = np.asarray(groups, dtype=np.int64).reshape(-1)
+        nr, br, nc, bc = self._block_shape
+        values = np.asarray(values, dtype=PETSc.ScalarType)
+        if values.size != nr * br * nc * bc * groups.size:
+            expected = nr * br * nc * bc * groups.size
+            raise ValueError(f"expected {expected} values, got {values.size}")
+        values = values.reshape(nr, br, nc, bc, groups.size)
+        position = self._positions(groups).reshape(-1)
+        count = self._blocks["count"]
+        summed = np.empty((br, count, bc))
+        for a in range(br):
+            for b in range(bc):
+                weights = np.ascontiguousarray(values[:, a, :, b, :]).reshape(-1)
+                sums = np.bincount(position, weights=weights, minlength=count + 1)
+                summed[a, :, b] = sums[:count]
+        return self._set(summed.reshape(-1), self._ijv)
+
+    def _positions(self, groups: np.ndarray) -> np.ndarray:
+        """(nr, nc, len(groups)) positions of the groups' blocks; dropped ones past the end."""
+        blocks = self._blocks
+        position, known = blocks["position"], blocks["known"]
+        new = groups[~known[groups]]
+        if new.size:
+            nr, nc = position.shape[1:]
+            rows, cols = blocks["rows"][new], blocks["cols"][new]
+            # a dropped block is looked up as block 0 (absent or not), then marked
+            found = blocks["pattern"][np.repeat(np.maximum(rows, 0), nc, axis=1).reshape(-1),
+                                      np.tile(np.maximum(cols, 0), (1, nr)).reshape(-1)]
+            found = np.asarray(found).reshape(new.size, nr, nc).astype(position.dtype)
+            found[(rows < 0)[:, :, None] | (cols < 0)[:, None, :]] = -1
+            position[new] = found
+            known[new] = True
+        result = position[groups].transpose(1, 2, 0).astype(np.int64)
+        result[result < 0] = blocks["count"]
+        return result
 
     def destroy(self) -> None:
         self.mat.destroy()
+
+
+def _interleave(blocks: np.ndarray, size: int) -> np.ndarray:
+    """(blocks * size + i for i < size), flattened block by block, as PETSc integers."""
+    blocks = blocks.astype(PETSc.IntType, copy=False)
+    if size == 1:
+        return blocks
+    result = np.empty((blocks.size, size), dtype=PETSc.IntType)
+    for i in range(size):  # (a broadcast over a short last axis is slow in numpy)
+        result[:, i] = blocks * size + i
+    return result.reshape(-1)
+
+
+def _compact_numbering(blocks: np.ndarray):
+    """(numbers, local, count): the block numbers used, each block's index among them
+    (-1 stays -1) and how many. ``numbers`` is None when the global numbering itself
+    is used (it is not much larger than the data)."""
+    largest = int(blocks.max()) if blocks.size else -1
+    if largest < 16 * blocks.size + 4096:
+        return None, blocks, largest + 1
+    valid = blocks >= 0
+    numbers, inverse = np.unique(blocks[valid], return_inverse=True)
+    local = np.full(blocks.shape, -1, dtype=np.int64)
+    local[valid] = inverse.reshape(-1)
+    return numbers, local, numbers.size
+
+
+def _incidence(blocks: np.ndarray, num_blocks: int):
+    """(groups x blocks) CSR matrix with a one where a group has a block (negative: none)."""
+    import scipy.sparse
+
+    valid = blocks >= 0
+    if valid.all():
+        step = max(blocks.shape[1], 1)
+        indptr = np.arange(0, blocks.size + 1, step, dtype=np.int64)[: blocks.shape[0] + 1]
+        indices = blocks.reshape(-1)
+    else:
+        indptr = np.zeros(blocks.shape[0] + 1, dtype=np.int64)
+        np.cumsum(valid.sum(axis=1), out=indptr[1:])
+        indices = blocks[valid]
+    return scipy.sparse.csr_matrix((np.ones(indices.size), indices, indptr),
+                                   shape=(blocks.shape[0], max(num_blocks, 1)))

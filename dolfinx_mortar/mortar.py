@@ -25,6 +25,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from . import kernels, search, surface
+from .dual import RowSubsetDual
 from .layout import CooMatrix
 from .kernels import BasisOption, IntegrationOption, NormalOption
 
@@ -53,6 +54,14 @@ def _owner_of_blocks(index_map, local_blocks: np.ndarray, rank: int) -> np.ndarr
     ghost = local_blocks >= index_map.size_local
     owners[ghost] = index_map.owners[local_blocks[ghost] - index_map.size_local]
     return owners
+
+
+def _contributing_rows(q: kernels.PairQuantities) -> np.ndarray | None:
+    """The pairs outside which every quantity of ``q`` is zero, if ``q`` says so."""
+    items = (q.Dn, q.Mn, q.area, q.gap)
+    if all(isinstance(item, RowSubsetDual) and item.rows is q.gap.rows for item in items):
+        return q.gap.rows
+    return None
 
 
 def _alltoallv(comm: MPI.Intracomm, chunks: list[np.ndarray], dtype, width: int) -> tuple[np.ndarray, np.ndarray]:
@@ -294,8 +303,12 @@ class MortarInterface:
         return self.quantities
 
     def _evaluate(self, node_x: np.ndarray) -> kernels.PairQuantities:
-        return kernels.pair_quantities(
-            node_x[self.pair_nodes],
+        # the pairs' coordinates (12, n), variable-major: x of p, y of p, x of a, ...
+        X = np.empty((kernels.NUM_PAIR_VARIABLES, self._pair_nodes_T.shape[1]))
+        for component in range(2):
+            X[component::2] = np.ascontiguousarray(node_x[:, component])[self._pair_nodes_T]
+        return kernels._pair_quantities(
+            X,
             self.pair_has_neighbour,
             normals=self.normals,
             integration=self.integration,
@@ -312,14 +325,30 @@ class MortarInterface:
         x = self._node_x[self.pair_nodes]  # (n, 6, 2)
         Dn, Mn = reference.Dn.value, reference.Mn.value  # (n, j, k, c)
         gap = (np.einsum("njlc,nlc->nj", Mn, x[:, 4:6]) - np.einsum("njkc,nkc->nj", Dn, x[:, 1:3]))
-        grad = np.zeros(gap.shape + (kernels.NUM_PAIR_VARIABLES,))
-        grad[:, :, 2:6] = -Dn.reshape(-1, 2, 4)
-        grad[:, :, 8:12] = Mn.reshape(-1, 2, 4)
+        rows = _contributing_rows(reference)
+        if rows is None:
+            grad = np.zeros(gap.shape + (kernels.NUM_PAIR_VARIABLES,))
+            grad[:, :, 2:6] = -Dn.reshape(-1, 2, 4)
+            grad[:, :, 8:12] = Mn.reshape(-1, 2, 4)
+
+            def constant(value: np.ndarray) -> Dual:
+                zero = np.broadcast_to(0.0, value.shape + (kernels.NUM_PAIR_VARIABLES,))
+                return Dual(value, zero)
+
+            return dataclasses.replace(reference, Dn=constant(Dn), Mn=constant(Mn),
+                                       area=constant(reference.area.value), gap=Dual(gap, grad))
+        # every quantity is zero outside the pairs that contribute: keep them apart
+        grad = np.zeros((rows.size, 2, kernels.NUM_PAIR_VARIABLES))
+        grad[:, :, 2:6] = -Dn[rows].reshape(-1, 2, 4)
+        grad[:, :, 8:12] = Mn[rows].reshape(-1, 2, 4)
+
         def constant(value: np.ndarray) -> Dual:
-            return Dual(value, np.broadcast_to(0.0, value.shape + (kernels.NUM_PAIR_VARIABLES,)))
+            shape = (rows.size,) + value.shape[1:] + (kernels.NUM_PAIR_VARIABLES,)
+            return RowSubsetDual(value, rows, np.broadcast_to(0.0, shape))
 
         return dataclasses.replace(reference, Dn=constant(Dn), Mn=constant(Mn),
-                                   area=constant(reference.area.value), gap=Dual(gap, grad))
+                                   area=constant(reference.area.value),
+                                   gap=RowSubsetDual(gap, rows, grad))
 
     def _exchange_plan(self, slave_x: np.ndarray, master_x: np.ndarray) -> None:
         """Which owned master and slave facets each other rank needs."""
@@ -410,11 +439,20 @@ class MortarInterface:
         self.pair_multipliers = self.node_multipliers[np.stack([a, b], axis=1)]
         self.pair_crosspoint = np.isin(self._node_blocks[np.stack([a, b], axis=1)],
                                        self._crosspoint_blocks)
-        dofs = self._node_blocks[self.pair_nodes][:, :, None] * self.block_size + np.arange(2)
+        self.pair_node_blocks = self._node_blocks[self.pair_nodes]
+        dofs = np.empty(self.pair_node_blocks.shape + (2,), dtype=np.int64)
+        for component in range(2):  # (not a broadcast over a last axis of 2: slow in numpy)
+            dofs[:, :, component] = self.pair_node_blocks * self.block_size + component
         dofs[~has_p, 0, :] = -1
         dofs[~has_q, 3, :] = -1
         self.pair_dofs = dofs.reshape(-1, 12)
-        self.pair_node_blocks = self._node_blocks[self.pair_nodes]
+        # for the kernels (coordinates gathered variable-major) and the block
+        # patterns of the matrices (node blocks, -1 where p or q is absent)
+        self._pair_nodes_T = np.ascontiguousarray(self.pair_nodes.T)
+        self._pair_col_blocks = self.pair_node_blocks.copy()
+        self._pair_col_blocks[~has_p, 0] = -1
+        self._pair_col_blocks[~has_q, 3] = -1
+        self._pair_force_blocks = np.ascontiguousarray(self.pair_node_blocks[:, [1, 2, 4, 5]])
         self._num_remote = (nrm, nrs)
         self._pattern_version += 1
         self.statistics.pairs = int(pairs.shape[0])
@@ -471,28 +509,71 @@ class MortarInterface:
             raise RuntimeError("call update(u) before assembling mortar quantities")
         return self.quantities
 
+    def _block_matrix(self, name: str, row_blocks, col_blocks, block_shape,
+                      row_sizes, col_sizes) -> CooMatrix:
+        """A matrix of a dense block per pair, whose pattern is rebuilt only after a new search."""
+        version, matrix = self._matrices.get(name, (-1, None))
+        if version != self._pattern_version:
+            if matrix is not None:
+                matrix.destroy()
+            matrix = CooMatrix.from_blocks(self.comm, row_blocks, col_blocks, block_shape,
+                                           row_sizes, col_sizes)
+            self._matrices[name] = (self._pattern_version, matrix)
+        return matrix
+
+    def _rows(self, q: kernels.PairQuantities) -> np.ndarray:
+        """The pairs whose quantities may be nonzero (the others are skipped in assembly)."""
+        rows = _contributing_rows(q)
+        return np.arange(q.D.shape[0]) if rows is None else rows
+
+    def _combined_gradients(self, q: kernels.PairQuantities, rows: np.ndarray, terms) -> np.ndarray:
+        """(len(terms), 12, len(rows)): per row of ``terms``, the sum of weight * d output / d x.
+
+        Outputs are numbered as in :class:`kernels.PairGradients` (Dn 0-7,
+        Mn 8-15, area 16-17, gap 18-19); a weight is a number or one per row.
+        """
+        factors = [getattr(item, "factors", None) for item in (q.Dn, q.Mn, q.area, q.gap)]
+        gradients = factors[0][0] if factors[0] is not None else None
+        if (gradients is not None and all(f is not None and f[0] is gradients for f in factors)
+                and q.gap.rows is rows and gradients.num_pairs == rows.size):
+            return gradients.combine(terms)
+        parts = []
+        for item in (q.Dn, q.Mn, q.area, q.gap):
+            if isinstance(item, RowSubsetDual) and item.rows is rows:
+                parts.append(item.grad_rows.reshape(rows.size, -1, kernels.NUM_PAIR_VARIABLES))
+            else:
+                parts.append(item.grad[rows].reshape(rows.size, -1, kernels.NUM_PAIR_VARIABLES))
+        flat = np.concatenate(parts, axis=1)  # (rows, 20, 12)
+        result = np.zeros((len(terms), kernels.NUM_PAIR_VARIABLES, rows.size))
+        for p, row in enumerate(terms):
+            for o, weight in row:
+                result[p] += (flat[:, o, :] * np.reshape(weight, (-1, 1))).T
+        return result
+
     def mortar_matrices(self) -> tuple[PETSc.Mat, PETSc.Mat]:
         """D (multipliers x slave nodes) and M (multipliers x master nodes).
 
         Columns are global dof blocks of the displacement space (one per node).
         """
         q = self._require()
-        rows = np.broadcast_to(self.pair_multipliers[:, :, None], (q.D.shape[0], 2, 2))
-        slave_cols = np.broadcast_to(self.pair_node_blocks[:, None, 1:3], rows.shape)
-        master_cols = np.broadcast_to(self.pair_node_blocks[:, None, 4:6], rows.shape)
-        D = self._coo_matrix("D", rows, slave_cols, q.D, self._multiplier_sizes, self._block_sizes)
-        M = self._coo_matrix("M", rows, master_cols, q.M, self._multiplier_sizes, self._block_sizes)
-        return D, M
+        rows = self._rows(q)
+        sizes = (self._multiplier_sizes, self._block_sizes)
+        slave, master = self.pair_node_blocks[:, 1:3], self.pair_node_blocks[:, 4:6]
+        D = self._block_matrix("D", self.pair_multipliers, slave, (1, 1), *sizes)
+        M = self._block_matrix("M", self.pair_multipliers, master, (1, 1), *sizes)
+        return (D.assemble_groups(q.D[rows].transpose(1, 2, 0), rows),
+                M.assemble_groups(q.M[rows].transpose(1, 2, 0), rows))
 
     def weighted_gap(self, vector: PETSc.Vec | None = None) -> PETSc.Vec:
         """The weighted gaps g~_j in the multiplier layout."""
         q = self._require()
+        rows = self._rows(q)
         if vector is None:
             vector = self.create_multiplier_vector()
         vector.zeroEntries()
         vector.setValues(
-            self.pair_multipliers.reshape(-1).astype(PETSc.IntType),
-            q.gap.value.reshape(-1),
+            self.pair_multipliers[rows].reshape(-1).astype(PETSc.IntType),
+            q.gap.value[rows].reshape(-1),
             addv=PETSc.InsertMode.ADD_VALUES,
         )
         vector.assemble()
@@ -501,9 +582,12 @@ class MortarInterface:
     def gap_jacobian(self) -> PETSc.Mat:
         """d g~ / d u (multipliers x displacement dofs), exact."""
         q = self._require()
-        rows = np.broadcast_to(self.pair_multipliers[:, :, None], (q.gap.grad.shape[0], 2, 12))
-        cols = np.broadcast_to(self.pair_dofs[:, None, :], rows.shape)
-        return self._coo_matrix("G", rows, cols, q.gap.grad, self._multiplier_sizes, self._dof_sizes)
+        rows = self._rows(q)
+        gap = kernels.PairGradients.GAP
+        values = self._combined_gradients(q, rows, [[(gap, 1.0)], [(gap + 1, 1.0)]])  # (j, 12, n)
+        matrix = self._block_matrix("G", self.pair_multipliers, self._pair_col_blocks, (1, 2),
+                                    self._multiplier_sizes, self._dof_sizes)
+        return matrix.assemble_groups(values, rows)
 
     def _force_columns(self) -> np.ndarray:
         """(n, 8) dofs of the slave nodes a, b and master nodes c, d."""
@@ -515,6 +599,11 @@ class MortarInterface:
 
         return dual.stack([-q.Dn[:, :, 0], -q.Dn[:, :, 1], q.Mn[:, :, 0], q.Mn[:, :, 1]], axis=2)
 
+    @staticmethod
+    def _force_coefficient_values(q: kernels.PairQuantities, rows: np.ndarray) -> np.ndarray:
+        """(rows, j, 4 nodes, 2 comps): the values of :meth:`_force_coefficients`."""
+        return np.concatenate([-q.Dn.value[rows], q.Mn.value[rows]], axis=2)
+
     def constraint_matrix(self) -> PETSc.Mat:
         """B with B_j,(k,c) = -Dn_jk[c] (slave), +Mn_jl[c] (master).
 
@@ -522,29 +611,34 @@ class MortarInterface:
         pressure z >= 0, master nodes along +n (paper, eq. 1).
         """
         q = self._require()
-        coefficients = self._force_coefficients(q)
-        rows = np.broadcast_to(self.pair_multipliers[:, :, None], (q.D.shape[0], 2, 8))
-        cols = np.broadcast_to(self._force_columns()[:, None, :], rows.shape)
-        return self._coo_matrix("B", rows, cols, coefficients.value.reshape(-1, 2, 8),
-                                self._multiplier_sizes, self._dof_sizes)
+        rows = self._rows(q)
+        values = self._force_coefficient_values(q, rows).transpose(1, 2, 3, 0)  # (j, 4, 2, n)
+        matrix = self._block_matrix("B", self.pair_multipliers, self._pair_force_blocks, (1, 2),
+                                    self._multiplier_sizes, self._dof_sizes)
+        return matrix.assemble_groups(values, rows)
 
     def force_jacobian(self, z: PETSc.Vec) -> PETSc.Mat:
         """d(-B(u)^T z)/du at fixed z (displacement dofs x displacement dofs)."""
         q = self._require()
-        z_nodes = self.node_values(z)
-        z_pair = z_nodes[self._pair_slave_nodes()]  # (n, 2)
-        coefficients = self._force_coefficients(q)
-        grad = -np.einsum("nj,njkcv->nkcv", z_pair, coefficients.grad).reshape(-1, 8, 12)
-        rows = np.broadcast_to(self._force_columns()[:, :, None], grad.shape)
-        cols = np.broadcast_to(self.pair_dofs[:, None, :], grad.shape)
-        return self._coo_matrix("K", rows, cols, grad, self._dof_sizes, self._dof_sizes)
+        rows = self._rows(q)
+        z_pair = self.node_values(z)[self._pair_slave_nodes()[rows]]  # (n, 2)
+        # -sum_j z_j d(coefficient_jkc): +Dn for the slave nodes, -Mn for the master nodes
+        dn, mn = kernels.PairGradients.DN, kernels.PairGradients.MN
+        nodes = [(k, c) for k in range(2) for c in range(2)]
+        terms = [[(dn + 4 * j + 2 * k + c, z_pair[:, j]) for j in range(2)] for k, c in nodes]
+        terms += [[(mn + 4 * j + 2 * k + c, -z_pair[:, j]) for j in range(2)] for k, c in nodes]
+        values = self._combined_gradients(q, rows, terms)  # (4 nodes x 2, 12, n)
+        matrix = self._block_matrix("K", self._pair_force_blocks, self._pair_col_blocks, (2, 2),
+                                    self._dof_sizes, self._dof_sizes)
+        return matrix.assemble_groups(values, rows)
 
     def contact_force(self, z: PETSc.Vec, vector: PETSc.Vec) -> PETSc.Vec:
         """Add -B^T z to ``vector`` (displacement layout), without forming B."""
         q = self._require()
-        z_pair = self.node_values(z)[self._pair_slave_nodes()]
-        force = -np.einsum("nj,njkc->nkc", z_pair, self._force_coefficients(q).value)
-        vector.setValues(self._force_columns().reshape(-1).astype(PETSc.IntType),
+        rows = self._rows(q)
+        z_pair = self.node_values(z)[self._pair_slave_nodes()[rows]]
+        force = -np.einsum("nj,njkc->nkc", z_pair, self._force_coefficient_values(q, rows))
+        vector.setValues(self._force_columns()[rows].reshape(-1).astype(PETSc.IntType),
                          force.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
         vector.assemble()
         return vector

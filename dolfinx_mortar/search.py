@@ -18,8 +18,8 @@ from scipy.spatial import cKDTree
 
 def facet_boxes(coordinates: np.ndarray, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(lower, upper) corners, each (num_facets, 2), of the facets' boxes."""
-    ends = coordinates[facets]
-    return ends.min(axis=1), ends.max(axis=1)
+    start, end = coordinates[facets[:, 0]], coordinates[facets[:, 1]]
+    return np.minimum(start, end), np.maximum(start, end)
 
 
 def boxes_overlap(lower_a, upper_a, lower_b, upper_b, margin: float) -> np.ndarray:
@@ -60,14 +60,15 @@ def candidate_pairs(
     slave_tree = cKDTree(0.5 * (slave_lower + slave_upper))
     master_tree = cKDTree(0.5 * (master_lower + master_upper))
     close = slave_tree.sparse_distance_matrix(master_tree, radius, output_type="ndarray")
-    pairs = np.stack([close["i"], close["j"]], axis=1).astype(np.int64)
-    keep = boxes_overlap(
-        slave_lower[pairs[:, 0]], slave_upper[pairs[:, 0]],
-        master_lower[pairs[:, 1]], master_upper[pairs[:, 1]], margin,
-    )
-    pairs = pairs[keep]
-    order = np.lexsort((pairs[:, 1], pairs[:, 0]))
-    return pairs[order]
+    slave, master = close["i"].astype(np.int64), close["j"].astype(np.int64)
+    # boxes_overlap on the candidates, one coordinate at a time (the same comparisons)
+    keep = np.ones(slave.size, dtype=bool)
+    for k in range(slave_lower.shape[1]):
+        keep &= (slave_lower[:, k] - margin)[slave] <= (master_upper[:, k] + margin)[master]
+        keep &= (master_lower[:, k] - margin)[master] <= (slave_upper[:, k] + margin)[slave]
+    slave, master = slave[keep], master[keep]
+    order = np.lexsort((master, slave))
+    return np.stack([slave[order], master[order]], axis=1)
 
 
 @dataclasses.dataclass

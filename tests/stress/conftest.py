@@ -1,0 +1,93 @@
+"""The stress suite's switch for the full sweep and its table of measured results.
+
+* ``--run-slow`` (``make stress``) runs the cases marked ``slow``; without it they are
+  skipped, so ``pytest tests`` runs only the fast part. ``DOLFINX_MORTAR_RUN_SLOW=1``
+  does the same, for runs that start pytest from the repository root with other
+  test paths (pytest only knows this file's option when ``tests/stress`` is named).
+* Each case calls :func:`common.record` with what it measured (converged, Newton
+  iterations, error, NaN); the terminal summary prints them as a table when the
+  full sweep runs or with ``-v``, and ``DOLFINX_MORTAR_STRESS_JSON=path`` writes
+  them as JSON (docs/stress.md is made from that).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+
+import pytest
+
+from .common import RESULTS
+
+
+def pytest_addoption(parser):
+    parser.addoption(
+        "--run-slow", action="store_true", default=False,
+        help="run the full stress sweep (tests marked slow in tests/stress)",
+    )
+
+
+def run_slow(config) -> bool:
+    try:
+        option = config.getoption("--run-slow")
+    except ValueError:  # this conftest was not loaded when the options were parsed
+        option = False
+    return bool(option) or os.environ.get("DOLFINX_MORTAR_RUN_SLOW", "") not in ("", "0")
+
+
+@pytest.fixture(autouse=True)
+def _full_sweep_needs_run_slow(request):
+    if request.node.get_closest_marker("slow") is not None and not run_slow(request.config):
+        pytest.skip("full stress sweep: pass --run-slow (make stress)")
+
+
+_DURATIONS: dict[str, dict] = {}
+
+
+def pytest_runtest_logreport(report):
+    entry = _DURATIONS.setdefault(report.nodeid, {"duration": 0.0, "outcome": "passed"})
+    entry["duration"] += report.duration
+    if report.when == "call" or report.outcome != "passed":
+        if hasattr(report, "wasxfail"):
+            entry["outcome"] = "xpassed" if report.passed else "xfailed"
+        else:
+            entry["outcome"] = report.outcome
+
+
+def _rows() -> list[dict]:
+    rows = []
+    for nodeid, values in RESULTS.items():
+        row = {"test": nodeid, **_DURATIONS.get(nodeid, {}), **values}
+        rows.append(row)
+    return rows
+
+
+def _short(value) -> str:
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, float):
+        return f"{value:.2e}"
+    if isinstance(value, list | tuple):
+        if len(value) > 8:
+            return f"{len(value)} steps, max {max(value)}"
+        return "/".join(_short(v) for v in value)
+    return str(value)
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    rows = [row for row in _rows() if row.get("outcome") != "skipped"]
+    path = os.environ.get("DOLFINX_MORTAR_STRESS_JSON")
+    if path and rows:
+        with open(path, "w") as stream:
+            json.dump(rows, stream, indent=1, default=str)
+    if not rows or not (run_slow(config) or config.getoption("verbose") > 0):
+        return
+    terminalreporter.section("stress cases: measured")
+    for row in sorted(rows, key=lambda r: (r.get("case", 0), r["test"])):
+        name = row["test"].split("::", 1)[-1]
+        fields = [f"case {row.get('case', '?'):>2}", f"{row.get('outcome', '?'):8}",
+                  f"{row.get('duration', 0.0):6.2f} s", name]
+        for key in ("converged", "iterations", "cutbacks", "error", "nan"):
+            if key in row:
+                fields.append(f"{key} {_short(row[key])}")
+        terminalreporter.write_line("  ".join(fields))
