@@ -585,46 +585,36 @@ class ContactProblem:
         self._frozen_active = [
             c & ((z > 0) | (g <= 0)) for c, z, g in zip(covered, z_now, self.gaps, strict=True)
         ]
+        return self._outer_loop(self._update_frozen_active_sets, failure_reason=-100)
+
+    def _update_frozen_active_sets(self) -> bool:
+        """One fixed-point update; True when no node changed on any rank."""
+        changed = 0
+        new_sets = []
+        for k in range(len(self.interfaces)):
+            pressure = self._averaged_pressure(k)
+            active = self._frozen_active[k].copy()
+            active[active & (pressure < 0.0)] = False
+            active[~self._frozen_active[k] & (self.gaps[k] < 0.0) & self._covered(k)] = True
+            changed += int(np.count_nonzero(active != self._frozen_active[k]))
+            new_sets.append(active)
+        self._frozen_active = new_sets
+        return self.comm.allreduce(changed, op=MPI.SUM) == 0
+
+    def _outer_loop(self, settled: typing.Callable[[], bool], failure_reason: int) -> SolveReport:
+        """Newton solves until ``settled()`` (called after each converged one) says so."""
         total_iterations, residuals = 0, []
         for outer in range(1, self.max_outer_iterations + 1):
             report = self._newton()
             total_iterations += report.iterations
             residuals += report.residuals
-            if not report.converged:
-                report.iterations, report.residuals, report.outer_iterations = (
-                    total_iterations,
-                    residuals,
-                    outer,
-                )
+            report.iterations, report.residuals, report.outer_iterations = (
+                total_iterations, residuals, outer)
+            if not report.converged or settled():
                 return report
-            changed = 0
-            new_sets = []
-            for k in range(len(self.interfaces)):
-                pressure = self._averaged_pressure(k)
-                active = self._frozen_active[k].copy()
-                active[active & (pressure < 0.0)] = False
-                active[~self._frozen_active[k] & (self.gaps[k] < 0.0) & self._covered(k)] = True
-                changed += int(np.count_nonzero(active != self._frozen_active[k]))
-                new_sets.append(active)
-            changed = self.comm.allreduce(changed, op=MPI.SUM)
-            self._frozen_active = new_sets
-            if changed == 0:
-                return SolveReport(
-                    converged=True,
-                    reason=report.reason,
-                    iterations=total_iterations,
-                    residuals=residuals,
-                    active=0,
-                    outer_iterations=outer,
-                )
-        return SolveReport(
-            converged=False,
-            reason=-100,
-            iterations=total_iterations,
-            residuals=residuals,
-            active=0,
-            outer_iterations=self.max_outer_iterations,
-        )
+        return SolveReport(converged=False, reason=failure_reason, iterations=total_iterations,
+                           residuals=residuals, active=0,
+                           outer_iterations=self.max_outer_iterations)
 
     def _averaged_pressure(self, k: int) -> np.ndarray:
         """p_j = int N_j lambda / int N_j = (D^T z)_j / (D^T 1)_j at owned slave nodes."""
@@ -647,43 +637,19 @@ class ContactProblem:
 
     def _uzawa(self) -> SolveReport:
         """Augmented Lagrange: Newton at fixed lam, then lam <- z, until lam settles."""
-        total_iterations, residuals = 0, []
-        for outer in range(1, self.max_outer_iterations + 1):
-            report = self._newton()
-            total_iterations += report.iterations
-            residuals += report.residuals
-            if not report.converged:
-                report.iterations, report.residuals, report.outer_iterations = (
-                    total_iterations,
-                    residuals,
-                    outer,
-                )
-                return report
-            change, size = 0.0, 0.0
-            for k, z in enumerate(self.multipliers):
-                new = z.getArray(readonly=True).copy()
-                change = max(change, float(np.max(np.abs(new - self._augmented[k]), initial=0.0)))
-                size = max(size, float(np.max(np.abs(new), initial=0.0)))
-                self._augmented[k] = new
-            change = self.comm.allreduce(change, op=MPI.MAX)
-            size = self.comm.allreduce(size, op=MPI.MAX)
-            if change <= self.augmented_tolerance * max(size, np.finfo(float).tiny):
-                return SolveReport(
-                    converged=True,
-                    reason=report.reason,
-                    iterations=total_iterations,
-                    residuals=residuals,
-                    active=0,
-                    outer_iterations=outer,
-                )
-        return SolveReport(
-            converged=False,
-            reason=-101,
-            iterations=total_iterations,
-            residuals=residuals,
-            active=0,
-            outer_iterations=self.max_outer_iterations,
-        )
+        return self._outer_loop(self._update_augmented_multipliers, failure_reason=-101)
+
+    def _update_augmented_multipliers(self) -> bool:
+        """lam <- z; True when max|change| <= augmented_tolerance max|lam| on all ranks."""
+        change, size = 0.0, 0.0
+        for k, z in enumerate(self.multipliers):
+            new = z.getArray(readonly=True).copy()
+            change = max(change, float(np.max(np.abs(new - self._augmented[k]), initial=0.0)))
+            size = max(size, float(np.max(np.abs(new), initial=0.0)))
+            self._augmented[k] = new
+        change = self.comm.allreduce(change, op=MPI.MAX)
+        size = self.comm.allreduce(size, op=MPI.MAX)
+        return change <= self.augmented_tolerance * max(size, np.finfo(float).tiny)
 
     # -- state for load stepping --------------------------------------------
 
