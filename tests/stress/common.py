@@ -68,7 +68,9 @@ def inverted_cells(u: dolfinx.fem.Function) -> int:
     num_cells = mesh.topology.index_map(mesh.topology.dim).size_local
     X = mesh.geometry.x[:, :2][geometry[:num_cells]]
     x = X + u.x.array.reshape(-1, 2)[u.function_space.dofmap.list[:num_cells]]
-    corners = [(0, 1, 2)] if geometry.shape[1] == 3 else [(0, 1, 2), (1, 3, 0), (3, 2, 1), (2, 0, 3)]
+    corners = (
+        [(0, 1, 2)] if geometry.shape[1] == 3 else [(0, 1, 2), (1, 3, 0), (3, 2, 1), (2, 0, 3)]
+    )
 
     def cross(p, q):
         return p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0]
@@ -132,8 +134,12 @@ class Outcome:
         return float(np.linalg.norm(self.slave_force + self.master_force) / size)
 
 
-def measure(problem: ContactProblem, reports: typing.Sequence[SolveReport | StepRecord],
-            wall_time: float = 0.0, **extra) -> Outcome:
+def measure(
+    problem: ContactProblem,
+    reports: typing.Sequence[SolveReport | StepRecord],
+    wall_time: float = 0.0,
+    **extra,
+) -> Outcome:
     """Collect an :class:`Outcome` from a solved problem (collective)."""
     converged, iterations, cutbacks = True, [], 0
     for item in reports:
@@ -145,10 +151,18 @@ def measure(problem: ContactProblem, reports: typing.Sequence[SolveReport | Step
     slave, master = problem.contact_forces()
     _, displacement = gathered_displacement(problem.u)
     return Outcome(
-        converged=converged, iterations=iterations, nan=non_finite(problem),
-        active=problem.num_active(), cutbacks=cutbacks, pressure=pressure,
-        coordinates=coordinates, displacement=displacement, slave_force=slave,
-        master_force=master, inverted=inverted_cells(problem.u), wall_time=wall_time,
+        converged=converged,
+        iterations=iterations,
+        nan=non_finite(problem),
+        active=problem.num_active(),
+        cutbacks=cutbacks,
+        pressure=pressure,
+        coordinates=coordinates,
+        displacement=displacement,
+        slave_force=slave,
+        master_force=master,
+        inverted=inverted_cells(problem.u),
+        wall_time=wall_time,
         extra=extra,
     )
 
@@ -194,8 +208,9 @@ class Setup:
         report = self.problem.solve()
         return measure(self.problem, [report], time.perf_counter() - start)
 
-    def steps(self, num_steps: int, *, max_steps: int | None = None, on_step=None,
-              **options) -> Outcome:
+    def steps(
+        self, num_steps: int, *, max_steps: int | None = None, on_step=None, **options
+    ) -> Outcome:
         """solve_load_steps over t in [start, end] (default [0, 1]).
 
         Raises TooManySteps once ``max_steps`` steps (default 20 times the nominal
@@ -215,11 +230,13 @@ class Setup:
                 raise TooManySteps(
                     f"load stepping accepted {len(accepted)} steps and reached only "
                     f"t = {step_record.load:.6g} of {end:g} (last increment {increment:.3g}, "
-                    f"{sum(r.cutbacks for r in accepted)} cut-backs)")
+                    f"{sum(r.cutbacks for r in accepted)} cut-backs)"
+                )
 
         start = time.perf_counter()
-        records = solve_load_steps(self.problem, self.apply_load, num_steps, on_step=guarded,
-                                   **options)
+        records = solve_load_steps(
+            self.problem, self.apply_load, num_steps, on_step=guarded, **options
+        )
         outcome = measure(self.problem, records, time.perf_counter() - start)
         outcome.extra["records"] = records
         return outcome
@@ -307,24 +324,34 @@ def patch_traction(
         strain_xx = 0.0
     fdim = mesh.topology.dim - 1
     bottom = tagged.facet_tags.find(markers["foundation_bottom"])
-    bcs = [dolfinx.fem.dirichletbc(np.float64(0.0),
-                                   dolfinx.fem.locate_dofs_topological(V.sub(1), fdim, bottom),
-                                   V.sub(1))]
+    bcs = [
+        dolfinx.fem.dirichletbc(
+            np.float64(0.0), dolfinx.fem.locate_dofs_topological(V.sub(1), fdim, bottom), V.sub(1)
+        )
+    ]
     mesh.topology.create_connectivity(0, mesh.topology.dim)
     corner_values = []
     for corner in ((0.0, 0.0), (4.0 + punch_shift, 7.0)):
         c = np.array(corner) * length_scale
         tolerance = 1e-8 * length_scale
         vertices = dolfinx.mesh.locate_entities(
-            mesh, 0, lambda x, c=c, tol=tolerance: (np.abs(x[0] - c[0]) <= tol)
-            & (np.abs(x[1] - c[1]) <= tol))
+            mesh,
+            0,
+            lambda x, c=c, tol=tolerance: (
+                (np.abs(x[0] - c[0]) <= tol) & (np.abs(x[1] - c[1]) <= tol)
+            ),
+        )
         dofs = dolfinx.fem.locate_dofs_topological(V.sub(0), 0, vertices)
         value = dolfinx.fem.Constant(mesh, np.float64(0.0))
         corner_values.append((value, strain_xx * c[0]))
         bcs.append(dolfinx.fem.dirichletbc(value, dofs, V.sub(0)))
 
-    pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"],
-                       name="punch-foundation")
+    pair = ContactPair(
+        tagged.facet_tags,
+        markers["contact_slave"],
+        markers["contact_master"],
+        name="punch-foundation",
+    )
     configuration = "reference" if material == "linear" else "current"
     problem = ContactProblem(F, u, bcs, [pair], configuration=configuration, **options)
 
@@ -376,11 +403,17 @@ def punch_driven(
     top = tagged.facet_tags.find(markers["punch_top"])
     motion = dolfinx.fem.Constant(mesh, np.zeros(2))
     bcs = [
-        dolfinx.fem.dirichletbc(np.zeros(2), dolfinx.fem.locate_dofs_topological(V, fdim, bottom), V),
+        dolfinx.fem.dirichletbc(
+            np.zeros(2), dolfinx.fem.locate_dofs_topological(V, fdim, bottom), V
+        ),
         dolfinx.fem.dirichletbc(motion, dolfinx.fem.locate_dofs_topological(V, fdim, top), V),
     ]
-    pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"],
-                       name="punch-foundation")
+    pair = ContactPair(
+        tagged.facet_tags,
+        markers["contact_slave"],
+        markers["contact_master"],
+        name="punch-foundation",
+    )
     configuration = "reference" if material == "linear" else "current"
     problem = ContactProblem(F, u, bcs, [pair], configuration=configuration, **options)
 
@@ -412,21 +445,33 @@ def hertz(
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
     u = dolfinx.fem.Function(V, name="displacement")
     v = ufl.TestFunction(V)
-    materials = {markers["cylinder"]: Material(HERTZ_E, HERTZ_NU, material),
-                 markers["block"]: Material(HERTZ_E, HERTZ_NU, material)}
+    materials = {
+        markers["cylinder"]: Material(HERTZ_E, HERTZ_NU, material),
+        markers["block"]: Material(HERTZ_E, HERTZ_NU, material),
+    }
     ds = ufl.Measure("ds", domain=mesh, subdomain_data=tagged.facet_tags)
     traction = dolfinx.fem.Constant(mesh, np.array([0.0, 0.0]))
-    F = internal_work(u, v, materials, tagged.cell_tags) - ufl.inner(traction, v) * ds(markers["load"])
+    F = internal_work(u, v, materials, tagged.cell_tags) - ufl.inner(traction, v) * ds(
+        markers["load"]
+    )
     fdim = mesh.topology.dim - 1
     support = tagged.facet_tags.find(markers["support"])
-    bcs = [dolfinx.fem.dirichletbc(np.zeros(2), dolfinx.fem.locate_dofs_topological(V, fdim, support), V)]
+    bcs = [
+        dolfinx.fem.dirichletbc(
+            np.zeros(2), dolfinx.fem.locate_dofs_topological(V, fdim, support), V
+        )
+    ]
     for name in ("symmetry_slave", "symmetry_master"):
         facets = tagged.facet_tags.find(markers[name])
         dofs = dolfinx.fem.locate_dofs_topological(V.sub(0), fdim, facets)
         bcs.append(dolfinx.fem.dirichletbc(np.float64(0.0), dofs, V.sub(0)))
     configuration = "reference" if material == "linear" else "current"
-    pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"],
-                       name="cylinder-block")
+    pair = ContactPair(
+        tagged.facet_tags,
+        markers["contact_slave"],
+        markers["contact_master"],
+        name="cylinder-block",
+    )
     problem = ContactProblem(F, u, bcs, [pair], configuration=configuration, **options)
     if indentation is None:
         indentation = (0.5 * exact["a"]) ** 2 / (2.0 * exact["R_star"])
@@ -457,19 +502,24 @@ def ironing(
     mesh, markers = tagged.mesh, tagged.markers
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
     u = dolfinx.fem.Function(V, name="displacement")
-    materials = {markers["die"]: Material(DIE_E, IRONING_NU, "neo-hookean"),
-                 markers["block"]: Material(BLOCK_E, IRONING_NU, "neo-hookean")}
+    materials = {
+        markers["die"]: Material(DIE_E, IRONING_NU, "neo-hookean"),
+        markers["block"]: Material(BLOCK_E, IRONING_NU, "neo-hookean"),
+    }
     F = internal_work(u, ufl.TestFunction(V), materials, tagged.cell_tags)
     fdim = mesh.topology.dim - 1
     bottom = tagged.facet_tags.find(markers["block_bottom"])
     top = tagged.facet_tags.find(markers["die_top"])
     motion = dolfinx.fem.Constant(mesh, np.zeros(2))
     bcs = [
-        dolfinx.fem.dirichletbc(np.zeros(2), dolfinx.fem.locate_dofs_topological(V, fdim, bottom), V),
+        dolfinx.fem.dirichletbc(
+            np.zeros(2), dolfinx.fem.locate_dofs_topological(V, fdim, bottom), V
+        ),
         dolfinx.fem.dirichletbc(motion, dolfinx.fem.locate_dofs_topological(V, fdim, top), V),
     ]
-    pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"],
-                       name="die-block")
+    pair = ContactPair(
+        tagged.facet_tags, markers["contact_slave"], markers["contact_master"], name="die-block"
+    )
     problem = ContactProblem(F, u, bcs, [pair], **options)
 
     def apply_load(t: float) -> None:
@@ -496,23 +546,35 @@ def rings(
     """Two Neo-Hookean rings of meshes.rings, touching at the origin; their inner
     boundaries are moved rigidly towards each other, each by squeeze / 2 at t = 1
     (squeeze is the total approach of the centres)."""
-    tagged = meshes.rings(refinement=refinement, inner_radius=inner_radius,
-                          outer_radius=outer_radius, cell_type=cell_type, comm=comm)
+    tagged = meshes.rings(
+        refinement=refinement,
+        inner_radius=inner_radius,
+        outer_radius=outer_radius,
+        cell_type=cell_type,
+        comm=comm,
+    )
     mesh, markers = tagged.mesh, tagged.markers
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
     u = dolfinx.fem.Function(V, name="displacement")
     material = Material(E, nu, "neo-hookean")
-    F = internal_work(u, ufl.TestFunction(V), {markers["ring_top"]: material,
-                                               markers["ring_bottom"]: material}, tagged.cell_tags)
+    F = internal_work(
+        u,
+        ufl.TestFunction(V),
+        {markers["ring_top"]: material, markers["ring_bottom"]: material},
+        tagged.cell_tags,
+    )
     fdim = mesh.topology.dim - 1
     top_motion = dolfinx.fem.Constant(mesh, np.zeros(2))
     bottom_motion = dolfinx.fem.Constant(mesh, np.zeros(2))
     bcs = []
     for name, motion in (("ring_top_inner", top_motion), ("ring_bottom_inner", bottom_motion)):
         facets = tagged.facet_tags.find(markers[name])
-        bcs.append(dolfinx.fem.dirichletbc(motion, dolfinx.fem.locate_dofs_topological(V, fdim, facets), V))
-    pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"],
-                       name="rings")
+        bcs.append(
+            dolfinx.fem.dirichletbc(motion, dolfinx.fem.locate_dofs_topological(V, fdim, facets), V)
+        )
+    pair = ContactPair(
+        tagged.facet_tags, markers["contact_slave"], markers["contact_master"], name="rings"
+    )
     problem = ContactProblem(F, u, bcs, [pair], **options)
 
     def apply_load(t: float) -> None:

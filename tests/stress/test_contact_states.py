@@ -10,7 +10,7 @@
    no penetration, the cylinder not thrown away or through the block, no NaN.
 9. Separation after contact: the punch of the patch test, driven by a Dirichlet
    condition on its top, is pressed down 0.05 and then pulled up 0.1 (still within
-   the contact search margin) or 3.0 (beyond it): at the end no active node, zero
+   the contact search margin) or 5.0 (beyond it): at the end no active node, zero
    pressure and force, and Newton converges (an empty active set is regular).
 """
 
@@ -36,9 +36,16 @@ def check_grazing_hertz(factor: float, material: str, steps: int):
     # the nominal problem's forces), so the tolerance has a part relative to the nominal load
     force_error = abs(outcome.slave_force[1] - load)
     tolerance = 1e-9 * load + 1e-12 * common.HERTZ_LOAD
-    record(7, converged=outcome.converged, iterations=outcome.iterations, cutbacks=outcome.cutbacks,
-           nan=outcome.nan, error=force_error / load, active=outcome.active,
-           p_max_over_hertz=float(outcome.pressure.max() / setup.info["exact"]["p0"]))
+    record(
+        7,
+        converged=outcome.converged,
+        iterations=outcome.iterations,
+        cutbacks=outcome.cutbacks,
+        nan=outcome.nan,
+        error=force_error / load,
+        active=outcome.active,
+        p_max_over_hertz=float(outcome.pressure.max() / setup.info["exact"]["p0"]),
+    )
     assert outcome.converged and not outcome.nan
     assert outcome.cutbacks == 0
     assert outcome.active >= 1
@@ -61,8 +68,14 @@ def test_grazing_hertz_full(factor, material, steps):
 
 
 def corner_contact(material, slave, push, angle=1e-2, ratio=(3, 2), cell_type="triangle"):
-    setup = common.punch_driven(ratio=ratio, slave=slave, material=material, punch_angle=angle,
-                                cell_type=cell_type, drive=lambda t: (0.0, -push * t))
+    setup = common.punch_driven(
+        ratio=ratio,
+        slave=slave,
+        material=material,
+        punch_angle=angle,
+        cell_type=cell_type,
+        drive=lambda t: (0.0, -push * t),
+    )
     outcome = setup.solve()
     setup.destroy()
     return outcome
@@ -72,9 +85,16 @@ def check_corner(material, slave, pushes, **options):
     forces = []
     for push in pushes:
         outcome = corner_contact(material, slave, push, **options)
-        record(7, converged=outcome.converged, iterations=outcome.iterations, nan=outcome.nan,
-               error=outcome.force_balance, active=outcome.active, push=push,
-               force=outcome.slave_force.tolist())
+        record(
+            7,
+            converged=outcome.converged,
+            iterations=outcome.iterations,
+            nan=outcome.nan,
+            error=outcome.force_balance,
+            active=outcome.active,
+            push=push,
+            force=outcome.slave_force.tolist(),
+        )
         assert outcome.converged and not outcome.nan, push
         assert outcome.inverted == 0
         # the corner node: with no push it is a tie (gap 0, active, zero force)
@@ -118,7 +138,9 @@ def check_initial_penetration(material: str, depth: float, **options):
     problem = setup.problem
     outcome = setup.solve(0.0)  # load 0
     covered = problem.areas[0] > 0.0
-    normalized = np.concatenate(problem.comm.allgather(problem.gaps[0][covered] / problem.areas[0][covered]))
+    normalized = np.concatenate(
+        problem.comm.allgather(problem.gaps[0][covered] / problem.areas[0][covered])
+    )
     cylinder = setup.tagged.cell_tags.find(setup.tagged.markers["cylinder"])
     # the cylinder's lowest current point (its arc touches y = 0 at the origin when u = 0)
     interface = problem.interfaces[0]
@@ -127,15 +149,26 @@ def check_initial_penetration(material: str, depth: float, **options):
     jump = float(np.max(np.abs(outcome.displacement)))
     setup.destroy()
     p0 = setup.info["exact"]["p0"]
-    record(8, converged=outcome.converged, iterations=outcome.iterations, nan=outcome.nan,
-           error=float(np.max(np.abs(outcome.pressure))) / p0, active=outcome.active,
-           max_displacement=jump, lowest_slave_y=lowest, depth=depth, cells=len(cylinder))
+    record(
+        8,
+        converged=outcome.converged,
+        iterations=outcome.iterations,
+        nan=outcome.nan,
+        error=float(np.max(np.abs(outcome.pressure))) / p0,
+        active=outcome.active,
+        max_displacement=jump,
+        lowest_slave_y=lowest,
+        depth=depth,
+        cells=len(cylinder),
+    )
     assert outcome.converged and not outcome.nan
     assert np.max(np.abs(outcome.pressure)) <= 1e-10 * p0  # no load: no pressure
     assert np.max(np.abs(outcome.slave_force)) <= 1e-10 * common.HERTZ_LOAD
     assert normalized.size == 0 or normalized.min() >= -1e-10  # no penetration left
-    # a consistent state: the cylinder above the block, not thrown away or through it
-    assert lowest >= -1e-8, lowest
+    # a consistent state: the cylinder on the block, not thrown away or through it (the
+    # mortar constraints are weak: a node of the curved surface may sink by O(h^2 / R))
+    h = setup.tagged.h_contact
+    assert lowest >= -h * h / common.HERTZ_RADIUS, lowest
     assert jump <= common.HERTZ_RADIUS, jump
 
 
@@ -154,29 +187,74 @@ FIXED_POINT_CYCLE = (
 )
 
 
-@pytest.mark.parametrize("material,depth", [
-    ("linear", 0.05),
-    pytest.param("neo-hookean", 0.05, marks=pytest.mark.xfail(strict=True, reason=SINGULAR_JUMP.format(
-        where="with u_y = +2.8e3, thrown 350 radii above the block"))),
-])
+@pytest.mark.parametrize(
+    "material,depth",
+    [
+        ("linear", 0.05),
+        pytest.param(
+            "neo-hookean",
+            0.05,
+            marks=pytest.mark.xfail(
+                strict=True,
+                reason=SINGULAR_JUMP.format(
+                    where="about 1e3 above the block (u_y = +1.1e3; the size of the jump "
+                    "is rounding: +2.8e3 with the library of an hour earlier)"
+                ),
+            ),
+        ),
+    ],
+)
 def test_initial_penetration(material, depth):
     check_initial_penetration(material, depth)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("material,depth,options", [
-    ("linear", 0.005, {}),
-    ("linear", 0.5, {}),
-    ("linear", 0.05, {"method": "penalty"}),
-    ("linear", 0.05, {"method": "augmented"}),
-    ("linear", 0.05, {"multipliers": "standard"}),
-    pytest.param("linear", 0.05, {"active_set": "fixed-point"},
-                 marks=pytest.mark.xfail(strict=True, reason=FIXED_POINT_CYCLE)),
-    pytest.param("neo-hookean", 0.005, {}, marks=pytest.mark.xfail(strict=True, reason=SINGULAR_JUMP.format(
-        where="with u_y = -1.8e3: it passed through the block (tunnelling), reported converged"))),
-    pytest.param("neo-hookean", 0.05, {"method": "penalty"}, marks=pytest.mark.xfail(
-        strict=True, reason=SINGULAR_JUMP.format(where="with u_y = +71"))),
-])
+@pytest.mark.parametrize(
+    "material,depth,options",
+    [
+        ("linear", 0.005, {}),
+        ("linear", 0.5, {}),
+        ("linear", 0.05, {"method": "penalty"}),
+        ("linear", 0.05, {"method": "augmented"}),
+        ("linear", 0.05, {"multipliers": "standard"}),
+        pytest.param(
+            "linear",
+            0.05,
+            {"active_set": "fixed-point"},
+            marks=pytest.mark.xfail(strict=True, reason=FIXED_POINT_CYCLE),
+        ),
+        pytest.param(
+            "neo-hookean",
+            0.005,
+            {},
+            marks=pytest.mark.xfail(
+                strict=True,
+                reason=SINGULAR_JUMP.format(
+                    where="1.8e3 below the block (u_y = -1.76e3): it passed through the block "
+                    "(tunnelling), reported converged"
+                ),
+            ),
+        ),
+        pytest.param(
+            "neo-hookean",
+            0.05,
+            {"method": "penalty"},
+            marks=pytest.mark.xfail(
+                strict=True, reason=SINGULAR_JUMP.format(where="59 above the block (u_y = +59)")
+            ),
+        ),
+    ],
+    ids=[
+        "linear-0.005",
+        "linear-0.5",
+        "linear-penalty",
+        "linear-augmented",
+        "linear-standard",
+        "linear-fixed-point",
+        "neo-hookean-0.005",
+        "neo-hookean-penalty",
+    ],
+)
 def test_initial_penetration_full(material, depth, options):
     check_initial_penetration(material, depth, **options)
 
@@ -202,11 +280,17 @@ def press_then_pull(material: str, lift: float, ratio=(3, 2), press=0.05, **opti
 def check_separation(material, lift, **options):
     pressed, released, pairs = press_then_pull(material, lift, **options)
     scale = float(np.max(pressed.pressure))
-    record(9, converged=pressed.converged and released.converged,
-           iterations=pressed.iterations + released.iterations,
-           cutbacks=pressed.cutbacks + released.cutbacks, nan=pressed.nan or released.nan,
-           error=float(np.max(np.abs(released.pressure))) / scale, active=released.active,
-           pressed_active=pressed.active, pairs_at_end=pairs)
+    record(
+        9,
+        converged=pressed.converged and released.converged,
+        iterations=pressed.iterations + released.iterations,
+        cutbacks=pressed.cutbacks + released.cutbacks,
+        nan=pressed.nan or released.nan,
+        error=float(np.max(np.abs(released.pressure))) / scale,
+        active=released.active,
+        pressed_active=pressed.active,
+        pairs_at_end=pairs,
+    )
     assert pressed.converged and released.converged
     assert not pressed.nan and not released.nan
     assert pressed.active == pressed.pressure.size and pressed.slave_force[1] != 0.0
@@ -214,25 +298,45 @@ def check_separation(material, lift, **options):
     assert np.max(np.abs(released.pressure)) <= 1e-10 * scale
     assert np.max(np.abs(released.slave_force)) <= 1e-10 * scale
     if lift > 1.0 and material != "linear":
-        # beyond the search margin: no candidate pair left (the small-strain reference
-        # configuration keeps the pairs of the undeformed surfaces)
+        # beyond twice the search margin (boxes of both sides grow by it; at most 2 x 2 h
+        # = 4 here): no candidate pair left (the small-strain reference configuration
+        # keeps the pairs of the undeformed surfaces)
         assert pairs == 0
 
 
-@pytest.mark.parametrize("options", [{}, {"method": "penalty"}, {"active_set": "fixed-point"}],
-                         ids=["semismooth", "penalty", "fixed-point"])
-@pytest.mark.parametrize("lift", [0.1, 3.0])
+@pytest.mark.parametrize(
+    "options",
+    [{}, {"method": "penalty"}, {"active_set": "fixed-point"}],
+    ids=["semismooth", "penalty", "fixed-point"],
+)
+@pytest.mark.parametrize("lift", [0.1, 5.0])
 def test_separation_after_contact(lift, options):
     check_separation("neo-hookean", lift, **options)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("options", [{}, {"method": "penalty"}, {"method": "augmented"},
-                                     {"active_set": "fixed-point"}, {"multipliers": "standard"},
-                                     {"cell_type": "quadrilateral"}, {"slave": "bottom"}],
-                         ids=["semismooth", "penalty", "augmented", "fixed-point", "standard",
-                              "quadrilateral", "slave-bottom"])
+@pytest.mark.parametrize(
+    "options",
+    [
+        {},
+        {"method": "penalty"},
+        {"method": "augmented"},
+        {"active_set": "fixed-point"},
+        {"multipliers": "standard"},
+        {"cell_type": "quadrilateral"},
+        {"slave": "bottom"},
+    ],
+    ids=[
+        "semismooth",
+        "penalty",
+        "augmented",
+        "fixed-point",
+        "standard",
+        "quadrilateral",
+        "slave-bottom",
+    ],
+)
 @pytest.mark.parametrize("material", ["linear", "neo-hookean"])
-@pytest.mark.parametrize("lift", [1e-6, 0.1, 3.0])
+@pytest.mark.parametrize("lift", [1e-6, 0.1, 5.0])
 def test_separation_after_contact_full(lift, material, options):
     check_separation(material, lift, **options)

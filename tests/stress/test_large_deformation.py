@@ -33,16 +33,27 @@ from .common import record, relative_difference
 def check_ironing(args: list[str]):
     summary = common.demo("ironing").main(args)
     history = summary["history"]
-    forces = np.array([[h["slave_force_x"], h["slave_force_y"], h["master_force_x"],
-                        h["master_force_y"]] for h in history])
+    forces = np.array(
+        [
+            [h["slave_force_x"], h["slave_force_y"], h["master_force_x"], h["master_force_y"]]
+            for h in history
+        ]
+    )
     nan = not np.all(np.isfinite(forces))
     end = float(args[args.index("--end-time") + 1])
-    record(10, converged=summary["end_time"] >= end - 1e-12, iterations=summary["newton_iterations"],
-           cutbacks=summary["cutbacks"], nan=nan, error=summary["max_force_balance_rel"],
-           end_time=summary["end_time"], steps=summary["steps_completed"],
-           max_iterations=summary["max_newton_iterations"],
-           vertical_force_at_t1=summary["vertical_force_at_t1"],
-           plateau=summary["vertical_force_plateau_mean"])
+    record(
+        10,
+        converged=summary["end_time"] >= end - 1e-12,
+        iterations=summary["newton_iterations"],
+        cutbacks=summary["cutbacks"],
+        nan=nan,
+        error=summary["max_force_balance_rel"],
+        end_time=summary["end_time"],
+        steps=summary["steps_completed"],
+        max_iterations=summary["max_newton_iterations"],
+        vertical_force_at_t1=summary["vertical_force_at_t1"],
+        plateau=summary["vertical_force_plateau_mean"],
+    )
     assert summary["end_time"] == pytest.approx(end, abs=1e-12)
     assert not nan
     assert summary["max_force_balance_rel"] <= 1e-8
@@ -58,12 +69,16 @@ def test_ironing_large_sliding():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("args", [
-    ["--steps", "100", "--end-time", "1.3"],
-    ["--steps", "100", "--end-time", "1.3", "--refinement", "1"],
-    ["--steps", "100", "--end-time", "1.3", "--cell-type", "triangle"],
-    ["--steps", "60", "--end-time", "1.3", "--method", "penalty"],
-], ids=["quadrilateral", "refined", "triangle", "penalty"])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--steps", "100", "--end-time", "1.3"],
+        ["--steps", "100", "--end-time", "1.3", "--refinement", "1"],
+        ["--steps", "100", "--end-time", "1.3", "--cell-type", "triangle"],
+        ["--steps", "60", "--end-time", "1.3", "--method", "penalty"],
+    ],
+    ids=["quadrilateral", "refined", "triangle", "penalty"],
+)
 def test_ironing_large_sliding_full(args):
     check_ironing(args)
 
@@ -85,9 +100,18 @@ def check_rings(squeeze: float, steps: int, refinement: int, **options):
     outcome = setup.steps(steps, on_step=on_step)
     fraction = squeeze / setup.info["outer_diameter"]
     setup.destroy()
-    record(11, converged=outcome.converged, iterations=outcome.iterations, cutbacks=outcome.cutbacks,
-           nan=outcome.nan, error=max(balances), squeeze_fraction=fraction, active=outcome.active,
-           inverted=max(inverted), contact_force=outcome.slave_force.tolist())
+    record(
+        11,
+        converged=outcome.converged,
+        iterations=outcome.iterations,
+        cutbacks=outcome.cutbacks,
+        nan=outcome.nan,
+        error=max(balances),
+        squeeze_fraction=fraction,
+        active=outcome.active,
+        inverted=max(inverted),
+        contact_force=outcome.slave_force.tolist(),
+    )
     assert outcome.converged and not outcome.nan
     assert max(balances) <= 1e-8
     assert max(inverted) == 0 and outcome.inverted == 0
@@ -100,13 +124,17 @@ def test_rings_moderate_squeeze():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("squeeze,steps,refinement,options", [
-    (0.7, 14, 1, {}),  # 35 %: the material between the holes (1.4) compressed to 0.7
-    (0.8, 16, 2, {}),  # 40 %
-    (0.7, 14, 1, {"cell_type": "quadrilateral"}),
-    (0.7, 14, 1, {"method": "penalty"}),
-    (0.3, 15, 1, {"inner_radius": 0.8}),  # thin rings: 0.4 of material crushed to 0.1
-], ids=["35%", "40%-refined", "35%-quadrilateral", "35%-penalty", "thin-15%"])
+@pytest.mark.parametrize(
+    "squeeze,steps,refinement,options",
+    [
+        (0.7, 14, 1, {}),  # 35 %: the material between the holes (1.4) compressed to 0.7
+        (0.8, 16, 2, {}),  # 40 %
+        (0.7, 14, 1, {"cell_type": "quadrilateral"}),
+        (0.7, 14, 1, {"method": "penalty"}),
+        (0.3, 15, 1, {"inner_radius": 0.8}),  # thin rings: 0.4 of material crushed to 0.1
+    ],
+    ids=["35%", "40%-refined", "35%-quadrilateral", "35%-penalty", "thin-15%"],
+)
 def test_rings_large_squeeze(squeeze, steps, refinement, options):
     check_rings(squeeze, steps, refinement, **options)
 
@@ -133,9 +161,16 @@ def test_too_large_step_is_cut_back():
     reference = hertz_finely_stepped(BIG_LOAD)
     records = outcome.extra["records"]
     difference = relative_difference(outcome.pressure, reference.pressure)
-    record(12, converged=outcome.converged, iterations=outcome.iterations, cutbacks=outcome.cutbacks,
-           nan=outcome.nan, error=difference, final_load=records[-1].load,
-           force=float(outcome.slave_force[1]))
+    record(
+        12,
+        converged=outcome.converged,
+        iterations=outcome.iterations,
+        cutbacks=outcome.cutbacks,
+        nan=outcome.nan,
+        error=difference,
+        final_load=records[-1].load,
+        force=float(outcome.slave_force[1]),
+    )
     assert outcome.cutbacks > 0
     assert records[-1].load == pytest.approx(1.0)
     assert outcome.converged and not outcome.nan and outcome.inverted == 0
@@ -146,8 +181,11 @@ def test_too_large_step_is_cut_back():
 def test_no_cutback_allowed_raises_a_clear_error():
     setup = common.hertz(load=BIG_LOAD, material="neo-hookean")
     initial = setup.problem.u.x.array.copy()
-    with pytest.raises(LoadSteppingError, match=r"no convergence from t = 0 to 1 after 0 cut-backs "
-                                               r"\(last SNES reason -?\d+") as error:
+    with pytest.raises(
+        LoadSteppingError,
+        match=r"no convergence from t = 0 to 1 after 0 cut-backs "
+        r"\(last SNES reason -?\d+",
+    ) as error:
         setup.steps(1, max_cutbacks=0)
     restored = np.array_equal(setup.problem.u.x.array, initial)
     multipliers = [z.getArray(readonly=True).copy() for z in setup.problem.multipliers]
@@ -174,9 +212,16 @@ def test_ironing_in_one_step_is_cut_back_or_solved():
     problem = setup.problem
     lowest = float(np.min(problem.interfaces[0].slave.current_coordinates(problem.u)[:, 1]))
     setup.destroy()
-    record(12, converged=outcome.converged, iterations=outcome.iterations, cutbacks=outcome.cutbacks,
-           nan=outcome.nan, active=outcome.active, lowest_die_point=lowest,
-           error=float(np.linalg.norm(outcome.slave_force)))
+    record(
+        12,
+        converged=outcome.converged,
+        iterations=outcome.iterations,
+        cutbacks=outcome.cutbacks,
+        nan=outcome.nan,
+        active=outcome.active,
+        lowest_die_point=lowest,
+        error=float(np.linalg.norm(outcome.slave_force)),
+    )
     assert outcome.converged and not outcome.nan
     assert outcome.active > 0, "no contact found"
     # the block top (y = 4) is indented, but the die cannot be deep inside it
@@ -188,7 +233,7 @@ def test_ironing_in_one_step_is_cut_back_or_solved():
 def test_ironing_sliding_jump_is_cut_back():
     """From the state at t = 1 (20 steps), jump to t = 1.1 (the die slides 1.0, ten block
     elements) in one step: cut back, reach t = 1.1, forces balance, and the same
-    vertical force as a run in steps of 0.0125."""
+    vertical force as a run in steps of 0.01 (the cut-backs end in steps of 0.0125)."""
     setup = common.ironing()
     setup.steps(20, end=1.0)
     outcome = setup.steps(1, start=1.0, end=1.1)
@@ -196,11 +241,20 @@ def test_ironing_sliding_jump_is_cut_back():
     setup.destroy()
     fine = common.ironing()
     fine.steps(20, end=1.0)
-    reference = fine.steps(8, start=1.0, end=1.1)
+    reference = fine.steps(10, start=1.0, end=1.1)
     fine.destroy()
-    difference = float(np.linalg.norm(jumped - reference.slave_force) / np.linalg.norm(reference.slave_force))
-    record(12, converged=outcome.converged, iterations=outcome.iterations, cutbacks=outcome.cutbacks,
-           nan=outcome.nan, error=difference, balance=outcome.force_balance)
+    difference = float(
+        np.linalg.norm(jumped - reference.slave_force) / np.linalg.norm(reference.slave_force)
+    )
+    record(
+        12,
+        converged=outcome.converged,
+        iterations=outcome.iterations,
+        cutbacks=outcome.cutbacks,
+        nan=outcome.nan,
+        error=difference,
+        balance=outcome.force_balance,
+    )
     assert outcome.cutbacks > 0
     assert outcome.extra["records"][-1].load == pytest.approx(1.1)
     assert outcome.converged and not outcome.nan

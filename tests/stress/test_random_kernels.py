@@ -28,8 +28,13 @@ from dolfinx_mortar import kernels
 
 from .common import record
 
-FAST = settings(max_examples=200, deadline=None, derandomize=True, database=None,
-                suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+FAST = settings(
+    max_examples=200,
+    deadline=None,
+    derandomize=True,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
 FULL = settings(FAST, max_examples=2000)
 DUAL = np.array([[2.0, -1.0], [-1.0, 2.0]])
 
@@ -43,11 +48,21 @@ def all_pairs(slave: np.ndarray, master: np.ndarray):
     """Every (slave facet, master facet) pair; slave facet i joins slave nodes i, i + 1.
     Missing neighbours get NaN coordinates (any use would show)."""
     num_slave, num_master = len(slave) - 1, len(master) - 1
-    facet_s, facet_m = (a.ravel() for a in np.meshgrid(np.arange(num_slave), np.arange(num_master),
-                                                       indexing="ij"))
+    facet_s, facet_m = (
+        a.ravel() for a in np.meshgrid(np.arange(num_slave), np.arange(num_master), indexing="ij")
+    )
     padded = np.concatenate([[np.full(2, np.nan)], slave, [np.full(2, np.nan)]])
-    x = np.stack([padded[facet_s], slave[facet_s], slave[facet_s + 1], padded[facet_s + 3],
-                  master[facet_m], master[facet_m + 1]], axis=1)
+    x = np.stack(
+        [
+            padded[facet_s],
+            slave[facet_s],
+            slave[facet_s + 1],
+            padded[facet_s + 3],
+            master[facet_m],
+            master[facet_m + 1],
+        ],
+        axis=1,
+    )
     has_neighbour = np.stack([facet_s > 0, facet_s + 1 < num_slave], axis=1)
     return x, has_neighbour, facet_s, facet_m
 
@@ -70,8 +85,12 @@ def positions(draw, count: int, length: float) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(spacings)]) * (length / spacings.sum())
 
 
-options = st.tuples(st.sampled_from(kernels.NORMAL_OPTIONS), st.sampled_from(kernels.INTEGRATION_OPTIONS),
-                    st.sampled_from(kernels.BASIS_OPTIONS), st.integers(1, 6))
+options = st.tuples(
+    st.sampled_from(kernels.NORMAL_OPTIONS),
+    st.sampled_from(kernels.INTEGRATION_OPTIONS),
+    st.sampled_from(kernels.BASIS_OPTIONS),
+    st.integers(1, 6),
+)
 motions = st.tuples(st.floats(0.0, 2.0 * np.pi), st.floats(-3.0, 3.0), st.floats(-3.0, 3.0))
 
 
@@ -88,12 +107,28 @@ def near_surfaces(draw):
     amplitude = draw(st.sampled_from([0.0, 1e-12, 1e-6, 0.02, 0.1]))
     gap = draw(st.floats(-0.05, 0.05)) * length / max(num_slave, num_master)
     h = length / max(num_slave, num_master)
-    bumps_s = np.array(draw(st.lists(st.floats(-1.0, 1.0), min_size=2 * (num_slave + 1),
-                                     max_size=2 * (num_slave + 1)))).reshape(-1, 2)
-    bumps_m = np.array(draw(st.lists(st.floats(-1.0, 1.0), min_size=2 * (num_master + 1),
-                                     max_size=2 * (num_master + 1)))).reshape(-1, 2)
-    slave = np.stack([slave_x, np.zeros_like(slave_x)], axis=1) + amplitude * h * bumps_s * (0.3, 1.0)
-    master = np.stack([master_x, np.full_like(master_x, gap)], axis=1) + amplitude * h * bumps_m * (0.3, 1.0)
+    bumps_s = np.array(
+        draw(
+            st.lists(
+                st.floats(-1.0, 1.0), min_size=2 * (num_slave + 1), max_size=2 * (num_slave + 1)
+            )
+        )
+    ).reshape(-1, 2)
+    bumps_m = np.array(
+        draw(
+            st.lists(
+                st.floats(-1.0, 1.0), min_size=2 * (num_master + 1), max_size=2 * (num_master + 1)
+            )
+        )
+    ).reshape(-1, 2)
+    slave = np.stack([slave_x, np.zeros_like(slave_x)], axis=1) + amplitude * h * bumps_s * (
+        0.3,
+        1.0,
+    )
+    master = np.stack([master_x, np.full_like(master_x, gap)], axis=1) + amplitude * h * bumps_m * (
+        0.3,
+        1.0,
+    )
     angle, sx, sy = draw(motions)
     return rigid(slave, angle, (sx, sy)), rigid(master, angle, (sx, sy)), h
 
@@ -110,8 +145,12 @@ def coincident_surfaces(draw):
     master_x = start + positions(draw, num_master, end - start)
     angle, sx, sy = draw(motions)
     line = lambda x: np.stack([x, np.zeros_like(x)], axis=1)  # noqa: E731
-    return (rigid(line(slave_x), angle, (sx, sy)), rigid(line(master_x), angle, (sx, sy)),
-            slave_x, (start, end))
+    return (
+        rigid(line(slave_x), angle, (sx, sy)),
+        rigid(line(master_x), angle, (sx, sy)),
+        slave_x,
+        (start, end),
+    )
 
 
 STATS = {"cases": 0, "pairs": 0, "valid": 0, "worst": 0.0}
@@ -121,8 +160,15 @@ def check_near(surfaces, option):
     slave, master, h = surfaces
     normals, integration, basis, num_gauss_points = option
     x, has_neighbour, facet_s, facet_m = all_pairs(slave, master)
-    q = kernels.pair_quantities(x, has_neighbour, normals=normals, integration=integration,
-                                basis=basis, num_gauss_points=num_gauss_points, slave_facet=facet_s)
+    q = kernels.pair_quantities(
+        x,
+        has_neighbour,
+        normals=normals,
+        integration=integration,
+        basis=basis,
+        num_gauss_points=num_gauss_points,
+        slave_facet=facet_s,
+    )
     for name in ("D", "M", "overlap"):
         assert np.all(np.isfinite(getattr(q, name))), name
     for name in ("Dn", "Mn", "gap", "area"):
@@ -131,8 +177,13 @@ def check_near(surfaces, option):
         assert np.all(np.isfinite(item.grad)), f"d{name}"
     scale = h * 1e-12
     row_d, row_m = q.D.sum(axis=2), q.M.sum(axis=2)
-    worst = max(float(np.max(np.abs(q.area.value - row_d), initial=0.0)),
-                float(np.max(np.abs(row_d - row_m), initial=0.0))) / h
+    worst = (
+        max(
+            float(np.max(np.abs(q.area.value - row_d), initial=0.0)),
+            float(np.max(np.abs(row_d - row_m), initial=0.0)),
+        )
+        / h
+    )
     assert np.all(np.abs(q.area.value - row_d) <= scale), "area != sum_k D_jk"
     assert np.all(np.abs(row_d - row_m) <= scale), "sum_k D_jk != sum_l M_jl"
     invalid = ~q.valid
@@ -158,7 +209,9 @@ def check_coincident(surfaces, option):
     slave, master, slave_x, (start, end) = surfaces
     normals, basis = option
     x, has_neighbour, facet_s, facet_m = all_pairs(slave, master)
-    q = kernels.pair_quantities(x, has_neighbour, normals=normals, integration="segment", basis=basis)
+    q = kernels.pair_quantities(
+        x, has_neighbour, normals=normals, integration="segment", basis=basis
+    )
     D, M, gap = assemble(q, facet_s, facet_m, len(slave), len(master))
     for array in (D, M, gap, q.Dn.grad, q.Mn.grad, q.gap.grad):
         assert np.all(np.isfinite(array))
@@ -168,7 +221,10 @@ def check_coincident(surfaces, option):
     worst = 0.0
     alpha, beta = rng.normal(), rng.normal(size=2)
     # the coordinates themselves, and a random linear field
-    for slave_values, master_values in ((slave, master), (alpha + slave @ beta, alpha + master @ beta)):
+    for slave_values, master_values in (
+        (slave, master),
+        (alpha + slave @ beta, alpha + master @ beta),
+    ):
         difference = np.abs(M @ master_values - D @ slave_values).max() / max(scale, 1e-300)
         worst = max(worst, float(difference))
         assert difference <= 1e-12, "sum_l M_jl x_l != sum_k D_jk x_k"
@@ -195,8 +251,16 @@ def check_coincident(surfaces, option):
 
 
 def finish(case_name):
-    record(5, converged=True, nan=False, error=STATS["worst"], examples=STATS["cases"],
-           pairs=STATS["pairs"], valid_pairs=STATS["valid"], kind=case_name)
+    record(
+        5,
+        converged=True,
+        nan=False,
+        error=STATS["worst"],
+        examples=STATS["cases"],
+        pairs=STATS["pairs"],
+        valid_pairs=STATS["valid"],
+        kind=case_name,
+    )
     for key in STATS:
         STATS[key] = 0 if key != "worst" else 0.0
 
@@ -213,7 +277,9 @@ def _near_full(surfaces, option):
     check_near(surfaces, option)
 
 
-coincident_options = st.tuples(st.sampled_from(kernels.NORMAL_OPTIONS), st.sampled_from(kernels.BASIS_OPTIONS))
+coincident_options = st.tuples(
+    st.sampled_from(kernels.NORMAL_OPTIONS), st.sampled_from(kernels.BASIS_OPTIONS)
+)
 
 
 @FAST
