@@ -13,14 +13,17 @@ B_j = d g~_j / dx at frozen integrals (-Dn on slave dofs, +Mn on master dofs)
 pushes the slave along -n and the master along +n. The multiplier rows C
 depend on the enforcement:
 
-* ``lagrange`` + ``semismooth``: C_j = z_j - max(0, z_j - c_n g~_j); the active
-  set {j: z_j - c_n g~_j > 0} is re-decided in every Newton iteration, and the
+* ``lagrange`` + ``semismooth``: C_j = z_j - max(0, z_j - c_n g^_j) with the
+  nodal gap g^_j = g~_j / A_j (A_j = int Phi_j), so z_j and c_n g^_j are both
+  pressures and the decision does not depend on the unit system; the active
+  set {j: z_j - c_n g^_j >= 0} is re-decided in every Newton iteration, and the
   Jacobian is the exact (generalized) derivative, so Newton converges
   quadratically once the set has settled and the solution does not depend on
   c_n.
 * ``lagrange`` + ``fixed-point``: the active set is frozen during a full
-  Newton solve (rows c_n g~_j if active, z_j if not), then updated from the
-  averaged nodal pressure and weighted gap; repeated until it stops changing.
+  Newton solve (rows g~_j = 0 if active, z_j = 0 if not), then updated from
+  the averaged nodal pressure and weighted gap; repeated until it stops
+  changing.
 * ``penalty``: z_j = max(0, -eps g~_j / A_j) (A_j = int Phi_j, so that a
   uniform penetration d gives the pressure eps d), written as the row
   z_j - max(0, -eps g~_j/A_j) and linearized exactly.
@@ -30,7 +33,20 @@ depend on the enforcement:
 
 Slave nodes that no master facet covers cannot become active and stay
 inactive (z_j = 0) without any mortar work. With no active node the z-rows
-are identity rows, so the system is regular whenever the bulk problem is.
+are identity rows, so the system is regular whenever the bulk problem is; a
+body held only by contact that loses every active node has a singular rigid
+mode, which MUMPS' null-pivot detection (ICNTL(24) with CNTL(3) = 1e-12, on
+by default) sets to a zero step instead of an arbitrary huge one; the residual
+test stays exact, so this can only slow Newton down, never change a solution.
+
+Every residual row is a force (unit E x length in plane strain), whatever
+the enforcement: active Lagrange rows are s g~_j, inactive rows h z_j, the
+penalty rows w (z_j - lam_j + eps g^_j) and the Dirichlet rows k (u - u_D),
+with s ~ E/h and k ~ E the bulk stiffness scale, h the mean slave facet
+length and w = h min(1, s/eps). Scaling a row changes neither the Newton step
+nor the solution; it makes SNES' norms and tolerances independent of units,
+of c_n and of eps (an unscaled c_n g~ row at c_n = 1e3 E/h has a rounding
+floor above any sensible absolute tolerance).
 """
 
 from __future__ import annotations
@@ -39,6 +55,7 @@ import dataclasses
 import logging
 import time
 import typing
+import weakref
 
 import dolfinx
 import dolfinx.fem.petsc
@@ -223,11 +240,13 @@ class ContactProblem:
         self.b = self.layout.create_vector()
         self._read_state_into_x()
 
-        self.c_n = float(c_n) if c_n is not None else self._stiffness_scale()
+        self._row_scale, self._slave_length = self._stiffness_scale()
+        self._dirichlet_scale = self._row_scale * self._slave_length
+        self.c_n = float(c_n) if c_n is not None else self._row_scale
         if penalty is None:
             # Uzawa contracts like 1 / (1 + eps * contact compliance): a stiffer
             # eps makes augmented Lagrange converge in far fewer updates
-            penalty = self._stiffness_scale() * (10.0 if method == "augmented" else 1.0)
+            penalty = self._row_scale * (10.0 if method == "augmented" else 1.0)
         self.penalty = float(penalty)
         self.timings = {
             "bulk assembly": 0.0,
@@ -255,10 +274,11 @@ class ContactProblem:
                     "supported)"
                 )
 
-    def _stiffness_scale(self) -> float:
-        """About E/h: mean bulk stiffness diagonal at slave dofs over mean slave facet length."""
+    def _stiffness_scale(self) -> tuple[float, float]:
+        """(s, h): s about E/h, the mean bulk stiffness diagonal at slave dofs over h,
+        the mean slave facet length (reference configuration)."""
         self._K.zeroEntries()
-        dolfinx.fem.petsc.assemble_matrix(self._K, self.J_form, bcs=self.bcs)
+        dolfinx.fem.petsc.assemble_matrix(self._K, self.J_form)
         self._K.assemble()
         diagonal = self._K.getDiagonal()
         start = self._K.getOwnershipRange()[0]
@@ -281,31 +301,52 @@ class ContactProblem:
             op=MPI.SUM,
         )
         diagonal.destroy()
-        if sums[1] == 0 or sums[3] == 0 or not sums[0] > 0:
-            raise ValueError("cannot estimate the stiffness scale; pass c_n and penalty")
-        return float((sums[0] / sums[1]) / (sums[2] / sums[3]))
+        if sums[1] == 0 or sums[3] == 0 or not sums[0] > 0 or not sums[2] > 0:
+            raise ValueError(
+                "cannot estimate the stiffness scale at the slave nodes: the bulk Jacobian "
+                "has a zero diagonal there (is the slave surface on a body of the form?)"
+            )
+        length = float(sums[2] / sums[3])
+        return float(sums[0] / sums[1]) / length, length
 
     def _setup_snes(self, petsc_options: dict, prefix: str) -> None:
+        """SNES with our defaults; ``petsc_options`` and then the options database win.
+
+        Options are put into the database only for setFromOptions and removed
+        again, except the factorization ones (``mat_*``): PETSc reads those at
+        every symbolic factorization, so they stay until :meth:`destroy` (or
+        garbage collection). The default absolute tolerance 1e-11 k h is
+        a force that moves a node by 1e-11 h, in the units of the problem.
+        """
         snes = PETSc.SNES().create(self.comm)
         snes.setOptionsPrefix(prefix)
         defaults = {
             "snes_type": "newtonls",
             "snes_linesearch_type": "basic",
             "snes_rtol": 1e-10,
-            "snes_atol": 1e-10,
             "snes_stol": 0.0,
             "snes_max_it": 30,
+            "snes_divergence_tolerance": -1.0,
             "ksp_type": "preonly",
             "pc_type": "lu",
             "pc_factor_mat_solver_type": "mumps",
+            # null pivots (|pivot| <= 1e-12 ||A||): the rigid mode of a body held
+            # only by contact that lost every active node; its step is set to 0
+            "mat_mumps_icntl_24": 1,
+            "mat_mumps_cntl_3": 1e-12,
         }
         defaults.update(petsc_options)
         options = PETSc.Options()
         added = []
         for key, value in defaults.items():
-            if not options.hasName(f"{prefix}{key}"):
-                options[f"{prefix}{key}"] = value
-                added.append(key)
+            name = f"{prefix}{key}"
+            if not options.hasName(name) or name in _OPTIONS_SET_BY_PROBLEMS:
+                options[name] = value
+                added.append(name)
+        user_atol = "snes_atol" in petsc_options or (
+            options.hasName(f"{prefix}snes_atol")
+            and f"{prefix}snes_atol" not in _OPTIONS_SET_BY_PROBLEMS
+        )
         self._residual_history: list[float] = []
         snes.setFunction(self._residual, self.b)
         self._assemble_system()  # creates the matrix with its pattern
@@ -313,8 +354,14 @@ class ContactProblem:
         snes.setMonitor(lambda _snes, _it, norm: self._residual_history.append(float(norm)))
         snes.setFromOptions()
         snes.getKSP().setFromOptions()
-        for key in added:
-            options.delValue(f"{prefix}{key}")
+        if not user_atol:
+            snes.setTolerances(atol=1e-11 * self._dirichlet_scale * self._slave_length)
+        kept = [name for name in added if name[len(prefix):].startswith("mat_")]
+        for name in added:
+            if name not in kept:
+                options.delValue(name)
+        _OPTIONS_SET_BY_PROBLEMS.update(kept)
+        self._options_finalizer = weakref.finalize(self, _delete_options, kept)
         self.snes = snes
 
     # -- state -------------------------------------------------------------
@@ -385,41 +432,59 @@ class ContactProblem:
         scale = interface.reuse.margin * 1e-10
         return self.areas[k] > scale
 
-    def _decide_active(self, k: int) -> np.ndarray:
-        z = self.multipliers[k].getArray(readonly=True)
+    def _nodal_gaps(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """(covered, g^): the nodal gap g~_j / A_j (a length) where covered, else 0.
+
+        Gaps within rounding of zero (1e-12 search margins) are set to exactly 0:
+        bodies that touch at the start count as touching, not as apart.
+        """
         covered = self._covered(k)
+        gap = np.where(covered, self.gaps[k] / np.where(covered, self.areas[k], 1.0), 0.0)
+        touching = np.abs(gap) <= 1e-12 * self.interfaces[k].reuse.margin
+        return covered, np.where(touching, 0.0, gap)
+
+    def _decide_active(self, k: int) -> np.ndarray:
+        """The active set; ties (z - c_n g^ = 0, e.g. touching at zero pressure) are active.
+
+        Counting ties as active is a valid choice of the generalized derivative
+        at the kink of max(0, .), and keeps a body held only by contact attached
+        when it starts exactly touching.
+        """
+        z = self.multipliers[k].getArray(readonly=True)
+        covered, gap = self._nodal_gaps(k)
         if self.method == "lagrange":
             if self.active_set_strategy == "fixed-point" and self._frozen_active is not None:
                 return self._frozen_active[k] & covered
-            # ties go to active, and gaps within rounding of zero count as
-            # ties: bodies that touch at the start hold each other
-            touching = (
-                np.abs(self.gaps[k]) <= 1e-12 * self.interfaces[k].reuse.margin * self.areas[k]
-            )
-            gap = np.where(touching, 0.0, self.gaps[k])
             return covered & (z - self.c_n * gap >= 0.0)
-        normalized = np.where(covered, self.gaps[k] / np.where(covered, self.areas[k], 1.0), 0.0)
-        return covered & (self._augmented[k] - self.penalty * normalized > 0.0)
+        return covered & (self._augmented[k] - self.penalty * gap >= 0.0)
 
     def _multiplier_rows(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Residual C_j and coefficients (alpha on dg~, beta on dA, delta on dz) of owned rows."""
+        """Residual C_j and coefficients (alpha on dg~, beta on dA, delta on dz) of owned rows.
+
+        Rows are scaled to force units (module docstring); the scaling is
+        constant per row, so Newton steps are unchanged by it.
+        """
         z = self.multipliers[k].getArray(readonly=True)
         active = self.active[k]
         gap, area = self.gaps[k], self.areas[k]
         alpha = np.zeros_like(z)
         beta = np.zeros_like(z)
-        delta = np.ones_like(z)
-        residual = z.copy()
         if self.method == "lagrange":
-            residual[active] = self.c_n * gap[active]
-            alpha[active] = self.c_n
+            weight = self._slave_length
+            delta = np.full_like(z, weight)
+            residual = weight * z
+            residual[active] = self._row_scale * gap[active]
+            alpha[active] = self._row_scale
             delta[active] = 0.0
         else:
             eps = self.penalty
+            weight = self._slave_length * min(1.0, self._row_scale / eps)
+            delta = np.full_like(z, weight)
+            residual = weight * z
             safe_area = np.where(active, area, 1.0)
-            residual[active] = (z - self._augmented[k] + eps * gap / safe_area)[active]
-            alpha[active] = (eps / safe_area)[active]
-            beta[active] = (-eps * gap / safe_area**2)[active]
+            residual[active] = weight * (z - self._augmented[k] + eps * gap / safe_area)[active]
+            alpha[active] = (weight * eps / safe_area)[active]
+            beta[active] = (-weight * eps * gap / safe_area**2)[active]
         return residual, alpha, beta, delta
 
     # -- SNES callbacks ----------------------------------------------------
@@ -445,7 +510,7 @@ class ContactProblem:
         start = time.perf_counter()
         for interface, z in zip(self.interfaces, self.multipliers, strict=True):
             interface.contact_force(z, b_u)
-        compat.set_bc(b_u, self.bcs, self.u.x.petsc_vec, -1.0)
+        compat.set_bc(b_u, self.bcs, self.u.x.petsc_vec, -self._dirichlet_scale)
         array = b.getArray()
         array[self.layout.owned_u] = b_u.getArray(readonly=True)
         for k in range(len(self.interfaces)):
@@ -479,7 +544,9 @@ class ContactProblem:
                 self.snes.setJacobian(self._jacobian, self._system.mat)
         values = [K.getValuesCSR()[2]] + [b[2] for b in blocks]
         matrix = self._system.assemble(np.concatenate(values))
-        matrix.zeroRows(self.layout.u(self._fixed_dofs).astype(PETSc.IntType), diag=1.0)
+        matrix.zeroRows(
+            self.layout.u(self._fixed_dofs).astype(PETSc.IntType), diag=self._dirichlet_scale
+        )
         self.timings["mortar integration"] += time.perf_counter() - start
         return matrix
 
@@ -580,23 +647,31 @@ class ContactProblem:
         self._frozen_active = None
         self._write_x_into_state(self.x)
         self._update_contact()
-        covered = [self._covered(k) for k in range(len(self.interfaces))]
-        z_now = [z.getArray(readonly=True) for z in self.multipliers]
-        self._frozen_active = [
-            c & ((z > 0) | (g <= 0)) for c, z, g in zip(covered, z_now, self.gaps, strict=True)
-        ]
+        self._frozen_active = []
+        for k, z in enumerate(self.multipliers):
+            covered, gap = self._nodal_gaps(k)
+            self._frozen_active.append(covered & ((z.getArray(readonly=True) > 0) | (gap <= 0)))
         return self._outer_loop(self._update_frozen_active_sets, failure_reason=-100)
 
     def _update_frozen_active_sets(self) -> bool:
-        """One fixed-point update; True when no node changed on any rank."""
+        """One fixed-point update; True when no node changed on any rank.
+
+        A node leaves the set when its averaged pressure is negative beyond
+        rounding (1e-10 of the largest), and joins it when its nodal gap is
+        negative beyond rounding (as in :meth:`_nodal_gaps`): a node at zero
+        pressure and zero gap must not flip in and out forever.
+        """
         changed = 0
         new_sets = []
         for k in range(len(self.interfaces)):
             pressure = self._averaged_pressure(k)
-            active = self._frozen_active[k].copy()
-            active[active & (pressure < 0.0)] = False
-            active[~self._frozen_active[k] & (self.gaps[k] < 0.0) & self._covered(k)] = True
-            changed += int(np.count_nonzero(active != self._frozen_active[k]))
+            largest = self.comm.allreduce(float(np.max(np.abs(pressure), initial=0.0)), op=MPI.MAX)
+            covered, gap = self._nodal_gaps(k)
+            frozen = self._frozen_active[k]
+            active = frozen.copy()
+            active[frozen & (pressure < -1e-10 * largest)] = False
+            active[~frozen & (gap < 0.0) & covered] = True
+            changed += int(np.count_nonzero(active != frozen))
             new_sets.append(active)
         self._frozen_active = new_sets
         return self.comm.allreduce(changed, op=MPI.SUM) == 0
@@ -733,6 +808,7 @@ class ContactProblem:
         return result
 
     def destroy(self) -> None:
+        self._options_finalizer()
         self.snes.destroy()
         if self._system is not None:
             self._system.destroy()
@@ -742,6 +818,18 @@ class ContactProblem:
         self.b.destroy()
         for interface in self.interfaces:
             interface.destroy()
+
+
+_OPTIONS_SET_BY_PROBLEMS: set[str] = set()
+"""Options-database names holding a ContactProblem's defaults (not the user's)."""
+
+
+def _delete_options(names: list[str]) -> None:
+    options = PETSc.Options()
+    for name in names:
+        if name in _OPTIONS_SET_BY_PROBLEMS:
+            options.delValue(name)
+            _OPTIONS_SET_BY_PROBLEMS.discard(name)
 
 
 def _check_choice(name: str, value, allowed) -> None:
