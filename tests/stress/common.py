@@ -188,6 +188,54 @@ def move_body(tagged: meshes.TaggedMesh, body: str, transform: typing.Callable) 
 # set-ups
 
 
+def contact_problem(tagged: meshes.TaggedMesh, F, u, bcs, name: str, **options) -> ContactProblem:
+    """The ContactProblem of one pair, the mesh's contact_slave against contact_master."""
+    markers = tagged.markers
+    pair = ContactPair(
+        tagged.facet_tags, markers["contact_slave"], markers["contact_master"], name=name
+    )
+    return ContactProblem(F, u, bcs, [pair], **options)
+
+
+def clamped_and_driven(V, tagged: meshes.TaggedMesh, clamped: str, driven: str):
+    """Dirichlet conditions u = 0 on the facets ``clamped`` and u = motion on ``driven``;
+    returns (bcs, motion), motion a Constant vector to set per load."""
+    mesh, markers = tagged.mesh, tagged.markers
+    fdim = mesh.topology.dim - 1
+    motion = dolfinx.fem.Constant(mesh, np.zeros(2))
+    bcs = []
+    for name, value in ((clamped, np.zeros(2)), (driven, motion)):
+        facets = tagged.facet_tags.find(markers[name])
+        dofs = dolfinx.fem.locate_dofs_topological(V, fdim, facets)
+        bcs.append(dolfinx.fem.dirichletbc(value, dofs, V))
+    return bcs, motion
+
+
+def all_pairs(slave: np.ndarray, master: np.ndarray):
+    """Every (slave facet, master facet) pair of two polylines in the layout of
+    kernels.pair_quantities; slave facet i joins slave nodes i, i + 1. Missing
+    neighbours get NaN coordinates (any use would show).
+    Returns (x, has_neighbour, slave facet, master facet) per pair."""
+    num_slave, num_master = len(slave) - 1, len(master) - 1
+    facet_s, facet_m = (
+        a.ravel() for a in np.meshgrid(np.arange(num_slave), np.arange(num_master), indexing="ij")
+    )
+    padded = np.concatenate([[np.full(2, np.nan)], slave, [np.full(2, np.nan)]])
+    x = np.stack(
+        [
+            padded[facet_s],
+            slave[facet_s],
+            slave[facet_s + 1],
+            padded[facet_s + 3],
+            master[facet_m],
+            master[facet_m + 1],
+        ],
+        axis=1,
+    )
+    has_neighbour = np.stack([facet_s > 0, facet_s + 1 < num_slave], axis=1)
+    return x, has_neighbour, facet_s, facet_m
+
+
 class TooManySteps(RuntimeError):
     """The load stepping went on with tiny steps (see Setup.steps)."""
 
@@ -346,14 +394,10 @@ def patch_traction(
         corner_values.append((value, strain_xx * c[0]))
         bcs.append(dolfinx.fem.dirichletbc(value, dofs, V.sub(0)))
 
-    pair = ContactPair(
-        tagged.facet_tags,
-        markers["contact_slave"],
-        markers["contact_master"],
-        name="punch-foundation",
-    )
     configuration = "reference" if material == "linear" else "current"
-    problem = ContactProblem(F, u, bcs, [pair], configuration=configuration, **options)
+    problem = contact_problem(
+        tagged, F, u, bcs, "punch-foundation", configuration=configuration, **options
+    )
 
     def apply_load(t: float) -> None:
         traction.value[:] = (0.0, -t * p)
@@ -389,7 +433,7 @@ def punch_driven(
     corner (6, 5) lifts), so that it touches the foundation at that one corner.
     """
     tagged = meshes.patch_test(ratio=ratio, slave=slave, cell_type=cell_type, comm=comm)
-    mesh, markers = tagged.mesh, tagged.markers
+    mesh = tagged.mesh
     if punch_angle:
         c, s = math.cos(punch_angle), math.sin(punch_angle)
         rotation = np.array([[c, -s], [s, c]])
@@ -398,24 +442,11 @@ def punch_driven(
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
     u = dolfinx.fem.Function(V, name="displacement")
     F = internal_work(u, ufl.TestFunction(V), {0: Material(PATCH_E, PATCH_NU, material)})
-    fdim = mesh.topology.dim - 1
-    bottom = tagged.facet_tags.find(markers["foundation_bottom"])
-    top = tagged.facet_tags.find(markers["punch_top"])
-    motion = dolfinx.fem.Constant(mesh, np.zeros(2))
-    bcs = [
-        dolfinx.fem.dirichletbc(
-            np.zeros(2), dolfinx.fem.locate_dofs_topological(V, fdim, bottom), V
-        ),
-        dolfinx.fem.dirichletbc(motion, dolfinx.fem.locate_dofs_topological(V, fdim, top), V),
-    ]
-    pair = ContactPair(
-        tagged.facet_tags,
-        markers["contact_slave"],
-        markers["contact_master"],
-        name="punch-foundation",
-    )
+    bcs, motion = clamped_and_driven(V, tagged, "foundation_bottom", "punch_top")
     configuration = "reference" if material == "linear" else "current"
-    problem = ContactProblem(F, u, bcs, [pair], configuration=configuration, **options)
+    problem = contact_problem(
+        tagged, F, u, bcs, "punch-foundation", configuration=configuration, **options
+    )
 
     def apply_load(t: float) -> None:
         motion.value[:] = drive(t)
@@ -466,13 +497,9 @@ def hertz(
         dofs = dolfinx.fem.locate_dofs_topological(V.sub(0), fdim, facets)
         bcs.append(dolfinx.fem.dirichletbc(np.float64(0.0), dofs, V.sub(0)))
     configuration = "reference" if material == "linear" else "current"
-    pair = ContactPair(
-        tagged.facet_tags,
-        markers["contact_slave"],
-        markers["contact_master"],
-        name="cylinder-block",
+    problem = contact_problem(
+        tagged, F, u, bcs, "cylinder-block", configuration=configuration, **options
     )
-    problem = ContactProblem(F, u, bcs, [pair], configuration=configuration, **options)
     if indentation is None:
         indentation = (0.5 * exact["a"]) ** 2 / (2.0 * exact["R_star"])
     if indentation:
@@ -507,20 +534,8 @@ def ironing(
         markers["block"]: Material(BLOCK_E, IRONING_NU, "neo-hookean"),
     }
     F = internal_work(u, ufl.TestFunction(V), materials, tagged.cell_tags)
-    fdim = mesh.topology.dim - 1
-    bottom = tagged.facet_tags.find(markers["block_bottom"])
-    top = tagged.facet_tags.find(markers["die_top"])
-    motion = dolfinx.fem.Constant(mesh, np.zeros(2))
-    bcs = [
-        dolfinx.fem.dirichletbc(
-            np.zeros(2), dolfinx.fem.locate_dofs_topological(V, fdim, bottom), V
-        ),
-        dolfinx.fem.dirichletbc(motion, dolfinx.fem.locate_dofs_topological(V, fdim, top), V),
-    ]
-    pair = ContactPair(
-        tagged.facet_tags, markers["contact_slave"], markers["contact_master"], name="die-block"
-    )
-    problem = ContactProblem(F, u, bcs, [pair], **options)
+    bcs, motion = clamped_and_driven(V, tagged, "block_bottom", "die_top")
+    problem = contact_problem(tagged, F, u, bcs, "die-block", **options)
 
     def apply_load(t: float) -> None:
         if t <= 1.0:
@@ -572,10 +587,7 @@ def rings(
         bcs.append(
             dolfinx.fem.dirichletbc(motion, dolfinx.fem.locate_dofs_topological(V, fdim, facets), V)
         )
-    pair = ContactPair(
-        tagged.facet_tags, markers["contact_slave"], markers["contact_master"], name="rings"
-    )
-    problem = ContactProblem(F, u, bcs, [pair], **options)
+    problem = contact_problem(tagged, F, u, bcs, "rings", **options)
 
     def apply_load(t: float) -> None:
         top_motion.value[:] = (0.0, -0.5 * squeeze * t)
@@ -605,3 +617,15 @@ def record(case: int, **values) -> None:
         elif isinstance(value, np.ndarray):
             value = value.tolist()
         entry[key] = value
+
+
+def record_outcome(case: int, outcome: Outcome, **values) -> None:
+    """record() with what every solve reports: converged, iterations, cut-backs, NaN."""
+    record(
+        case,
+        converged=outcome.converged,
+        iterations=outcome.iterations,
+        cutbacks=outcome.cutbacks,
+        nan=outcome.nan,
+        **values,
+    )

@@ -6,18 +6,26 @@
   test paths (pytest only knows this file's option when ``tests/stress`` is named).
 * Each case calls :func:`common.record` with what it measured (converged, Newton
   iterations, error, NaN); the terminal summary prints them as a table when the
-  full sweep runs or with ``-v``, and ``DOLFINX_MORTAR_STRESS_JSON=path`` writes
-  them as JSON (docs/stress.md is made from that).
+  full sweep runs or with ``-v``. ``DOLFINX_MORTAR_STRESS_REPORT=DIR`` (``make
+  stress``) writes them with the outcomes, xfail reasons, machine and load to
+  ``DIR/stress.json`` and ``DIR/stress.md`` (report.py; docs/stress.md quotes it);
+  ``DOLFINX_MORTAR_STRESS_JSON=path`` writes only the JSON.
+  ``DOLFINX_MORTAR_STRESS_LABEL`` names the library version in both (e.g. a commit).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import pathlib
+import platform
+import threading
+import time
 
 import pytest
 
+from . import report as stress_report
 from .common import RESULTS
 
 
@@ -81,28 +89,128 @@ def pytest_runtest_makereport(item, call):
     report = outcome.get_result()
     if call.when == "call" and call.excinfo is not None and HERE in item.path.parents:
         entry = RESULTS.setdefault(item.nodeid, {})
-        if "case" not in entry:
-            name = item.name.split("[")[0]
-            entry["case"] = next((c for p, c in _CASES.items() if name.startswith(p)), 0)
+        entry.setdefault("case", _case(item.nodeid))
         message = str(call.excinfo.value).strip().splitlines()
         entry["failure"] = f"{call.excinfo.typename}: {message[0] if message else ''}"[:300]
     return report
 
 
+_ROOT: list[pathlib.Path] = []
+
+
+def pytest_configure(config):
+    _ROOT[:] = [config.rootpath]
+
+
 def pytest_runtest_logreport(report):
+    root = _ROOT[0] if _ROOT else pathlib.Path.cwd()
+    if (root / report.nodeid.split("::", 1)[0]).resolve().parent != HERE:
+        return
     entry = _DURATIONS.setdefault(report.nodeid, {"duration": 0.0, "outcome": "passed"})
     entry["duration"] += report.duration
     if report.when == "call" or report.outcome != "passed":
         if hasattr(report, "wasxfail"):
             entry["outcome"] = "xpassed" if report.passed else "xfailed"
+            entry["xfail_reason"] = report.wasxfail
+        elif report.failed and "XPASS(strict)" in str(report.longrepr):
+            entry["outcome"] = "xpassed"
+            entry["xfail_reason"] = str(report.longrepr)
+        elif report.failed and report.when != "call":
+            entry["outcome"] = "error"
         else:
             entry["outcome"] = report.outcome
 
 
+class LoadMonitor:
+    """The 1-minute load average, sampled every few seconds during the session."""
+
+    def __init__(self, interval: float = 5.0):
+        self.samples: list[float] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, args=(interval,), daemon=True)
+        self._thread.start()
+
+    def _run(self, interval: float) -> None:
+        while not self._stop.is_set():
+            self.samples.append(os.getloadavg()[0])
+            self._stop.wait(interval)
+
+    def stop(self) -> dict:
+        self._stop.set()
+        samples = self.samples or [os.getloadavg()[0]]
+        return {
+            "min": min(samples),
+            "mean": sum(samples) / len(samples),
+            "max": max(samples),
+            "samples": len(samples),
+        }
+
+
+_SESSION: dict = {}
+
+
+def _reporting() -> bool:
+    variables = ("DOLFINX_MORTAR_STRESS_REPORT", "DOLFINX_MORTAR_STRESS_JSON")
+    return any(os.environ.get(name) for name in variables)
+
+
+def pytest_sessionstart(session):
+    if _reporting():
+        _SESSION.update(
+            start=time.perf_counter(),
+            started=time.strftime("%Y-%m-%d %H:%M:%S %Z"),
+            monitor=LoadMonitor(),
+        )
+
+
+def library_label() -> str:
+    """DOLFINX_MORTAR_STRESS_LABEL and a hash of the library's and demos' sources."""
+    repository = HERE.parents[1]
+    digest = hashlib.sha256()
+    for path in sorted([*repository.glob("dolfinx_mortar/*.py"), *repository.glob("demos/*.py")]):
+        digest.update(path.name.encode() + path.read_bytes())
+    label = os.environ.get("DOLFINX_MORTAR_STRESS_LABEL", "")
+    return f"{label + ', ' if label else ''}sources sha256 {digest.hexdigest()[:16]}"
+
+
+def session_meta(config) -> dict:
+    import dolfinx
+    from petsc4py import PETSc
+
+    cpu = platform.processor()
+    try:
+        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {
+        "command": "python3 -m pytest " + " ".join(config.invocation_params.args),
+        "library": library_label(),
+        "started": _SESSION.get("started"),
+        "wall_time_s": time.perf_counter() - _SESSION.get("start", time.perf_counter()),
+        "load_average_1min": _SESSION["monitor"].stop() if "monitor" in _SESSION else {},
+        "nproc": len(os.sched_getaffinity(0)),
+        "cpu": cpu,
+        "dolfinx": dolfinx.__version__,
+        "petsc": ".".join(str(v) for v in PETSc.Sys.getVersion()),
+        "python": platform.python_version(),
+    }
+
+
+def _case(nodeid: str) -> int:
+    name = nodeid.split("::", 1)[-1].split("[")[0]
+    return next((c for p, c in _CASES.items() if name.startswith(p)), 0)
+
+
 def _rows() -> list[dict]:
+    """One row per stress test that ran: what it recorded, outcome, duration, xfail reason."""
     rows = []
-    for nodeid, values in RESULTS.items():
-        row = {"test": nodeid, **_DURATIONS.get(nodeid, {}), **values}
+    for nodeid in dict.fromkeys([*RESULTS, *_DURATIONS]):
+        row = {"test": nodeid, "case": _case(nodeid)}
+        row.update(_DURATIONS.get(nodeid, {}))
+        row.update(RESULTS.get(nodeid, {}))
         rows.append(row)
     return rows
 
@@ -121,10 +229,19 @@ def _short(value) -> str:
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config):
     rows = [row for row in _rows() if row.get("outcome") != "skipped"]
-    path = os.environ.get("DOLFINX_MORTAR_STRESS_JSON")
-    if path and rows:
-        with open(path, "w") as stream:
-            json.dump(rows, stream, indent=1, default=str)
+    if rows and _reporting():
+        data = {"meta": session_meta(config), "rows": rows}
+        directory = os.environ.get("DOLFINX_MORTAR_STRESS_REPORT")
+        paths = [os.environ.get("DOLFINX_MORTAR_STRESS_JSON")]
+        if directory:
+            pathlib.Path(directory).mkdir(parents=True, exist_ok=True)
+            paths.append(os.path.join(directory, "stress.json"))
+            markdown = stress_report.markdown(rows, data["meta"])
+            pathlib.Path(directory, "stress.md").write_text(markdown)
+        for path in filter(None, paths):
+            with open(path, "w") as stream:
+                json.dump(data, stream, indent=1, default=str)
+        terminalreporter.write_line(f"stress results written: {', '.join(filter(None, paths))}")
     if not rows or not (run_slow(config) or config.getoption("verbose") > 0):
         return
     terminalreporter.section("stress cases: measured")

@@ -21,7 +21,7 @@ import pytest
 from mpi4py import MPI
 
 from . import common
-from .common import record
+from .common import record, record_outcome
 
 # ----------------------------------------------------------------------------------------
 # 7. grazing contact
@@ -36,12 +36,9 @@ def check_grazing_hertz(factor: float, material: str, steps: int):
     # the nominal problem's forces), so the tolerance has a part relative to the nominal load
     force_error = abs(outcome.slave_force[1] - load)
     tolerance = 1e-9 * load + 1e-12 * common.HERTZ_LOAD
-    record(
+    record_outcome(
         7,
-        converged=outcome.converged,
-        iterations=outcome.iterations,
-        cutbacks=outcome.cutbacks,
-        nan=outcome.nan,
+        outcome,
         error=force_error / load,
         active=outcome.active,
         p_max_over_hertz=float(outcome.pressure.max() / setup.info["exact"]["p0"]),
@@ -85,11 +82,9 @@ def check_corner(material, slave, pushes, **options):
     forces = []
     for push in pushes:
         outcome = corner_contact(material, slave, push, **options)
-        record(
+        record_outcome(
             7,
-            converged=outcome.converged,
-            iterations=outcome.iterations,
-            nan=outcome.nan,
+            outcome,
             error=outcome.force_balance,
             active=outcome.active,
             push=push,
@@ -149,11 +144,9 @@ def check_initial_penetration(material: str, depth: float, **options):
     jump = float(np.max(np.abs(outcome.displacement)))
     setup.destroy()
     p0 = setup.info["exact"]["p0"]
-    record(
+    record_outcome(
         8,
-        converged=outcome.converged,
-        iterations=outcome.iterations,
-        nan=outcome.nan,
+        outcome,
         error=float(np.max(np.abs(outcome.pressure))) / p0,
         active=outcome.active,
         max_displacement=jump,

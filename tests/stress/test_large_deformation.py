@@ -24,7 +24,7 @@ import pytest
 from dolfinx_mortar.loading import LoadSteppingError
 
 from . import common
-from .common import record, relative_difference
+from .common import record, record_outcome, relative_difference
 
 # ----------------------------------------------------------------------------------------
 # 10. large sliding
@@ -100,12 +100,9 @@ def check_rings(squeeze: float, steps: int, refinement: int, **options):
     outcome = setup.steps(steps, on_step=on_step)
     fraction = squeeze / setup.info["outer_diameter"]
     setup.destroy()
-    record(
+    record_outcome(
         11,
-        converged=outcome.converged,
-        iterations=outcome.iterations,
-        cutbacks=outcome.cutbacks,
-        nan=outcome.nan,
+        outcome,
         error=max(balances),
         squeeze_fraction=fraction,
         active=outcome.active,
@@ -161,12 +158,9 @@ def test_too_large_step_is_cut_back():
     reference = hertz_finely_stepped(BIG_LOAD)
     records = outcome.extra["records"]
     difference = relative_difference(outcome.pressure, reference.pressure)
-    record(
+    record_outcome(
         12,
-        converged=outcome.converged,
-        iterations=outcome.iterations,
-        cutbacks=outcome.cutbacks,
-        nan=outcome.nan,
+        outcome,
         error=difference,
         final_load=records[-1].load,
         force=float(outcome.slave_force[1]),
@@ -212,12 +206,9 @@ def test_ironing_in_one_step_is_cut_back_or_solved():
     problem = setup.problem
     lowest = float(np.min(problem.interfaces[0].slave.current_coordinates(problem.u)[:, 1]))
     setup.destroy()
-    record(
+    record_outcome(
         12,
-        converged=outcome.converged,
-        iterations=outcome.iterations,
-        cutbacks=outcome.cutbacks,
-        nan=outcome.nan,
+        outcome,
         active=outcome.active,
         lowest_die_point=lowest,
         error=float(np.linalg.norm(outcome.slave_force)),
@@ -246,12 +237,9 @@ def test_ironing_sliding_jump_is_cut_back():
     difference = float(
         np.linalg.norm(jumped - reference.slave_force) / np.linalg.norm(reference.slave_force)
     )
-    record(
+    record_outcome(
         12,
-        converged=outcome.converged,
-        iterations=outcome.iterations,
-        cutbacks=outcome.cutbacks,
-        nan=outcome.nan,
+        outcome,
         error=difference,
         balance=outcome.force_balance,
     )

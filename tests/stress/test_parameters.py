@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from . import common
-from .common import record, relative_difference
+from .common import record, record_outcome, relative_difference
 
 PENALTY_FACTORS = [10.0**k for k in range(-3, 4)]  # eps / (E/h): six decades
 CN_FACTORS = [1e-2, 1e-1, 10.0, 1e2]  # c_n / (E/h): four decades around 1
@@ -73,6 +73,17 @@ def run_patch_penalty(factor: float, ratio=(3, 7), **options):
     return outcome, error, penetration_error, product
 
 
+def check_patch_penalty(factor: float, ratio=(3, 7), **options):
+    """Converged, no NaN, pressure = Lagrange to 1e-10, penetration x eps = p to 1e-8."""
+    outcome, error, penetration_error, product = run_patch_penalty(factor, ratio, **options)
+    record_outcome(1, outcome, error=error, penetration_error=penetration_error, eps_factor=factor)
+    assert outcome.converged, f"SNES failed at eps = {factor:g} E/h"
+    assert not outcome.nan
+    assert error <= 1e-10
+    assert penetration_error <= 1e-8, product
+    return outcome
+
+
 @pytest.mark.parametrize(
     "factor",
     [
@@ -82,38 +93,13 @@ def run_patch_penalty(factor: float, ratio=(3, 7), **options):
 )
 def test_penalty_patch_test(factor):
     """Any eps: pressure exactly uniform (= Lagrange), penetration exactly p / eps."""
-    outcome, error, penetration_error, product = run_patch_penalty(factor)
-    record(
-        1,
-        converged=outcome.converged,
-        iterations=outcome.iterations,
-        nan=outcome.nan,
-        error=error,
-        penetration_error=penetration_error,
-        eps_factor=factor,
-    )
-    assert outcome.converged, f"SNES failed at eps = {factor:g} E/h"
-    assert not outcome.nan
+    outcome = check_patch_penalty(factor)
     assert outcome.active == outcome.pressure.size
-    assert error <= 1e-10
-    assert penetration_error <= 1e-8, product
 
 
 def test_penalty_stiffest_with_divergence_test_disabled():
     """The same stiffest case converges once SNES's divergence test is off (the fix)."""
-    outcome, error, penetration_error, _ = run_patch_penalty(
-        PENALTY_FACTORS[-1], petsc_options=NO_DIVERGENCE_TEST
-    )
-    record(
-        1,
-        converged=outcome.converged,
-        iterations=outcome.iterations,
-        nan=outcome.nan,
-        error=error,
-        penetration_error=penetration_error,
-    )
-    assert outcome.converged and not outcome.nan
-    assert error <= 1e-10 and penetration_error <= 1e-8
+    check_patch_penalty(PENALTY_FACTORS[-1], petsc_options=NO_DIVERGENCE_TEST)
 
 
 def check_first_penalty_iterate(ratio, factor):
@@ -195,12 +181,9 @@ def run_hertz_penalty(factor: float, refinement=0, steps=2, **options):
 def test_penalty_hertz_every_solve_converges(factor):
     """Hertz in the demo's two load steps: every Newton solve converges (no cut-back)."""
     outcome, error = run_hertz_penalty(factor)
-    record(
+    record_outcome(
         1,
-        converged=outcome.converged,
-        iterations=outcome.iterations,
-        cutbacks=outcome.cutbacks,
-        nan=outcome.nan,
+        outcome,
         error=error,
         eps_factor=factor,
     )
@@ -331,19 +314,7 @@ def penalty_ratio_params():
 @pytest.mark.slow
 @pytest.mark.parametrize("ratio,factor", list(penalty_ratio_params()))
 def test_penalty_patch_test_ratios(ratio, factor):
-    outcome, error, penetration_error, _ = run_patch_penalty(
-        factor, ratio=ratio, petsc_options=NO_DIVERGENCE_TEST
-    )
-    record(
-        1,
-        converged=outcome.converged,
-        iterations=outcome.iterations,
-        nan=outcome.nan,
-        error=error,
-        penetration_error=penetration_error,
-    )
-    assert outcome.converged and not outcome.nan
-    assert error <= 1e-10 and penetration_error <= 1e-8
+    check_patch_penalty(factor, ratio, petsc_options=NO_DIVERGENCE_TEST)
 
 
 # ----------------------------------------------------------------------------------------
@@ -399,12 +370,9 @@ def check_cn(name: str, factor: float):
     outcome, _ = run_configuration(name, c_n=factor * c_n)
     pressure_difference = relative_difference(outcome.pressure, reference.pressure)
     displacement_difference = relative_difference(outcome.displacement, reference.displacement)
-    record(
+    record_outcome(
         2,
-        converged=outcome.converged,
-        iterations=outcome.iterations,
-        cutbacks=outcome.cutbacks,
-        nan=outcome.nan,
+        outcome,
         error=max(pressure_difference, displacement_difference),
         reference_iterations=reference.iterations,
     )

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from . import common
-from .common import record
+from .common import record, record_outcome
 
 
 def patch_demo(ratio: str, slave: str, *extra: str) -> dict:
@@ -105,11 +105,9 @@ def check_aligned(ratio, slave, material, shift, cell_type="triangle", tolerance
         common.PATCH_PRESSURE / (1.0 + strain) if material != "linear" else common.PATCH_PRESSURE
     )
     deviation = float(np.max(np.abs(outcome.pressure / expected - 1.0)))
-    record(
+    record_outcome(
         6,
-        converged=outcome.converged,
-        iterations=outcome.iterations,
-        nan=outcome.nan,
+        outcome,
         error=deviation,
         active=outcome.active,
         shift=shift,

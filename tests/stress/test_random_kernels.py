@@ -26,7 +26,7 @@ from hypothesis import strategies as st
 
 from dolfinx_mortar import kernels
 
-from .common import record
+from .common import all_pairs, record
 
 FAST = settings(
     max_examples=200,
@@ -42,29 +42,6 @@ DUAL = np.array([[2.0, -1.0], [-1.0, 2.0]])
 def rigid(points: np.ndarray, angle: float, shift) -> np.ndarray:
     rotation = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
     return points @ rotation.T + np.asarray(shift)
-
-
-def all_pairs(slave: np.ndarray, master: np.ndarray):
-    """Every (slave facet, master facet) pair; slave facet i joins slave nodes i, i + 1.
-    Missing neighbours get NaN coordinates (any use would show)."""
-    num_slave, num_master = len(slave) - 1, len(master) - 1
-    facet_s, facet_m = (
-        a.ravel() for a in np.meshgrid(np.arange(num_slave), np.arange(num_master), indexing="ij")
-    )
-    padded = np.concatenate([[np.full(2, np.nan)], slave, [np.full(2, np.nan)]])
-    x = np.stack(
-        [
-            padded[facet_s],
-            slave[facet_s],
-            slave[facet_s + 1],
-            padded[facet_s + 3],
-            master[facet_m],
-            master[facet_m + 1],
-        ],
-        axis=1,
-    )
-    has_neighbour = np.stack([facet_s > 0, facet_s + 1 < num_slave], axis=1)
-    return x, has_neighbour, facet_s, facet_m
 
 
 def assemble(q, facet_s, facet_m, num_slave_nodes, num_master_nodes):

@@ -23,7 +23,7 @@ import pytest
 from dolfinx_mortar import kernels
 
 from . import common
-from .common import record, relative_difference
+from .common import all_pairs, record, record_outcome, relative_difference
 
 SCALINGS = [(1e3, 1e-6), (1e-3, 1e6)]  # (length factor, modulus factor)
 OPTIONS = list(
@@ -49,21 +49,7 @@ def curved_polylines(rng: np.random.Generator, num_slave: int, num_master: int):
     rotation = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
     shift = rng.uniform(-1.0, 1.0, 2)
     slave, master = slave @ rotation.T + shift, master @ rotation.T + shift
-    facets_s, facets_m = np.meshgrid(np.arange(num_slave), np.arange(num_master), indexing="ij")
-    facets_s, facets_m = facets_s.ravel(), facets_m.ravel()
-    padded = np.concatenate([[slave[1] * 0.0], slave, [slave[1] * 0.0]])
-    x = np.stack(
-        [
-            padded[facets_s],
-            slave[facets_s],
-            slave[facets_s + 1],
-            padded[facets_s + 3],
-            master[facets_m],
-            master[facets_m + 1],
-        ],
-        axis=1,
-    )
-    has_neighbour = np.stack([facets_s > 0, facets_s + 1 < num_slave], axis=1)
+    x, has_neighbour, facets_s, _ = all_pairs(slave, master)
     return x, has_neighbour, facets_s
 
 
@@ -158,12 +144,9 @@ def check_units(name: str, scaling: tuple[float, float]):
     assert reference.converged and not reference.nan
     outcome, p, u = dimensionless(name, *scaling)
     errors = {"pressure/E": relative_difference(p, p0), "u/length": relative_difference(u, u0)}
-    record(
+    record_outcome(
         4,
-        converged=outcome.converged,
-        iterations=outcome.iterations,
-        cutbacks=outcome.cutbacks,
-        nan=outcome.nan,
+        outcome,
         error=max(errors.values()),
         reference_iterations=reference.iterations,
         scaling=list(scaling),
