@@ -17,7 +17,6 @@ Run:  mpirun -n 2 python3 demos/hertz.py --refinement 2 --json hertz.json --outp
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import pathlib
 import sys
@@ -30,7 +29,7 @@ from mpi4py import MPI
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 
-from patch_test import add_common_arguments, problem_options  # noqa: E402
+from patch_test import add_common_arguments, problem_options, write_summary  # noqa: E402
 
 from dolfinx_mortar import meshes  # noqa: E402
 from dolfinx_mortar.loading import ContactOutput, configure_logging, solve_load_steps  # noqa: E402
@@ -241,9 +240,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
             f"L2 pressure error {100 * error_rel:.2f} %",
             flush=True,
         )
-        if args.json:
-            args.json.parent.mkdir(parents=True, exist_ok=True)
-            args.json.write_text(json.dumps(summary, indent=2))
+        write_summary(args.json, summary)
         if args.output:
             plot(args.output / "hertz_pressure.png", x_nodes, pressure, exact, summary)
             print(f"results written to {args.output}/ (hertz_pressure.png, paraview/*.bp)")

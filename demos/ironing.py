@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import pathlib
 import sys
 import time
@@ -29,7 +28,7 @@ from mpi4py import MPI
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 
-from patch_test import add_common_arguments, problem_options  # noqa: E402
+from patch_test import add_common_arguments, problem_options, write_summary  # noqa: E402
 
 from dolfinx_mortar import meshes  # noqa: E402
 from dolfinx_mortar.loading import ContactOutput, configure_logging, solve_load_steps  # noqa: E402
@@ -160,9 +159,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
             f"force balance {summary['max_force_balance_rel']:.2e}",
             flush=True,
         )
-        if args.json:
-            args.json.parent.mkdir(parents=True, exist_ok=True)
-            args.json.write_text(json.dumps(summary, indent=2))
+        write_summary(args.json, summary)
         if args.output:
             args.output.mkdir(parents=True, exist_ok=True)
             with open(args.output / "ironing_forces.csv", "w", newline="") as stream:

@@ -45,6 +45,13 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", type=Path, help="write a JSON summary here")
 
 
+def write_summary(path: Path | None, summary: dict) -> None:
+    """The --json option: write the demo's summary there (call it on one rank)."""
+    if path:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(summary, indent=2))
+
+
 def problem_options(args) -> dict:
     return {
         "method": args.method,
@@ -180,9 +187,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
             f"{report.iterations} Newton iterations",
             flush=True,
         )
-        if args.json:
-            args.json.parent.mkdir(parents=True, exist_ok=True)
-            args.json.write_text(json.dumps(summary, indent=2))
+        write_summary(args.json, summary)
     problem.destroy()
     return summary
 

@@ -613,7 +613,9 @@ def pair_quantities(
     contribute, which are kept apart (``rows``, ``grad_rows``) for assembly.
     """
     if integration not in INTEGRATION_OPTIONS:
-        raise ValueError(f"unknown integration {integration!r}; expected one of {INTEGRATION_OPTIONS}")
+        raise ValueError(
+            f"unknown integration {integration!r}; expected one of {INTEGRATION_OPTIONS}"
+        )
     if basis not in BASIS_OPTIONS:
         raise ValueError(f"unknown multiplier basis {basis!r}; expected one of {BASIS_OPTIONS}")
     if normals not in NORMAL_OPTIONS:
@@ -751,7 +753,10 @@ def dual_basis_coefficients(jacobian_at_points=None, num_gauss_points: int = 2) 
     which keeps D and M integrated over the same domain (patch test).
     """
     points, weights = gauss_legendre(num_gauss_points)
-    jacobian = np.ones_like(points) if jacobian_at_points is None else np.asarray(jacobian_at_points)
+    if jacobian_at_points is None:
+        jacobian = np.ones_like(points)
+    else:
+        jacobian = np.asarray(jacobian_at_points)
     N = np.stack([(1.0 - points) / 2.0, (1.0 + points) / 2.0], axis=-1)
     w = weights * jacobian
     mass = np.einsum("g,gj,gk->jk", w, N, N)
@@ -762,7 +767,9 @@ def dual_basis_coefficients(jacobian_at_points=None, num_gauss_points: int = 2) 
 _DUAL_COEFFICIENTS = dual_basis_coefficients()
 
 
-def _one_master_facet_per_point(eta: np.ndarray, valid: np.ndarray, slave_facet: np.ndarray) -> np.ndarray:
+def _one_master_facet_per_point(
+    eta: np.ndarray, valid: np.ndarray, slave_facet: np.ndarray
+) -> np.ndarray:
     """(n, g) mask: each Gauss point of a slave facet goes to the master facet it
     projects into most centrally (smallest |eta|, within 1e-12 of [-1, 1])."""
     num_pairs, num_points = eta.shape
