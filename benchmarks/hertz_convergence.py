@@ -1,0 +1,120 @@
+"""Convergence of the Hertz contact pressure under mesh refinement, and where it stops.
+
+Runs ``demos/hertz.py`` (case B: P = 10, both bodies E = 200, nu = 0.3, linear
+elasticity, dual multipliers, segment-based integration) at refinements 0..N for
+one or more cylinder radii and fits, by least squares over all meshes, the rate of
+the relative L2 error of the pressure against Hertz theory in the slave element
+size h. Hertz theory is exact only as a/R -> 0: at the reference radius R = 8,
+a/R = 0.12 and the theory itself is off by about 1.5 % in L2 (this shows as a
+floor that falls with R at fixed mesh resolution a/h), so the discretization rate
+is measured at a larger radius, where a/R is small and the same meshes (scaled
+with a) resolve the same zone.
+
+    tools/run python3 benchmarks/hertz_convergence.py --radii 8 --refinements 0 1 2 3 4 \\
+        --json benchmarks/results/hertz_convergence_R8.json \\
+        --markdown benchmarks/results/hertz_convergence_R8.md
+    tools/run python3 benchmarks/hertz_convergence.py --radii 32 128 --refinements 0 1 2 3 \\
+        --json benchmarks/results/hertz_convergence_large_R.json \\
+        --markdown benchmarks/results/hertz_convergence_large_R.md
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import sys
+
+import numpy as np
+from mpi4py import MPI
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "demos"))
+
+import hertz  # noqa: E402
+
+
+def fitted_rate(h: np.ndarray, error: np.ndarray) -> float:
+    """Least-squares slope of log(error) against log(h)."""
+    return float(np.polyfit(np.log(h), np.log(error), 1)[0])
+
+
+def run(radii, refinements, comm) -> dict:
+    results = {}
+    for radius in radii:
+        rows = []
+        for refinement in refinements:
+            summary = hertz.main(
+                ["--radius", str(radius), "--refinement", str(refinement), "--steps", "2"], comm
+            )
+            rows.append(
+                {
+                    key: summary[key]
+                    for key in (
+                        "refinement",
+                        "num_dofs",
+                        "h_contact",
+                        "a_exact",
+                        "p_max_error_rel",
+                        "a_error_in_elements",
+                        "l2_pressure_error_rel",
+                        "total_force_error_rel",
+                        "newton_iterations",
+                        "wall_time_s",
+                    )
+                }
+            )
+        h = np.array([r["h_contact"] for r in rows])
+        l2 = np.array([r["l2_pressure_error_rel"] for r in rows])
+        results[str(radius)] = {
+            "a_over_R": rows[0]["a_exact"] / radius,
+            "rows": rows,
+            "l2_rate": fitted_rate(h, l2) if len(rows) > 1 else None,
+        }
+    return results
+
+
+def markdown(results: dict) -> str:
+    lines = []
+    for radius, data in results.items():
+        lines.append(
+            f"R = {radius} (a/R = {data['a_over_R']:.3f}): fitted L2 rate "
+            f"{data['l2_rate']:.2f} over {len(data['rows'])} meshes\n"
+        )
+        lines.append("| refinement | dofs | h / a | p_max error | a error (elements) | L2 error "
+                     "| Newton per step | time (s) |")
+        lines.append("|---|---|---|---|---|---|---|---|")
+        for r in data["rows"]:
+            lines.append(
+                f"| {r['refinement']} | {r['num_dofs']} | {r['h_contact'] / r['a_exact']:.4f} "
+                f"| {100 * r['p_max_error_rel']:+.2f} % | {r['a_error_in_elements']:.2f} "
+                f"| {100 * r['l2_pressure_error_rel']:.2f} % "
+                f"| {', '.join(map(str, r['newton_iterations']))} | {r['wall_time_s']:.1f} |"
+            )
+        lines.append("")
+    return "\n".join(lines)
+
+
+def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--radii", type=float, nargs="+", default=[8.0, 128.0])
+    parser.add_argument("--refinements", type=int, nargs="+", default=[0, 1, 2, 3])
+    parser.add_argument("--json", type=pathlib.Path)
+    parser.add_argument("--markdown", type=pathlib.Path)
+    args = parser.parse_args(argv)
+    results = run(args.radii, args.refinements, comm)
+    if comm.rank == 0:
+        text = markdown(results)
+        print(text)
+        if args.json:
+            args.json.parent.mkdir(parents=True, exist_ok=True)
+            args.json.write_text(json.dumps(results, indent=1))
+        if args.markdown:
+            args.markdown.parent.mkdir(parents=True, exist_ok=True)
+            args.markdown.write_text(text)
+    return results
+
+
+if __name__ == "__main__":
+    main()
