@@ -11,7 +11,10 @@ the master facets it crossed; the kernels decide from the current geometry,
 where its nodes are behind the master surface: a negative gap, an active
 node, pushed back. A search on the current positions alone finds nothing in
 that case, the bulk residual of a rigidly moved body is zero, and the body
-passes through unnoticed.
+passes through unnoticed. A translated or moderately turned facet keeps
+facing its master (the kernels' test n_slave . n_master < 0); a facet turned
+by more than 90 degrees relative to the master within one update is still
+found here but rejected by the kernels as not facing.
 
 This is what 4C does (``Mortar::BaseBinaryTreeNode::calculate_slabs_dop``:
 k-DOP slabs of the current node positions, with SEARCH_USE_AUX_POS enlarged

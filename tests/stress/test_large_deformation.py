@@ -182,10 +182,10 @@ def test_ironing_in_one_step_is_cut_back_or_solved():
     outcome = setup.steps(1, end=1.0)
     problem = setup.problem
     interface = problem.interfaces[0]
-    lowest = float(np.min(interface.slave.current_coordinates(problem.u)[:, 1]))
-    block_lowest = float(np.min(interface.master.current_coordinates(problem.u)[:, 1]))
-    smallest_gap = problem.comm.allreduce(float(np.min(problem.gaps[0], initial=np.inf)),
-                                          op=MPI.MIN)
+    lowest, block_lowest, smallest_gap = (
+        problem.comm.allreduce(float(np.min(values, initial=np.inf)), op=MPI.MIN)
+        for values in (interface.slave.current_coordinates(problem.u)[:, 1],
+                       interface.master.current_coordinates(problem.u)[:, 1], problem.gaps[0]))
     u = problem.u.x.array.copy()
     setup.destroy()
     reference_u, reference_force = ironing_finely_stepped()
