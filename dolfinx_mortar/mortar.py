@@ -26,8 +26,8 @@ from petsc4py import PETSc
 
 from . import kernels, search, surface
 from .dual import RowSubsetDual
-from .layout import CooMatrix
 from .kernels import BasisOption, IntegrationOption, NormalOption
+from .layout import CooMatrix
 
 CONFIGURATIONS = ("current", "reference")
 DEFAULT_GAUSS_POINTS = {"segment": 3, "element": 4}
@@ -64,11 +64,17 @@ def _contributing_rows(q: kernels.PairQuantities) -> np.ndarray | None:
     return None
 
 
-def _alltoallv(comm: MPI.Intracomm, chunks: list[np.ndarray], dtype, width: int) -> tuple[np.ndarray, np.ndarray]:
-    """Send chunks[r] (rows of ``width`` values) to rank r; return received rows and their sources."""
+def _alltoallv(
+    comm: MPI.Intracomm, chunks: list[np.ndarray], dtype, width: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Send chunks[r] (rows of ``width`` values) to rank r; return the rows and their sources."""
     send_counts = np.array([c.shape[0] * width for c in chunks], dtype=np.int64)
     recv_counts = np.array(comm.alltoall(send_counts.tolist()), dtype=np.int64)
-    send = np.concatenate([np.asarray(c, dtype=dtype).reshape(-1) for c in chunks]) if chunks else np.zeros(0, dtype)
+    send = (
+        np.concatenate([np.asarray(c, dtype=dtype).reshape(-1) for c in chunks])
+        if chunks
+        else np.zeros(0, dtype)
+    )
     recv = np.empty(int(recv_counts.sum()), dtype=dtype)
     mpi_type = MPI._typedict[np.dtype(dtype).char]
     comm.Alltoallv([send, (send_counts, None), mpi_type], [recv, (recv_counts, None), mpi_type])
@@ -251,7 +257,11 @@ class MortarInterface:
         """Evaluate all mortar quantities at x = X + u (collective).
 
         Re-searches only when a surface node moved more than half the margin
-        since the last search; otherwise only coordinates are exchanged. With
+        since the last search; otherwise only coordinates are exchanged. The
+        search sweeps the facets from their positions at the last search (the
+        undeformed surfaces before the first) to the current ones, so that
+        pairs are found however far one update moved the surfaces through
+        each other (:mod:`search`). With
         ``configuration="reference"`` the integrals are taken once on the
         undeformed surfaces and only the gap follows u (small strain).
         """
@@ -272,7 +282,10 @@ class MortarInterface:
         else:
             moving = np.concatenate([slave_x, master_x])
             if self.reuse.needs_search(moving, self.comm):
-                self._search(slave_x, master_x)
+                ns = self.slave.num_nodes
+                origin = self.reuse.sweep_start(moving, np.concatenate(
+                    [self.slave.reference_coordinates, self.master.reference_coordinates]))
+                self._search(slave_x, master_x, origin[:ns], origin[ns:])
                 self.reuse.searched(moving)
             else:
                 self.reuse.skipped()
@@ -350,17 +363,20 @@ class MortarInterface:
                                    area=constant(reference.area.value),
                                    gap=RowSubsetDual(gap, rows, grad))
 
-    def _exchange_plan(self, slave_x: np.ndarray, master_x: np.ndarray) -> None:
-        """Which owned master and slave facets each other rank needs."""
+    def _exchange_plan(self, slave_x: np.ndarray, master_x: np.ndarray,
+                       slave_origin: np.ndarray | None = None,
+                       master_origin: np.ndarray | None = None) -> None:
+        """Which owned master and slave facets each other rank needs (swept boxes
+        from the ``origin`` positions, as in the search itself)."""
         comm = self.comm
         margin = self.reuse.margin
-        slave_lower, slave_upper = search.facet_boxes(slave_x, self.slave.facets)
+        slave_lower, slave_upper = search.facet_boxes(slave_x, self.slave.facets, slave_origin)
         if self.slave.num_facets:
             my_box = np.concatenate([slave_lower.min(axis=0), slave_upper.max(axis=0)])
         else:
             my_box = np.array([np.inf, np.inf, -np.inf, -np.inf])
         boxes = np.array(comm.allgather(my_box))
-        master_lower, master_upper = search.facet_boxes(master_x, self.master.facets)
+        master_lower, master_upper = search.facet_boxes(master_x, self.master.facets, master_origin)
         self._send_master = []
         self._send_slave = []
         for r in range(comm.size):
@@ -374,30 +390,42 @@ class MortarInterface:
             self._send_slave.append(np.flatnonzero(
                 search.boxes_overlap(slave_lower, slave_upper, lower, upper, margin)))
 
-    def _receive(self, owned: surface.ContactSurface, x: np.ndarray, plan: list[np.ndarray]):
-        """Global blocks (k, 2) and coordinates (k, 2, 2) of the facets others send."""
+    def _receive(self, owned: surface.ContactSurface, plan: list[np.ndarray], *states: np.ndarray):
+        """Global blocks (k, 2) and, per state of the nodes in ``states``, the
+        coordinates (k, 2, 2) of the facets others send."""
         chunks = []
         for facets in plan:
             nodes = owned.facets[facets]
-            chunks.append(np.column_stack([
-                np.ascontiguousarray(owned.node_global_blocks[nodes]).view(np.float64),
-                x[nodes].reshape(-1, 4),
-            ]))
-        data, _ = _alltoallv(self.comm, chunks, np.float64, 6)
+            chunks.append(np.column_stack(
+                [np.ascontiguousarray(owned.node_global_blocks[nodes]).view(np.float64)]
+                + [x[nodes].reshape(-1, 4) for x in states]
+            ))
+        data, _ = _alltoallv(self.comm, chunks, np.float64, 2 + 4 * len(states))
         blocks = data[:, :2].copy().view(np.int64)
-        return blocks, data[:, 2:].reshape(-1, 2, 2)
+        coordinates = (data[:, 2 + 4 * i:6 + 4 * i].reshape(-1, 2, 2) for i in range(len(states)))
+        return (blocks, *coordinates)
 
-    def _search(self, slave_x: np.ndarray, master_x: np.ndarray) -> None:
+    def _search(self, slave_x: np.ndarray, master_x: np.ndarray,
+                slave_origin: np.ndarray | None = None,
+                master_origin: np.ndarray | None = None) -> None:
+        """New candidate pairs at the positions ``x``; with ``origin`` positions
+        (the last search's), the boxes are swept from there (:mod:`search`)."""
         slave, master = self.slave, self.master
         parallel = self.comm.size > 1
+        swept = slave_origin is not None
+        if not swept:
+            slave_origin, master_origin = slave_x, master_x
         start = time.perf_counter()
         if parallel:
-            self._exchange_plan(slave_x, master_x)
-            remote_master_blocks, remote_master_x = self._receive(master, master_x, self._send_master)
-            remote_slave_blocks, remote_slave_x = self._receive(slave, slave_x, self._send_slave)
+            self._exchange_plan(slave_x, master_x, slave_origin, master_origin)
+            remote_master_blocks, remote_master_x, remote_master_origin = self._receive(
+                master, self._send_master, master_x, master_origin)
+            remote_slave_blocks, remote_slave_x, remote_slave_origin = self._receive(
+                slave, self._send_slave, slave_x, slave_origin)
         else:
             remote_master_blocks = remote_slave_blocks = np.zeros((0, 2), dtype=np.int64)
             remote_master_x = remote_slave_x = np.zeros((0, 2, 2))
+            remote_master_origin = remote_slave_origin = remote_master_x
         self.statistics.time_exchange += time.perf_counter() - start
 
         # node table: local slave nodes, local master nodes, remote master
@@ -418,8 +446,15 @@ class MortarInterface:
             slave.facets, ns + nm + 2 * nrm + np.arange(2 * nrs).reshape(-1, 2)
         ]).astype(np.int64)
 
+        node_origin = None
+        if swept:
+            node_origin = np.concatenate([
+                slave_origin, master_origin,
+                remote_master_origin.reshape(-1, 2), remote_slave_origin.reshape(-1, 2),
+            ])
         pairs = search.candidate_pairs(
-            self._node_x, slave.facets, self._node_x, all_master_facets, self.reuse.margin
+            self._node_x, slave.facets, self._node_x, all_master_facets, self.reuse.margin,
+            slave_previous=node_origin, master_previous=node_origin,
         )
         a = slave.facets[pairs[:, 0], 0]
         b = slave.facets[pairs[:, 0], 1]
@@ -473,8 +508,8 @@ class MortarInterface:
         self._node_x[ns:ns + nm] = master_x
         if self.comm.size > 1:
             start = time.perf_counter()
-            _, remote_master_x = self._receive(self.master, master_x, self._send_master)
-            _, remote_slave_x = self._receive(self.slave, slave_x, self._send_slave)
+            _, remote_master_x = self._receive(self.master, self._send_master, master_x)
+            _, remote_slave_x = self._receive(self.slave, self._send_slave, slave_x)
             self._node_x[ns + nm:] = np.concatenate(
                 [remote_master_x.reshape(-1, 2), remote_slave_x.reshape(-1, 2)]
             )

@@ -1,11 +1,37 @@
 """Broad-phase search: candidate (slave facet, master facet) pairs and when to redo it.
 
 Candidates are pairs whose axis-aligned boxes, grown by a margin, overlap.
+The boxes are *swept*: a facet's box covers it at the positions of the
+previous search and at the current ones (the union of both boxes), so it
+contains the facet at every point of the straight path between the two
+(each point of the moving facet is a convex combination of the four end
+positions). A slave facet that a Newton iterate or a large load step pushed
+through the master surface by more than the margin is then still paired with
+the master facets it crossed; the kernels decide from the current geometry,
+where its nodes are behind the master surface: a negative gap, an active
+node, pushed back. A search on the current positions alone finds nothing in
+that case, the bulk residual of a rigidly moved body is zero, and the body
+passes through unnoticed. A translated or moderately turned facet keeps
+facing its master (the kernels' test n_slave . n_master < 0); a facet turned
+by more than 90 degrees relative to the master within one update is still
+found here but rejected by the kernels as not facing.
+
+This is what 4C does (``Mortar::BaseBinaryTreeNode::calculate_slabs_dop``:
+k-DOP slabs of the current node positions, with SEARCH_USE_AUX_POS enlarged
+by an auxiliary position, the current position moved along the facet normal
+back to the last converged state). Kratos' contact search
+(``BaseContactSearchProcess``) searches once per solution step around the
+positions at its start (optionally predicted by velocity times the time
+step) and MOOSE's patch search asks the user for a ``patch_size`` large
+enough for the sliding of one step: both rely on steps small compared with
+the search radius, which a Newton iterate of a large step is not.
+
 A search is expensive compared with reusing its result, and contact moves
 little between Newton iterations, so :class:`SearchReuse` keeps the pairs
 while no surface node has moved more than half the margin since the last
 search: then no pair that could overlap has been missed (each side moved at
-most margin/2, together at most the margin the boxes were grown by).
+most margin/2, together at most the margin the boxes were grown by). It also
+keeps the positions of the last search, from which the next one sweeps.
 """
 
 from __future__ import annotations
@@ -16,15 +42,36 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 
-def facet_boxes(coordinates: np.ndarray, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(lower, upper) corners, each (num_facets, 2), of the facets' boxes."""
+def facet_boxes(
+    coordinates: np.ndarray, facets: np.ndarray, previous_coordinates: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) corners, each (num_facets, 2), of the facets' boxes.
+
+    With ``previous_coordinates`` (the same nodes at an earlier state): the
+    swept boxes, the union of the boxes at both states.
+    """
     start, end = coordinates[facets[:, 0]], coordinates[facets[:, 1]]
-    return np.minimum(start, end), np.maximum(start, end)
+    lower, upper = np.minimum(start, end), np.maximum(start, end)
+    if previous_coordinates is not None:
+        start, end = previous_coordinates[facets[:, 0]], previous_coordinates[facets[:, 1]]
+        # fmin/fmax: a NaN state (a diverged iterate) does not erase the other one
+        lower = np.fmin(lower, np.minimum(start, end))
+        upper = np.fmax(upper, np.maximum(start, end))
+    return lower, upper
 
 
 def boxes_overlap(lower_a, upper_a, lower_b, upper_b, margin: float) -> np.ndarray:
     """Elementwise: do the boxes, each grown by ``margin``, overlap?"""
-    return np.all((lower_a - margin <= upper_b + margin) & (lower_b - margin <= upper_a + margin), axis=-1)
+    return np.all(
+        (lower_a - margin <= upper_b + margin) & (lower_b - margin <= upper_a + margin), axis=-1
+    )
+
+
+def _size_classes(half: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per box: a class (boxes of one class are within a factor 2 in size) and the size
+    max_k half_k + margin that bounds the box's reach around its centre."""
+    reach = half.max(axis=1) + margin
+    return np.floor(np.log2(np.maximum(reach, np.finfo(float).tiny))).astype(np.int64), reach
 
 
 def candidate_pairs(
@@ -33,13 +80,21 @@ def candidate_pairs(
     master_coordinates: np.ndarray,
     master_facets: np.ndarray,
     margin: float,
+    *,
+    slave_previous: np.ndarray | None = None,
+    master_previous: np.ndarray | None = None,
 ) -> np.ndarray:
     """All (slave facet, master facet) index pairs whose grown boxes overlap.
 
-    A k-d tree of facet midpoints finds the pairs whose midpoints are closer
-    than the largest possible distance of overlapping boxes, then the boxes
-    themselves decide. Cost O(n log n) in the number of facets; nothing at
-    all is done when the two surfaces' boxes are apart.
+    ``slave_previous`` and ``master_previous`` (the nodes at the previous
+    search) make the boxes swept (:func:`facet_boxes`). A k-d tree of box
+    centres finds the pairs whose centres are closer than the largest
+    possible distance of overlapping boxes, then the boxes themselves decide.
+    Boxes are grouped by size (within a factor 2) and each pair of groups is
+    searched with its own radius, so that the few long boxes of nodes that
+    moved far (a diverging iterate) do not widen the search of all the
+    others. Cost O(n log n) in the number of facets for boxes of similar
+    size; nothing at all is done when the two surfaces' boxes are apart.
 
     Returns:
         (num_pairs, 2) int array, sorted by slave facet then master facet.
@@ -47,20 +102,37 @@ def candidate_pairs(
     empty = np.zeros((0, 2), dtype=np.int64)
     if slave_facets.shape[0] == 0 or master_facets.shape[0] == 0:
         return empty
-    slave_lower, slave_upper = facet_boxes(slave_coordinates, slave_facets)
-    master_lower, master_upper = facet_boxes(master_coordinates, master_facets)
+    slave_lower, slave_upper = facet_boxes(slave_coordinates, slave_facets, slave_previous)
+    master_lower, master_upper = facet_boxes(master_coordinates, master_facets, master_previous)
     if not boxes_overlap(
         slave_lower.min(axis=0), slave_upper.max(axis=0),
         master_lower.min(axis=0), master_upper.max(axis=0), margin,
     ):
         return empty
-    slave_half = 0.5 * (slave_upper - slave_lower)
-    master_half = 0.5 * (master_upper - master_lower)
-    radius = np.linalg.norm(slave_half.max(axis=0) + master_half.max(axis=0) + 2.0 * margin)
-    slave_tree = cKDTree(0.5 * (slave_lower + slave_upper))
-    master_tree = cKDTree(0.5 * (master_lower + master_upper))
-    close = slave_tree.sparse_distance_matrix(master_tree, radius, output_type="ndarray")
-    slave, master = close["i"].astype(np.int64), close["j"].astype(np.int64)
+    slave_centre = 0.5 * (slave_lower + slave_upper)
+    master_centre = 0.5 * (master_lower + master_upper)
+    slave_class, slave_reach = _size_classes(0.5 * (slave_upper - slave_lower), margin)
+    master_class, master_reach = _size_classes(0.5 * (master_upper - master_lower), margin)
+    # overlapping boxes: |centre difference|_k <= half_s,k + half_m,k + 2 margin
+    # <= reach_s + reach_m in each coordinate k
+    scale = np.sqrt(slave_lower.shape[1])
+    found_slave, found_master = [], []
+    master_groups = []
+    for c in np.unique(master_class):
+        members = np.flatnonzero(master_class == c)
+        tree = cKDTree(master_centre[members])
+        master_groups.append((members, tree, master_reach[members].max()))
+    for c in np.unique(slave_class):
+        slave_members = np.flatnonzero(slave_class == c)
+        slave_tree = cKDTree(slave_centre[slave_members])
+        largest = slave_reach[slave_members].max()
+        for master_members, master_tree, master_largest in master_groups:
+            radius = scale * (largest + master_largest)
+            close = slave_tree.sparse_distance_matrix(master_tree, radius, output_type="ndarray")
+            found_slave.append(slave_members[close["i"]])
+            found_master.append(master_members[close["j"]])
+    slave = np.concatenate(found_slave).astype(np.int64)
+    master = np.concatenate(found_master).astype(np.int64)
     # boxes_overlap on the candidates, one coordinate at a time (the same comparisons)
     keep = np.ones(slave.size, dtype=bool)
     for k in range(slave_lower.shape[1]):
@@ -73,7 +145,8 @@ def candidate_pairs(
 
 @dataclasses.dataclass
 class SearchReuse:
-    """Decides whether the last search still holds, and counts searches.
+    """Decides whether the last search still holds, counts searches, and keeps the
+    positions of the last search (where the next, swept, search starts from).
 
     Attributes:
         margin: boxes are grown by this much in every search.
@@ -84,12 +157,13 @@ class SearchReuse:
     searches_done: int = 0
     searches_skipped: int = 0
     _reference: np.ndarray | None = None
+    _valid: bool = False
 
     def needs_search(self, coordinates: np.ndarray, comm) -> bool:
         """Collective: True if any node on any rank moved more than margin/2."""
         from mpi4py import MPI
 
-        if self._reference is None or self._reference.shape != coordinates.shape:
+        if not self._valid or self._reference is None or self._reference.shape != coordinates.shape:
             moved = np.inf
         elif coordinates.size:
             moved = float(np.max(np.linalg.norm(coordinates - self._reference, axis=1)))
@@ -98,12 +172,21 @@ class SearchReuse:
         moved = comm.allreduce(moved, op=MPI.MAX)
         return not moved <= 0.5 * self.margin
 
+    def sweep_start(self, coordinates: np.ndarray, initial: np.ndarray) -> np.ndarray:
+        """Where the surfaces are swept from to ``coordinates``: the positions of the
+        last search, or ``initial`` (the undeformed surfaces) before the first one."""
+        if self._reference is not None and self._reference.shape == coordinates.shape:
+            return self._reference
+        return initial
+
     def searched(self, coordinates: np.ndarray) -> None:
         self._reference = coordinates.copy()
+        self._valid = True
         self.searches_done += 1
 
     def skipped(self) -> None:
         self.searches_skipped += 1
 
     def invalidate(self) -> None:
-        self._reference = None
+        """The next update searches again (still swept from the last search's positions)."""
+        self._valid = False

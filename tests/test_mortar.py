@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from dolfinx_mortar import compat, meshes
+from dolfinx_mortar import compat, meshes, search
 from dolfinx_mortar.layout import csr_to_coo
 from dolfinx_mortar.mortar import MortarInterface
 from dolfinx_mortar.surface import SurfaceError
@@ -180,6 +180,44 @@ def test_penetrating_blocks_weighted_gap():
         D.getRowSum(row_sum)
         gap = mortar.weighted_gap()
         assert np.allclose(gap.getArray(), -0.01 * row_sum.getArray(), atol=1e-15, rtol=1e-12)
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("first_at_rest", [True, False])
+def test_pushed_through_by_more_than_the_margin(first_at_rest):
+    """Lower block moved up rigidly by five search margins in one update (from rest, or
+    in the very first update): the swept search still pairs the facets, and
+    g~_j = -depth * int Phi_j as for a shallow penetration, on any number of ranks."""
+    tagged = meshes.tied_blocks(ratio=(2, 5), refinement=0)
+    V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (2,)))
+    margin = 0.01
+    depth = 5 * margin
+    mortar = MortarInterface(V, tagged.facet_tags, tagged.markers["contact_slave"],
+                             tagged.markers["contact_master"], search_margin=margin)
+    if first_at_rest:
+        mortar.update(dolfinx.fem.Function(V))
+        assert mortar.comm.allreduce(mortar.statistics.pairs) > 0
+    u = dolfinx.fem.Function(V)
+    u.interpolate(
+        lambda x: np.vstack([0.0 * x[0], depth + 0.0 * x[0]]),
+        tagged.cell_tags.find(tagged.markers["lower"]),
+    )
+    u.x.scatter_forward()
+    mortar.update(u)
+    assert mortar.reuse.searches_done == (2 if first_at_rest else 1)
+    D, _ = mortar.mortar_matrices()
+    row_sum = D.createVecLeft()
+    D.getRowSum(row_sum)
+    gap = mortar.weighted_gap()
+    assert mortar.comm.allreduce(row_sum.getArray().size) == mortar.num_global_multipliers
+    assert row_sum.sum() == pytest.approx(1.0, rel=1e-12)  # the whole interface is covered
+    assert np.allclose(gap.getArray(), -depth * row_sum.getArray(), atol=1e-15, rtol=1e-12)
+    # the boxes at the new positions alone are too far apart: no pair at all
+    slave_x = mortar.slave.current_coordinates(u)
+    master_x = mortar.master.current_coordinates(u)
+    unswept = search.candidate_pairs(slave_x, mortar.slave.facets, master_x, mortar.master.facets,
+                                     margin)
+    assert unswept.shape == (0, 2)
 
 
 def test_bad_input():

@@ -1,0 +1,116 @@
+"""Broad-phase search: swept boxes, candidate pairs against brute force, reuse decisions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from dolfinx_mortar import kernels, search
+
+
+def brute_force_pairs(slave_x, slave_facets, master_x, master_facets, margin,
+                      slave_previous=None, master_previous=None):
+    slave_lower, slave_upper = search.facet_boxes(slave_x, slave_facets, slave_previous)
+    master_lower, master_upper = search.facet_boxes(master_x, master_facets, master_previous)
+    overlap = search.boxes_overlap(slave_lower[:, None], slave_upper[:, None],
+                                   master_lower[None], master_upper[None], margin)
+    return np.argwhere(overlap)
+
+
+def test_swept_boxes_are_the_union_of_both_states():
+    previous = np.array([[0.0, 0.0], [1.0, 0.5]])
+    current = np.array([[2.0, -1.0], [2.5, -3.0]])
+    facets = np.array([[0, 1]])
+    lower, upper = search.facet_boxes(current, facets)
+    assert np.array_equal(lower, [[2.0, -3.0]]) and np.array_equal(upper, [[2.5, -1.0]])
+    lower, upper = search.facet_boxes(current, facets, previous)
+    assert np.array_equal(lower, [[0.0, -3.0]]) and np.array_equal(upper, [[2.5, 0.5]])
+    # a diverged (NaN) state does not erase the other one
+    lower, upper = search.facet_boxes(np.full_like(current, np.nan), facets, previous)
+    assert np.array_equal(lower, [[0.0, 0.0]]) and np.array_equal(upper, [[1.0, 0.5]])
+
+
+def test_facet_pushed_through_by_more_than_the_margin_is_found_and_penetrates():
+    """A slave facet above a master facet, moved down through it by 10 margins in one
+    update: the box search at the new positions finds nothing, the swept one finds the
+    pair, and the kernel sees a penetration of exactly that depth (gap = -depth * area)."""
+    margin = 0.01
+    master_x = np.array([[1.0, 0.0], [-1.0, 0.0]])  # normal (t_y, -t_x) = (0, 1): up
+    slave_before = np.array([[-0.5, 0.005], [0.5, 0.005]])  # normal down
+    depth = 10 * margin
+    slave_after = slave_before - [0.0, 0.005 + depth]
+    facets = np.array([[0, 1]])
+    assert search.candidate_pairs(slave_after, facets, master_x, facets, margin).shape == (0, 2)
+    pairs = search.candidate_pairs(slave_after, facets, master_x, facets, margin,
+                                   slave_previous=slave_before, master_previous=master_x)
+    assert pairs.tolist() == [[0, 0]]
+    # p, a, b, q, c, d: no neighbours
+    x = np.concatenate([slave_after[0], slave_after[0], slave_after[1], slave_after[1],
+                        master_x[0], master_x[1]])[None]
+    q = kernels.pair_quantities(x, np.zeros((1, 2), dtype=bool))
+    assert q.valid[0]
+    np.testing.assert_allclose(q.gap.value[0], -depth * q.area.value[0], rtol=1e-14)
+    np.testing.assert_allclose(q.area.value[0], [0.5, 0.5], rtol=1e-14)
+
+
+def test_facet_turned_over_is_not_a_contact_pair():
+    """The kernels' facing test: a slave facet whose outward normal points the same way
+    as the master's (turned by more than 90 degrees relative to it) gives no contribution,
+    whether or not it crossed the master facet; the swept search still reports the pair."""
+    master_x = np.array([[1.0, 0.0], [-1.0, 0.0]])
+    slave_turned = np.array([[0.5, -0.1], [-0.5, -0.1]])  # normal up, like the master's
+    x = np.concatenate([slave_turned[0], slave_turned[0], slave_turned[1], slave_turned[1],
+                        master_x[0], master_x[1]])[None]
+    q = kernels.pair_quantities(x, np.zeros((1, 2), dtype=bool))
+    assert not q.valid[0]
+    assert np.all(q.gap.value == 0.0) and np.all(q.area.value == 0.0)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_candidate_pairs_equal_brute_force(seed):
+    """Random facets of mixed sizes, some swept very far (a diverging iterate): the
+    size-grouped k-d tree search returns exactly the pairs of the O(n^2) box test."""
+    rng = np.random.default_rng(seed)
+    num_slave, num_master, margin = 300, 200, 0.02
+
+    def surface(n):
+        start = rng.uniform(0.0, 1.0, (n, 2))
+        length = 10.0 ** rng.uniform(-3.0, -1.0, (n, 1))
+        angle = rng.uniform(0.0, 2 * np.pi, n)
+        end = start + length * np.column_stack([np.cos(angle), np.sin(angle)])
+        x = np.concatenate([start, end])
+        previous = x + rng.normal(0.0, 0.01, x.shape)
+        far = rng.random(x.shape[0]) < 0.02
+        previous[far] += rng.normal(0.0, 3.0, (far.sum(), 2))
+        return x, previous, np.column_stack([np.arange(n), np.arange(n, 2 * n)])
+
+    slave_x, slave_previous, slave_facets = surface(num_slave)
+    master_x, master_previous, master_facets = surface(num_master)
+    for previous in (False, True):
+        options = {"slave_previous": slave_previous, "master_previous": master_previous}
+        if not previous:
+            options = {}
+        arguments = (slave_x, slave_facets, master_x, master_facets, margin)
+        found = search.candidate_pairs(*arguments, **options)
+        expected = brute_force_pairs(*arguments, **options)
+        assert found.tolist() == expected.tolist()
+        assert expected.shape[0] > 100
+    lower, upper = search.facet_boxes(slave_x, slave_facets, slave_previous)
+    assert np.ptp(np.log2(np.max(upper - lower, axis=1) + margin)) > 4  # several size groups
+
+
+def test_reuse_sweeps_from_the_last_search():
+    reuse = search.SearchReuse(margin=0.1)
+    initial = np.zeros((3, 2))
+    first = initial + [0.0, 1.0]
+    assert reuse.needs_search(first, MPI.COMM_SELF)
+    assert reuse.sweep_start(first, initial) is initial
+    reuse.searched(first)
+    assert not reuse.needs_search(first + 0.049 / np.sqrt(2), MPI.COMM_SELF)
+    assert reuse.needs_search(first + [0.0, 0.051], MPI.COMM_SELF)
+    assert np.array_equal(reuse.sweep_start(first + 5.0, initial), first)
+    reuse.invalidate()
+    assert reuse.needs_search(first, MPI.COMM_SELF)
+    assert np.array_equal(reuse.sweep_start(first, initial), first)  # still from the last search
+    assert reuse.searches_done == 1
