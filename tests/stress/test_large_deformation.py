@@ -216,18 +216,29 @@ def test_ironing_in_one_step_is_cut_back_or_solved():
     interface = problem.interfaces[0]
     lowest, block_lowest, smallest_gap = (
         problem.comm.allreduce(float(np.min(values, initial=np.inf)), op=MPI.MIN)
-        for values in (interface.slave.current_coordinates(problem.u)[:, 1],
-                       interface.master.current_coordinates(problem.u)[:, 1], problem.gaps[0]))
+        for values in (
+            interface.slave.current_coordinates(problem.u)[:, 1],
+            interface.master.current_coordinates(problem.u)[:, 1],
+            problem.gaps[0],
+        )
+    )
     u = problem.u.x.array.copy()
     setup.destroy()
     reference_u, reference_force = ironing_finely_stepped()
     squares = problem.comm.allreduce(
-        np.array([np.sum((u - reference_u) ** 2), np.sum(reference_u**2)]))
+        np.array([np.sum((u - reference_u) ** 2), np.sum(reference_u**2)])
+    )
     difference = float(np.sqrt(squares[0] / squares[1]))
     force_difference = relative_difference(outcome.slave_force, reference_force)
-    record_outcome(12, outcome, active=outcome.active, lowest_die_point=lowest,
-                   lowest_block_point=block_lowest, error=difference,
-                   force_error=force_difference)
+    record_outcome(
+        12,
+        outcome,
+        active=outcome.active,
+        lowest_die_point=lowest,
+        lowest_block_point=block_lowest,
+        error=difference,
+        force_error=force_difference,
+    )
     assert outcome.converged and not outcome.nan
     assert outcome.active > 0, "no contact found"
     assert outcome.cutbacks > 0

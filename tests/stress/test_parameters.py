@@ -117,7 +117,7 @@ def check_first_penalty_iterate(ratio, factor):
     setup.destroy()
     jump = float(np.max(np.abs(outcome.displacement)))
     bound = 100.0 * (1.0 + common.PATCH_PRESSURE / (factor * scale))
-    record(1, iterations=outcome.iterations, nan=outcome.nan, error=jump, bound=bound)
+    record_outcome(1, outcome, error=jump / bound, jump=jump, bound=bound)
     assert not outcome.nan
     assert jump <= bound, jump
 
