@@ -16,8 +16,10 @@ Sections (``--only`` picks some):
     changed at a time from the default (Lagrange multipliers, semismooth active
     set, dual basis, segment-based integration, averaged normals). Errors,
     Newton iterations, dofs and the solve time split by phase (medians over
-    ``--repeats``, 3 in the full run, 1 in the quick run).
-    -> work_precision.json / .png / .md (+ work_precision_pmax.png)
+    ``--repeats``, 3 in the full run, 1 in the quick run). The ``dual-condensed``
+    variant runs once ContactProblem accepts ``condensation=True``; until then its
+    row says "not implemented".
+    -> work_precision.json / .png / .md (+ work_precision_cpu.png, work_precision_pmax.png)
 ``cost``
     Share of a Newton iteration spent on contact at >= 1e5 dofs (Hertz B, the
     first refinement with that many dofs; quick: refinement 3), for linear
@@ -96,13 +98,39 @@ VARIANTS: list[dict] = [
      "label": "augmented Lagrange (eps = 10 E/h)"},
     {"name": "normals-slave", "args": ["--normals", "slave"], "label": "slave normals"},
     {"name": "normals-master", "args": ["--normals", "master"], "label": "master normals"},
+    # PLACEHOLDER for the condensed variant (issue 5): dual multipliers eliminated
+    # from the [u, z] system. ContactProblem(condensation=True) is being added
+    # separately; until ContactProblem accepts the keyword this variant is listed as
+    # not implemented (``available_variants``), once it does, it runs with no change
+    # here. ``problem_options`` go to ContactProblem directly (the demos have no flag).
+    {"name": "dual-condensed", "args": [], "problem_options": {"condensation": True},
+     "label": "dual multipliers condensed out of the system (condensation=True)"},
 ]
-NOT_IMPLEMENTED = [
-    {"name": "dual-condensed",
-     "label": "dual multipliers condensed out of the system (static condensation)",
-     "status": "not implemented: dual multipliers are solved for in the monolithic [u, z] "
-               "system; no condensed variant exists in dolfinx_mortar"},
-]
+
+
+def variant_available(variant: dict) -> bool:
+    """Does ContactProblem accept every keyword of the variant's ``problem_options``?"""
+    import inspect
+
+    from dolfinx_mortar.problem import ContactProblem
+
+    accepted = inspect.signature(ContactProblem.__init__).parameters
+    return all(name in accepted for name in variant.get("problem_options", {}))
+
+
+def available_variants(variants: list[dict]) -> tuple[list[dict], list[dict]]:
+    """(the variants to run, the not implemented ones with a status line)."""
+    run, missing = [], []
+    for variant in variants:
+        if variant_available(variant):
+            run.append(variant)
+        else:
+            options = ", ".join(f"{k}={v!r}" for k, v in variant["problem_options"].items())
+            missing.append({"name": variant["name"], "label": variant["label"],
+                            "status": f"not implemented: ContactProblem has no {options}"})
+    return run, missing
+
+
 CASES = {
     "hertz-A": {"demo": "hertz", "args": ["--case", "A"], "title": "Hertz case A (rigid plate)",
                 "error": "l2_pressure_error_rel"},
@@ -191,7 +219,18 @@ def machine_info() -> dict:
         for line in pathlib.Path("/etc/os-release").read_text().splitlines():
             if line.startswith("PRETTY_NAME="):
                 os_release = line.split("=", 1)[1].strip('"')
+    import hashlib
+
+    package = pathlib.Path(__file__).resolve().parent
+    sources = sorted(p for p in package.glob("*.py") if p.name != "benchmarks.py")
+    sources += [DEMOS / "hertz.py", DEMOS / "patch_test.py"]
+    digest = hashlib.sha256()
+    for path in sources:
+        if path.exists():
+            digest.update(path.name.encode() + path.read_bytes())
     return {
+        "dolfinx_mortar_path": str(package),
+        "dolfinx_mortar_sources_sha256": digest.hexdigest()[:16],
         "nproc": usable,
         "cpu": cpu,
         "memory_gib": memory.get("MemTotal"),
@@ -236,13 +275,15 @@ def quiet_logging() -> None:
 
 
 def run_demo(name: str, argv: list[str], comm: MPI.Intracomm = MPI.COMM_WORLD,
-             on_problem: typing.Callable | None = None) -> dict:
+             on_problem: typing.Callable | None = None,
+             problem_options: dict | None = None) -> dict:
     """``demos/NAME.py``'s main(argv) with its printing captured.
 
     ``on_problem(problem)`` is called right after the demo builds its
     ContactProblem (to read sizes or to switch a reuse off for an A/B timing);
     whatever it returns is stored under ``summary["probe"]``, with the
-    process CPU time of all ``solve`` calls (``solve_cpu_s``).
+    process CPU time of all ``solve`` calls (``solve_cpu_s``). ``problem_options``
+    are passed to the demo's ContactProblem on top of what its arguments give.
     """
     module = demo(name)
     original = module.ContactProblem
@@ -250,7 +291,7 @@ def run_demo(name: str, argv: list[str], comm: MPI.Intracomm = MPI.COMM_WORLD,
 
     class Probed(original):
         def __init__(self, *args, **kwargs):
-            super().__init__(*args, **kwargs)
+            super().__init__(*args, **{**kwargs, **(problem_options or {})})
             if on_problem is not None:
                 probe.update(on_problem(self) or {})
 
@@ -341,7 +382,9 @@ def iterations_per_step(summary: dict) -> list[int]:
 
 
 def work_precision(refinements: list[int], repeats: int, variants: list[dict]) -> dict:
-    """Every case x refinement x variant, ``repeats`` times (interleaved: repeat outermost)."""
+    """Every case x refinement x variant, ``repeats`` times (interleaved: repeat outermost);
+    variants that ContactProblem cannot run yet are listed as not implemented."""
+    variants, not_implemented = available_variants(variants)
     samples: dict[tuple, list[dict]] = {}
     failures: dict[tuple, str] = {}
     penalty_base: dict[tuple, float] = {}
@@ -363,7 +406,8 @@ def work_precision(refinements: list[int], repeats: int, variants: list[dict]) -
                         argv += ["--penalty", repr(variant["penalty"] * base)]
                     start = time.perf_counter()
                     try:
-                        summary = run_demo(case["demo"], argv, on_problem=sizes_probe)
+                        summary = run_demo(case["demo"], argv, on_problem=sizes_probe,
+                                           problem_options=variant.get("problem_options"))
                     except Exception as error:  # noqa: BLE001 - recorded and reported
                         failures[key] = f"{type(error).__name__}: {error}"
                         log(f"[work-precision {repeat + 1}/{repeats}] {case_name} r{refinement} "
@@ -400,6 +444,7 @@ def work_precision(refinements: list[int], repeats: int, variants: list[dict]) -
                 record.update(
                     failed=False,
                     argv=first["argv"],
+                    problem_options=variant.get("problem_options", {}),
                     repeats=len(runs_of_key),
                     num_dofs=first["num_dofs"],
                     errors=errors,
@@ -420,7 +465,7 @@ def work_precision(refinements: list[int], repeats: int, variants: list[dict]) -
                 )
                 runs.append(record)
     return {"refinements": refinements, "repeats": repeats, "runs": runs,
-            "variants": variants, "not_implemented": NOT_IMPLEMENTED,
+            "variants": variants, "not_implemented": not_implemented,
             "cases": {name: {k: v for k, v in case.items()} for name, case in CASES.items()}}
 
 
@@ -479,7 +524,9 @@ def work_precision_markdown(data: dict, finest_only: bool = False) -> str:
     return "\n".join(lines)
 
 
-def plot_work_precision(data: dict, path: pathlib.Path, error_key: str | None = None) -> None:
+def plot_work_precision(data: dict, path: pathlib.Path, error_key: str | None = None,
+                        time_key: str = "wall") -> None:
+    """Error against the median solve time (wall, or process CPU with time_key="cpu")."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -499,7 +546,7 @@ def plot_work_precision(data: dict, path: pathlib.Path, error_key: str | None = 
                           key=lambda r: r["refinement"])
             if not runs:
                 continue
-            x = [r["timings"]["total"] for r in runs]
+            x = [r["timings"]["total"] if time_key == "wall" else r["solve_cpu_s"] for r in runs]
             y = [max(r["errors"][key], 1e-16) for r in runs]
             style = "--" if variant["name"].startswith("penalty") else (
                 ":" if variant["name"].startswith("element") else "-")
@@ -508,8 +555,9 @@ def plot_work_precision(data: dict, path: pathlib.Path, error_key: str | None = 
                                 linewidth=2.2 if variant["name"] == "default" else 1.2)
             handles.setdefault(variant["name"], line)
         ax.set_title(CASES[case_name]["title"], fontsize=10)
-        ax.set_xlabel("solve time [s] (median; refinements " +
-                      f"{data['refinements'][0]}..{data['refinements'][-1]})")
+        ax.set_xlabel(("solve time" if time_key == "wall" else "solve CPU time")
+                      + f" [s] (median; refinements {data['refinements'][0]}.."
+                      f"{data['refinements'][-1]})")
         ax.set_ylabel(key.replace("_", " "))
         ax.grid(True, which="both", linewidth=0.3)
     fig.tight_layout(rect=(0, 0, 1 - 1.6 / width, 1))
@@ -999,19 +1047,21 @@ def cost_markdown(data: dict) -> str:
               f"{far['max_displacement_difference_rel']:.1e}.", ""]
     par = data["parallel"]
     lines += [f"#### Hertz B (linear) on 1 and 2 MPI ranks, refinement {par['refinement']}", "",
-              "| ranks | dofs | Newton its | solve [s] | bulk | search | mortar | linear solve | "
-              "wall [s] | speed-up (solve) | p_max difference to 1 rank |", "|" + "---|" * 11]
+              "| ranks | dofs | Newton its | solve [s] | solve CPU [s] | bulk | search | mortar | "
+              "linear solve | wall [s] | speed-up (solve) | p_max difference to 1 rank |",
+              "|" + "---|" * 12]
     for r in par["runs"]:
         if r.get("failed"):
             lines.append(f"| {r['num_ranks']} | failed (exit {r['returncode']}): "
-                         f"{r['error'][-200:]!r} |" + " |" * 9)
+                         f"{r['error'][-200:]!r} |" + " |" * 10)
             continue
         t = r["timings"]
         lines.append(f"| {r['num_ranks']} | {r['num_dofs']} | "
                      f"{'+'.join(str(i) for i in r['newton_iterations'])} | {t['total']:.3g} | "
-                     f"{t['bulk assembly']:.3g} | {t['contact search']:.3g} | "
-                     f"{t['mortar integration']:.3g} | {t['linear solve']:.3g} | "
-                     f"{r['wall_time_s']:.3g} | {_fmt(r.get('speedup_solve'))} | "
+                     f"{r['solve_cpu_s']:.3g} | {t['bulk assembly']:.3g} | "
+                     f"{t['contact search']:.3g} | {t['mortar integration']:.3g} | "
+                     f"{t['linear solve']:.3g} | {r['wall_time_s']:.3g} | "
+                     f"{_fmt(r.get('speedup_solve'))} | "
                      f"{_fmt(r.get('p_max_difference_rel'))} |")
     lines += ["", "commands: " + "; ".join(f"`{c}`" for c in par["commands"]), ""]
     return "\n".join(lines)
@@ -1247,8 +1297,11 @@ def goals_markdown(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def machine_markdown(machine: dict, load: dict, command: str, elapsed: float) -> str:
-    return (f"command: `{command}`; {elapsed / 60:.1f} min; {machine['nproc']} cores "
+def machine_markdown(machine: dict, load: dict, command: str, elapsed: float,
+                     label: str = "") -> str:
+    code = (f"library: {label + ', ' if label else ''}sources sha256 "
+            f"{machine.get('dolfinx_mortar_sources_sha256', '?')}; ")
+    return (f"command: `{command}`; {code}{elapsed / 60:.1f} min; {machine['nproc']} cores "
             f"({machine['cpu']}), {machine['memory_gib']} GiB; load average (1 min) during the "
             f"run min {load['min']:.2f} / mean {load['mean']:.2f} / max {load['max']:.2f} "
             f"({load['samples']} samples); {machine['os']}, dolfinx {machine['dolfinx']}, PETSc "
@@ -1279,6 +1332,11 @@ def main(argv=None) -> int:
     parser.add_argument("--big-refinement", type=int, default=None,
                         help="cost section: Hertz B refinement (default: first with >= 1e5 dofs)")
     parser.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--label", default="",
+                        help="free text naming the library version (e.g. a git commit), "
+                             "recorded in the outputs")
+    parser.add_argument("--render-only", action="store_true",
+                        help="only re-create markdown and PNG from the JSON files in --output")
     parser.add_argument("--worker-json", type=pathlib.Path, help=argparse.SUPPRESS)
     parser.add_argument("--parallel-refinement", type=int, default=3, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -1293,6 +1351,9 @@ def main(argv=None) -> int:
         return 0
     if MPI.COMM_WORLD.size != 1:
         parser.error("run the driver serially; it starts mpirun itself for the parallel runs")
+    if args.render_only:
+        print(render_only(args.output), end="", flush=True)
+        return 0
 
     sections = args.only or list(SECTIONS)
     output = args.output
@@ -1300,8 +1361,8 @@ def main(argv=None) -> int:
     refinements = args.refinements or ([0, 1, 2] if args.quick else [0, 1, 2, 3, 4])
     variants = [v for v in VARIANTS if args.variants is None or v["name"] in args.variants
                 or v["name"] == "default"]
-    command = "python3 -m dolfinx_mortar.benchmarks " + shlex.join(argv if argv is not None
-                                                                   else sys.argv[1:])
+    command = ("python3 -m dolfinx_mortar.benchmarks "
+               + shlex.join(argv if argv is not None else sys.argv[1:])).rstrip()
     machine = machine_info()
     begin = time.perf_counter()
     work = cost = skip = None
@@ -1321,22 +1382,39 @@ def main(argv=None) -> int:
             timings["skip"] = time.perf_counter() - start
     elapsed = time.perf_counter() - begin
     load = monitor.summary()
-    meta = {"command": command, "quick": args.quick, "repeats": repeats, "machine": machine,
+    meta = {"command": command, "label": args.label, "quick": args.quick, "repeats": repeats,
+            "machine": machine,
             "load_average_1min": load, "load_at_end": list(os.getloadavg()),
             "elapsed_s": elapsed, "section_times_s": timings,
             "note": ("quick run: 1 repeat, timings are single samples" if repeats == 1 else
                      f"medians over {repeats} repeats")}
-    header = [f"## dolfinx_mortar benchmarks{' (quick)' if args.quick else ''}", "",
-              machine_markdown(machine, load, command, elapsed),
+    if work is not None:
+        write_json(output / "work_precision.json", {"meta": meta, **work})
+    if cost is not None:
+        write_json(output / "cost_of_contact.json", {"meta": meta, **cost})
+    if skip is not None:
+        write_json(output / "skipping.json", {"meta": meta, **skip})
+    text = render(output, meta, work, cost, skip)
+    print(text, end="", flush=True)
+    return 0
+
+
+def render(output: pathlib.Path, meta: dict, work: dict | None, cost: dict | None,
+           skip: dict | None) -> str:
+    """Markdown, PNG and summary.json of one run, from its data; returns summary.md's text."""
+    header = [f"## dolfinx_mortar benchmarks{' (quick)' if meta['quick'] else ''}", "",
+              machine_markdown(meta["machine"], meta["load_average_1min"], meta["command"],
+                               meta["elapsed_s"], meta.get("label", "")),
               f"Timings: {meta['note']}; section times "
-              + ", ".join(f"{k} {v / 60:.1f} min" for k, v in timings.items()) + ".", ""]
+              + ", ".join(f"{k} {v / 60:.1f} min" for k, v in meta["section_times_s"].items())
+              + ".", ""]
     parts = ["\n".join(header)]
     goal_rows = goals(work, cost)
     if goal_rows:
         parts.append("### Goals\n\n" + goals_markdown(goal_rows))
     if work is not None:
-        write_json(output / "work_precision.json", {"meta": meta, **work})
         plot_work_precision(work, output / "work_precision.png")
+        plot_work_precision(work, output / "work_precision_cpu.png", time_key="cpu")
         plot_work_precision(work, output / "work_precision_pmax.png", "p_max_error_rel")
         table = work_precision_markdown(work)
         (output / "work_precision.md").write_text(
@@ -1344,22 +1422,39 @@ def main(argv=None) -> int:
         parts.append("### Work-precision, finest refinement (all refinements: "
                      "work_precision.md)\n\n" + work_precision_markdown(work, finest_only=True))
     if cost is not None:
-        write_json(output / "cost_of_contact.json", {"meta": meta, **cost})
         plot_scaling(cost, output / "mortar_scaling.png")
         table = cost_markdown(cost)
         (output / "cost_of_contact.md").write_text("\n".join(header) + "\n### Cost of contact\n\n"
                                                    + table)
         parts.append("### Cost of contact\n\n" + table)
     if skip is not None:
-        write_json(output / "skipping.json", {"meta": meta, **skip})
         table = skipping_markdown(skip)
         (output / "skipping.md").write_text("\n".join(header) + "\n### Skipped work\n\n" + table)
         parts.append("### Skipped work\n\n" + table)
     text = "\n".join(parts)
     write_json(output / "summary.json", {"meta": meta, "goals": goal_rows})
     (output / "summary.md").write_text(text)
-    print(text, end="", flush=True)
-    return 0
+    return text
+
+
+def render_only(output: pathlib.Path) -> str:
+    """Re-create markdown and PNG from the JSON files a run left in ``output``."""
+    data = {}
+    for name in ("summary", "work_precision", "cost_of_contact", "skipping"):
+        path = output / f"{name}.json"
+        data[name] = json.loads(path.read_text()) if path.exists() else None
+    if data["summary"] is None:
+        raise FileNotFoundError(f"{output / 'summary.json'} not found: nothing to render")
+    meta = data["summary"]["meta"]
+    sections = []
+    for name in ("work_precision", "cost_of_contact", "skipping"):
+        section = data[name]
+        if section is not None and section["meta"]["command"] != meta["command"]:
+            section = None  # left over from another run
+        if section is not None:
+            section = {k: v for k, v in section.items() if k != "meta"}
+        sections.append(section)
+    return render(output, meta, *sections)
 
 
 if __name__ == "__main__":
