@@ -241,7 +241,8 @@ def machine_info() -> dict:
         "dolfinx": dolfinx.__version__,
         "petsc": ".".join(str(v) for v in PETSc.Sys.getVersion()),
         "petsc4py": petsc4py.__version__,
-        "mpi": MPI.Get_library_version().splitlines()[0].strip(),
+        # Open MPI ends its version string with a NUL byte
+        "mpi": MPI.Get_library_version().replace("\x00", "").splitlines()[0].strip(),
         "numpy": np.__version__,
         "scipy": scipy.__version__,
         "omp_num_threads": os.environ.get("OMP_NUM_THREADS"),
@@ -1305,7 +1306,8 @@ def machine_markdown(machine: dict, load: dict, command: str, elapsed: float,
             f"({machine['cpu']}), {machine['memory_gib']} GiB; load average (1 min) during the "
             f"run min {load['min']:.2f} / mean {load['mean']:.2f} / max {load['max']:.2f} "
             f"({load['samples']} samples); {machine['os']}, dolfinx {machine['dolfinx']}, PETSc "
-            f"{machine['petsc']}, {machine['mpi']}, Python {machine['python']}, numpy "
+            f"{machine['petsc']}, {machine['mpi'].replace(chr(0), '').strip()}, Python "
+            f"{machine['python']}, numpy "
             f"{machine['numpy']}.\n")
 
 
