@@ -108,3 +108,14 @@ def test_demo_outputs(tmp_path):
     )
     assert (iron / "ironing_forces.csv").read_text().count("\n") >= 3
     assert (iron / "ironing_forces.png").stat().st_size > 1000
+
+
+@pytest.mark.parallel
+def test_ironing_die_top_reaction_equals_contact_force():
+    """The die is in equilibrium: the force of the drive on its top (the bulk residual
+    summed over the die-top nodes) is the contact force of the die on the block."""
+    summary = load("ironing").main(["--steps", "20", "--end-time", "0.4"])
+    pressing = [h for h in summary["history"] if h["t"] >= 0.3]
+    assert pressing and all(h["active"] > 0 and h["die_top_force_y"] < 0.0 for h in pressing)
+    assert -pressing[-1]["die_top_force_y"] > 1e7
+    assert summary["max_reaction_mismatch_rel"] <= 1e-8
