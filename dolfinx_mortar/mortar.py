@@ -286,7 +286,7 @@ class MortarInterface:
                 origin = self.reuse.sweep_start(moving, np.concatenate(
                     [self.slave.reference_coordinates, self.master.reference_coordinates]))
                 self._search(slave_x, master_x, origin[:ns], origin[ns:])
-                self.reuse.searched(moving)
+                self.reuse.searched(moving, origin, self.comm)
             else:
                 self.reuse.skipped()
                 self._refresh_coordinates(slave_x, master_x)

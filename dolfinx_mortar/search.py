@@ -139,8 +139,38 @@ def candidate_pairs(
         keep &= (slave_lower[:, k] - margin)[slave] <= (master_upper[:, k] + margin)[master]
         keep &= (master_lower[:, k] - margin)[master] <= (slave_upper[:, k] + margin)[slave]
     slave, master = slave[keep], master[keep]
+    if slave_previous is not None or master_previous is not None:
+        keep = _near_now_or_crossed(
+            slave_coordinates, slave_facets[slave], master_coordinates, master_facets[master],
+            margin,
+        )
+        slave, master = slave[keep], master[keep]
     order = np.lexsort((master, slave))
     return np.stack([slave[order], master[order]], axis=1)
+
+
+def _near_now_or_crossed(
+    slave_coordinates: np.ndarray,
+    slave_facets: np.ndarray,
+    master_coordinates: np.ndarray,
+    master_facets: np.ndarray,
+    margin: float,
+) -> np.ndarray:
+    """Of swept candidates (one row per pair): those a search at the current positions
+    also finds, and those whose slave facet has a node behind the master facet's line
+    now (it crossed). The other swept pairs only lie on the path of a body moving away:
+    kept, they would make far-apart surfaces cost mortar work until the next search."""
+    lower_s, upper_s = facet_boxes(slave_coordinates, slave_facets)
+    lower_m, upper_m = facet_boxes(master_coordinates, master_facets)
+    near = boxes_overlap(lower_s, upper_s, lower_m, upper_m, margin)
+    start = master_coordinates[master_facets[:, 0]]
+    tangent = master_coordinates[master_facets[:, 1]] - start
+    outward = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
+    behind = np.zeros(near.shape, dtype=bool)
+    for k in range(slave_facets.shape[1]):
+        offset = slave_coordinates[slave_facets[:, k]] - start
+        behind |= np.einsum("ij,ij->i", offset, outward) < 0.0
+    return near | behind
 
 
 @dataclasses.dataclass
@@ -179,9 +209,23 @@ class SearchReuse:
             return self._reference
         return initial
 
-    def searched(self, coordinates: np.ndarray) -> None:
+    def searched(
+        self, coordinates: np.ndarray, origin: np.ndarray | None = None, comm=None
+    ) -> None:
+        """Record a search at ``coordinates``, swept from ``origin`` (collective if given).
+
+        A sweep longer than margin/2 keeps the pairs of the whole path, most of
+        which the current positions no longer need (a body lifted off): the
+        next update then searches again, from here, instead of carrying them.
+        """
         self._reference = coordinates.copy()
         self._valid = True
+        if origin is not None:
+            from mpi4py import MPI
+
+            swept = float(np.max(np.linalg.norm(coordinates - origin, axis=1), initial=0.0))
+            swept = comm.allreduce(swept, op=MPI.MAX) if comm is not None else swept
+            self._valid = swept <= 0.5 * self.margin
         self.searches_done += 1
 
     def skipped(self) -> None:

@@ -15,7 +15,20 @@ def brute_force_pairs(slave_x, slave_facets, master_x, master_facets, margin,
     master_lower, master_upper = search.facet_boxes(master_x, master_facets, master_previous)
     overlap = search.boxes_overlap(slave_lower[:, None], slave_upper[:, None],
                                    master_lower[None], master_upper[None], margin)
-    return np.argwhere(overlap)
+    pairs = np.argwhere(overlap)
+    if slave_previous is None and master_previous is None:
+        return pairs
+    # swept pairs stay only if found at the current positions too, or if a slave node
+    # is now behind the master facet's line (outward normal (t_y, -t_x))
+    kept = []
+    for s, m in pairs:
+        now = brute_force_pairs(slave_x, slave_facets[[s]], master_x, master_facets[[m]], margin)
+        a, b = master_x[master_facets[m]]
+        normal = np.array([b[1] - a[1], a[0] - b[0]])
+        behind = any(float(np.dot(slave_x[k] - a, normal)) < 0.0 for k in slave_facets[s])
+        if now.size or behind:
+            kept.append((s, m))
+    return np.array(kept, dtype=np.int64).reshape(-1, 2)
 
 
 def test_swept_boxes_are_the_union_of_both_states():
@@ -114,3 +127,21 @@ def test_reuse_sweeps_from_the_last_search():
     assert reuse.needs_search(first, MPI.COMM_SELF)
     assert np.array_equal(reuse.sweep_start(first, initial), first)  # still from the last search
     assert reuse.searches_done == 1
+
+
+def test_swept_pairs_of_a_body_moving_away_are_dropped():
+    """A slave facet lifted from touching to 10 margins above the master: its swept box
+    covers the master, but it lies in front of it now, so no pair remains; pushed down
+    by as much instead, it is behind the master and the pair stays."""
+    margin = 0.01
+    master_x = np.array([[1.0, 0.0], [0.0, 0.0]])  # outward normal (0, 1)
+    facets = np.array([[0, 1]])
+    touching = np.array([[0.0, 0.0], [1.0, 0.0]])
+    for shift, expected in ((10 * margin, 0), (-10 * margin, 1)):
+        moved = touching + [0.0, shift]
+        pairs = search.candidate_pairs(moved, facets, master_x, facets, margin,
+                                       slave_previous=touching, master_previous=master_x)
+        assert pairs.shape[0] == expected, shift
+        brute = brute_force_pairs(moved, facets, master_x, facets, margin,
+                                  slave_previous=touching, master_previous=master_x)
+        assert brute.shape[0] == expected
