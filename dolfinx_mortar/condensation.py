@@ -1,0 +1,222 @@
+"""Static condensation of dual multipliers, as a preconditioner of the monolithic system.
+
+The Newton system of :class:`~dolfinx_mortar.problem.ContactProblem` is, per
+rank [u | z] (all multiplier fields together),
+
+    A du + G dz = r_u          (u rows; A = K + d(-B^T z)/du, G = -B^T)
+    C du + diag(d) dz = r_z    (multiplier rows; d_j is 0 or 1)
+
+Rows with d_j != 0 (inactive Lagrange, penalty, augmented) are eliminated
+exactly: dz_j = (r_z - C du)_j / d_j. The rows with d_j = 0 (active Lagrange)
+are condensed after Popp et al. with the unit normal n_j of slave node j:
+T (rows n_j^T on node j's dofs) turns the u rows into T A' du + T G dz_a =
+T r', and with P = diag(T G) (exact when T G is diagonal, i.e. when the dual
+basis decouples the nodes) dz_a = P^-1 T (r' - A' du). The u rows then become
+(I - G P^-1 T)(A' du - r') = 0, whose components along the active normals
+vanish; those rows are replaced by the constraints C_a du = r_za:
+
+    K_c = (I - T^T T)(I - G P^-1 T) A' + T^T C_a,    A' = A - G d^-1 C.
+
+K_c has the displacement size only. Our mortar integrals carry the
+interpolated normal (Dn_jk = int Phi_j N_k n_h), so T G is not exactly
+diagonal in general and the condensation is approximate; it is therefore
+used as the preconditioner of an outer Krylov method (fgmres) on the full
+monolithic matrix, which makes the Newton steps exact to the Krylov
+tolerance: the solution does not change, only how the linear systems are
+solved. When T G is diagonal the outer method converges in one iteration.
+
+The normal n_j is the direction of G's column j at node j's own dofs (the
+diagonal Dn_jj), so that P_jj = |Dn_jj| > 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse
+from mpi4py import MPI
+from petsc4py import PETSc
+
+CONDENSED_DEFAULTS = {
+    "ksp_type": "preonly",
+    "pc_type": "lu",
+    "pc_factor_mat_solver_type": "mumps",
+}
+
+
+class CondensedPreconditioner:
+    """A petsc4py ``python`` PC: the condensed solve of the monolithic [u | z] system.
+
+    Args:
+        comm: communicator.
+        u_rows: this rank's monolithic rows of the displacements (global indices).
+        z_rows: this rank's monolithic rows of all multipliers (global indices).
+        z_node_dofs: (len(z_rows), 2) global displacement dofs of the slave
+            node of each owned multiplier (owned by this rank too).
+        prefix: options prefix of the inner solver of K_c (default MUMPS LU).
+    """
+
+    def __init__(self, comm: MPI.Intracomm, u_rows, z_rows, z_node_dofs, prefix: str):
+        self.comm = comm
+        self.is_u = PETSc.IS().createGeneral(np.asarray(u_rows, dtype=PETSc.IntType), comm=comm)
+        self.is_z = PETSc.IS().createGeneral(np.asarray(z_rows, dtype=PETSc.IntType), comm=comm)
+        self.num_u = len(u_rows)
+        self.num_z = len(z_rows)
+        self.z_node_dofs = np.asarray(z_node_dofs, dtype=np.int64).reshape(self.num_z, 2)
+        self.ksp = PETSc.KSP().create(comm)
+        self.ksp.setOptionsPrefix(prefix)
+        options = PETSc.Options()
+        added = []
+        for key, value in CONDENSED_DEFAULTS.items():
+            if not options.hasName(f"{prefix}{key}"):
+                options[f"{prefix}{key}"] = value
+                added.append(key)
+        self.ksp.setFromOptions()
+        for key in added:
+            options.delValue(f"{prefix}{key}")
+        self._matrices: dict[str, PETSc.Mat] = {}
+        self._vectors: dict[str, PETSc.Vec] = {}
+        self.num_active = 0
+
+    # -- PC interface ------------------------------------------------------
+
+    def setUp(self, pc: PETSc.PC) -> None:  # noqa: N802 (petsc4py's name)
+        J = pc.getOperators()[0]
+        self._release_matrices()
+        A = J.createSubMatrix(self.is_u, self.is_u)
+        G = J.createSubMatrix(self.is_u, self.is_z)
+        C = J.createSubMatrix(self.is_z, self.is_u)
+        diagonal = J.getDiagonal()
+        d = diagonal.getArray(readonly=True)[self.num_u:].copy()
+        diagonal.destroy()
+        active = d == 0.0
+        self.num_active = self.comm.allreduce(int(active.sum()), op=MPI.SUM)
+        inverse_d = np.where(active, 0.0, 1.0 / np.where(active, 1.0, d))
+        normals, lengths = self._normals(G, active)
+        inverse_p = np.where(active, 1.0 / np.where(active, lengths, 1.0), 0.0)
+
+        vz = G.createVecRight()
+        self._vectors = {"inverse_d": vz, "inverse_p": vz.duplicate(), "active": vz.duplicate()}
+        self._vectors["inverse_d"].getArray()[:] = inverse_d
+        self._vectors["inverse_p"].getArray()[:] = inverse_p
+        self._vectors["active"].getArray()[:] = active
+        for name in ("ru", "rp", "rc", "du", "tu"):
+            self._vectors[name] = A.createVecRight()
+        for name in ("rz", "tz", "sz"):
+            self._vectors[name] = vz.duplicate()
+
+        T = self._normal_matrix(normals, A)
+        # A' = A - G d^-1 C
+        scaled_C = C.copy()
+        scaled_C.diagonalScale(L=self._vectors["inverse_d"])
+        GdC = G.matMult(scaled_C)
+        A_prime = A.copy()
+        A_prime.axpy(-1.0, GdC, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+        # B1 = (I - G P^-1 T) A'
+        G_scaled = G.copy()
+        G_scaled.diagonalScale(R=self._vectors["inverse_p"])
+        TA = T.matMult(A_prime)
+        correction = G_scaled.matMult(TA)
+        B1 = A_prime.copy()
+        B1.axpy(-1.0, correction, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+        # K_c = B1 - T^T (T B1 - C_a)
+        active_C = C.copy()
+        active_C.diagonalScale(L=self._vectors["active"])
+        normal_rows = T.matMult(B1)
+        normal_rows.axpy(-1.0, active_C, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+        K_c = B1.copy()
+        K_c.axpy(-1.0, T.transposeMatMult(normal_rows),
+                 structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+        for matrix in (scaled_C, GdC, TA, correction, B1, active_C, normal_rows):
+            matrix.destroy()
+        self._matrices = {"A": A, "G": G, "C": C, "T": T, "A_prime": A_prime,
+                          "G_scaled": G_scaled, "K_c": K_c}
+        self.ksp.setOperators(K_c)
+        self.ksp.setUp()
+
+    def apply(self, pc: PETSc.PC, x: PETSc.Vec, y: PETSc.Vec) -> None:
+        m, v = self._matrices, self._vectors
+        source = x.getArray(readonly=True)
+        v["ru"].getArray()[:] = source[: self.num_u]
+        v["rz"].getArray()[:] = source[self.num_u:]
+        # r' = r_u - G d^-1 r_z
+        v["sz"].pointwiseMult(v["inverse_d"], v["rz"])
+        m["G"].mult(v["sz"], v["rp"])
+        v["rp"].aypx(-1.0, v["ru"])
+        # rc = (I - G P^-1 T) r'
+        m["T"].mult(v["rp"], v["tz"])
+        m["G_scaled"].mult(v["tz"], v["rc"])
+        v["rc"].aypx(-1.0, v["rp"])
+        # rhs = rc - T^T (T rc - r_za)
+        m["T"].mult(v["rc"], v["tz"])
+        v["sz"].pointwiseMult(v["active"], v["rz"])
+        v["tz"].axpy(-1.0, v["sz"])
+        m["T"].multTranspose(v["tz"], v["tu"])
+        v["rc"].axpy(-1.0, v["tu"])
+        self.ksp.solve(v["rc"], v["du"])
+        if self.ksp.getConvergedReason() < 0:
+            # a NaN makes the outer Krylov method, and so the Newton step, fail
+            y.set(np.nan)
+            return
+        # dz = d^-1 (r_z - C du) + P^-1 T (r' - A' du)
+        m["C"].mult(v["du"], v["sz"])
+        v["sz"].aypx(-1.0, v["rz"])
+        v["sz"].pointwiseMult(v["sz"], v["inverse_d"])
+        m["A_prime"].mult(v["du"], v["tu"])
+        v["tu"].aypx(-1.0, v["rp"])
+        m["T"].mult(v["tu"], v["tz"])
+        v["tz"].pointwiseMult(v["tz"], v["inverse_p"])
+        v["sz"].axpy(1.0, v["tz"])
+        target = y.getArray()
+        target[: self.num_u] = v["du"].getArray(readonly=True)
+        target[self.num_u:] = v["sz"].getArray(readonly=True)
+
+    def view(self, pc: PETSc.PC, viewer: PETSc.Viewer) -> None:
+        viewer.printfASCII(f"static condensation of the multipliers ({self.num_active} active)\n")
+        self.ksp.view(viewer)
+
+    # -- pieces ------------------------------------------------------------
+
+    def _normals(self, G: PETSc.Mat, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Unit normals (n_z, 2) and |G[node j dofs, j]| of the active multipliers (0 elsewhere)."""
+        first_row = G.getOwnershipRange()[0]
+        first_col = G.getOwnershipRangeColumn()[0]
+        indptr, indices, values = G.getValuesCSR()
+        local = scipy.sparse.csr_matrix(
+            (values, indices, indptr), shape=(self.num_u, G.getSize()[1])
+        )
+        normals = np.zeros((self.num_z, 2))
+        selected = np.flatnonzero(active)
+        if selected.size:
+            rows = self.z_node_dofs[selected] - first_row
+            cols = np.repeat(first_col + selected[:, None], 2, axis=1)
+            normals[selected] = np.asarray(local[rows.reshape(-1), cols.reshape(-1)]).reshape(-1, 2)
+        lengths = np.linalg.norm(normals, axis=1)
+        if np.any(lengths[selected] == 0.0):
+            raise RuntimeError("an active multiplier has no coupling to its own slave node")
+        normals[selected] /= lengths[selected, None]
+        return normals, lengths
+
+    def _normal_matrix(self, normals: np.ndarray, A: PETSc.Mat) -> PETSc.Mat:
+        """T: row j holds n_j^T on the dofs of slave node j (zeros when j is not active)."""
+        indptr = np.arange(0, 2 * self.num_z + 1, 2, dtype=PETSc.IntType)
+        indices = self.z_node_dofs.reshape(-1).astype(PETSc.IntType)
+        T = PETSc.Mat().createAIJ(
+            size=((self.num_z, PETSc.DETERMINE), A.getSizes()[1]),
+            csr=(indptr, indices, normals.reshape(-1)),
+            comm=self.comm,
+        )
+        T.assemble()
+        return T
+
+    def _release_matrices(self) -> None:
+        for matrix in self._matrices.values():
+            matrix.destroy()
+        for vector in self._vectors.values():
+            vector.destroy()
+        self._matrices, self._vectors = {}, {}
+
+    def destroy(self, pc: PETSc.PC | None = None) -> None:
+        self._release_matrices()
+        self.ksp.destroy()
+        self.is_u.destroy()
+        self.is_z.destroy()
