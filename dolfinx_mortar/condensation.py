@@ -32,7 +32,6 @@ diagonal Dn_jj), so that P_jj = |Dn_jj| > 0.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -180,16 +179,18 @@ class CondensedPreconditioner:
         """Unit normals (n_z, 2) and |G[node j dofs, j]| of the active multipliers (0 elsewhere)."""
         first_row = G.getOwnershipRange()[0]
         first_col = G.getOwnershipRangeColumn()[0]
+        num_cols = G.getSize()[1]
         indptr, indices, values = G.getValuesCSR()
-        local = scipy.sparse.csr_matrix(
-            (values, indices, indptr), shape=(self.num_u, G.getSize()[1])
-        )
+        # AIJ rows are sorted by column: the keys row * num_cols + col are sorted
+        keys = np.repeat(np.arange(self.num_u, dtype=np.int64), np.diff(indptr)) * num_cols
+        keys += indices
         normals = np.zeros((self.num_z, 2))
         selected = np.flatnonzero(active)
-        if selected.size:
-            rows = self.z_node_dofs[selected] - first_row
-            cols = np.repeat(first_col + selected[:, None], 2, axis=1)
-            normals[selected] = np.asarray(local[rows.reshape(-1), cols.reshape(-1)]).reshape(-1, 2)
+        wanted = (self.z_node_dofs[selected] - first_row) * num_cols
+        wanted += (first_col + selected)[:, None]
+        position = np.minimum(np.searchsorted(keys, wanted), max(keys.size - 1, 0))
+        found = keys[position] == wanted if keys.size else np.zeros(wanted.shape, dtype=bool)
+        normals[selected] = np.where(found, values[position] if keys.size else 0.0, 0.0)
         lengths = np.linalg.norm(normals, axis=1)
         if np.any(lengths[selected] == 0.0):
             raise RuntimeError("an active multiplier has no coupling to its own slave node")

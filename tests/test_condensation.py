@@ -1,0 +1,164 @@
+"""Static condensation of dual multipliers: the same solutions as the monolithic solve.
+
+The condensed solve preconditions fgmres on the monolithic system, so the
+Newton iterates must not change: condensed and uncondensed displacements and
+pressures agree to 1e-9 (Newton stops at 1e-10). Where the condensation is
+exact (penalty rows; Lagrange rows when T G is diagonal, as on the flat patch
+test), the outer method needs one iteration per Newton step.
+"""
+
+from __future__ import annotations
+
+import dolfinx
+import numpy as np
+import pytest
+import ufl
+from mpi4py import MPI
+from stress.common import hertz, measure, patch_traction, relative_difference
+
+from dolfinx_mortar import meshes
+from dolfinx_mortar.materials import Material, internal_work
+from dolfinx_mortar.problem import ContactPair, ContactProblem
+
+OPTIONS = {
+    "semismooth": {"method": "lagrange"},
+    "fixed-point": {"method": "lagrange", "active_set": "fixed-point"},
+    "penalty": {"method": "penalty"},
+    "augmented": {"method": "augmented"},
+}
+
+
+def assert_same_solution(condensed, uncondensed, tolerance=1e-9):
+    assert condensed.converged and uncondensed.converged
+    assert condensed.active == uncondensed.active
+    assert relative_difference(condensed.displacement, uncondensed.displacement) <= tolerance
+    assert relative_difference(condensed.pressure, uncondensed.pressure) <= tolerance
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("name", sorted(OPTIONS))
+@pytest.mark.parametrize("slave", ["top", "bottom"])
+def test_condensed_patch_test_is_exact_in_one_outer_iteration(name, slave):
+    outcomes, reports = {}, {}
+    for condensation in (False, True):
+        setup = patch_traction(ratio=(3, 7), slave=slave, condensation=condensation,
+                               **OPTIONS[name])
+        setup.apply_load(1.0)
+        reports[condensation] = setup.problem.solve()
+        outcomes[condensation] = measure(setup.problem, [reports[condensation]])
+        setup.destroy()
+    assert_same_solution(outcomes[True], outcomes[False])
+    if name != "penalty":
+        pressure = outcomes[True].pressure
+        assert np.max(np.abs(pressure - 10.0)) <= 1e-10 * 10.0
+    # flat surfaces, full coverage: T G is diagonal and the condensation exact
+    assert reports[True].linear_iterations == reports[True].iterations
+
+
+@pytest.mark.parallel
+@pytest.mark.timeout(600)
+@pytest.mark.parametrize("name", ["semismooth", "fixed-point", "penalty"])
+def test_condensed_hertz_equals_uncondensed(name):
+    outcomes = {}
+    for condensation in (False, True):
+        setup = hertz(refinement=0, condensation=condensation, **OPTIONS[name])
+        outcomes[condensation] = setup.steps(2)
+        setup.destroy()
+    assert outcomes[True].active > 0
+    assert outcomes[True].iterations == outcomes[False].iterations
+    assert_same_solution(outcomes[True], outcomes[False])
+    records = outcomes[True].extra["records"]
+    linear = sum(r.report.linear_iterations for r in records)
+    newton = sum(r.report.iterations for r in records)
+    if name == "penalty":
+        assert linear == newton  # exact condensation
+    else:
+        assert newton <= linear <= 5 * newton
+
+
+def two_pair_patch_test(condensation: bool, comm=MPI.COMM_WORLD):
+    """The patch test with the punch's contact surface split at x = 5 into two pairs."""
+    tagged = meshes.patch_test(ratio=(4, 7), slave="top", comm=comm)
+    mesh, markers = tagged.mesh, tagged.markers
+    tags = tagged.facet_tags
+    values = tags.values.copy()
+    slave = values == markers["contact_slave"]
+    midpoints = dolfinx.mesh.compute_midpoints(mesh, 1, tags.indices[slave])
+    right = max(markers.values()) + 1
+    values[np.flatnonzero(slave)[midpoints[:, 0] > 5.0]] = right
+    facet_tags = dolfinx.mesh.meshtags(mesh, 1, tags.indices, values)
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    u = dolfinx.fem.Function(V)
+    v = ufl.TestFunction(V)
+    ds = ufl.Measure("ds", domain=mesh, subdomain_data=facet_tags)
+    traction = dolfinx.fem.Constant(mesh, np.array([0.0, -10.0]))
+    F = internal_work(u, v, {0: Material(1000.0, 0.4, "linear")}) - ufl.inner(traction, v) * (
+        ds(markers["punch_top"]) + ds(markers["foundation_top_free"]))
+    strain_xx = 10.0 * 0.4 * 1.4 / 1000.0
+    bottom = facet_tags.find(markers["foundation_bottom"])
+    bcs = [dolfinx.fem.dirichletbc(np.float64(0.0),
+                                   dolfinx.fem.locate_dofs_topological(V.sub(1), 1, bottom),
+                                   V.sub(1))]
+    mesh.topology.create_connectivity(0, 2)
+    for corner in ((0.0, 0.0), (4.0, 7.0)):
+        vertices = dolfinx.mesh.locate_entities(
+            mesh, 0, lambda x, c=corner: np.isclose(x[0], c[0]) & np.isclose(x[1], c[1]))
+        dofs = dolfinx.fem.locate_dofs_topological(V.sub(0), 0, vertices)
+        bcs.append(dolfinx.fem.dirichletbc(np.float64(strain_xx * corner[0]), dofs, V.sub(0)))
+    pairs = [ContactPair(facet_tags, tag, markers["contact_master"], name=name)
+             for tag, name in ((markers["contact_slave"], "left"), (right, "right"))]
+    return ContactProblem(F, u, bcs, pairs, configuration="reference",
+                          condensation=condensation)
+
+
+@pytest.mark.parallel
+def test_condensation_with_two_pairs():
+    results = {}
+    for condensation in (False, True):
+        problem = two_pair_patch_test(condensation)
+        report = problem.solve()
+        pressures = [problem.gathered_pressure(k)[1] for k in range(2)]
+        results[condensation] = (report, measure(problem, [report]), pressures)
+        problem.destroy()
+    (report, condensed, pressures), (_, uncondensed, reference) = results[True], results[False]
+    assert report.converged and len(pressures[0]) and len(pressures[1])
+    assert relative_difference(condensed.displacement, uncondensed.displacement) <= 1e-9
+    for k in range(2):
+        assert relative_difference(pressures[k], reference[k]) <= 1e-9
+    # two multipliers at x = 5: an approximate condensation there, still a few iterations
+    assert report.linear_iterations <= 4 * report.iterations
+
+
+@pytest.mark.parallel
+def test_separated_bodies_condense_to_the_bulk_matrix():
+    """No active node: K_c is the bulk matrix; one outer iteration per Newton step."""
+    tagged = meshes.tied_blocks(ratio=(2, 3))
+    mesh = tagged.mesh
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    u = dolfinx.fem.Function(V)
+    F = internal_work(u, ufl.TestFunction(V), {0: Material(10.0, 0.3, "neo-hookean")})
+    bcs = []
+    for y, value in ((0.0, np.zeros(2)), (1.0, np.array([0.0, 0.3]))):
+        facets = dolfinx.mesh.locate_entities_boundary(mesh, 1, lambda x, y=y: np.isclose(x[1], y))
+        dofs = dolfinx.fem.locate_dofs_topological(V, 1, facets)
+        bcs.append(dolfinx.fem.dirichletbc(value, dofs, V))
+    pair = ContactPair(
+        tagged.facet_tags, tagged.markers["contact_slave"], tagged.markers["contact_master"]
+    )
+    problem = ContactProblem(F, u, bcs, [pair], search_margin=0.05, condensation=True)
+    report = problem.solve()
+    assert report.converged and report.active == 0
+    assert report.linear_iterations == report.iterations
+    problem.destroy()
+
+
+@pytest.mark.parallel
+def test_condensation_needs_dual_multipliers():
+    tagged = meshes.patch_test(ratio=(2, 3))
+    V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (2,)))
+    u = dolfinx.fem.Function(V)
+    F = internal_work(u, ufl.TestFunction(V), {0: Material(1.0, 0.3, "linear")})
+    markers = tagged.markers
+    pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"])
+    with pytest.raises(ValueError, match="condensation=True needs multipliers='dual'"):
+        ContactProblem(F, u, [], [pair], multipliers="standard", condensation=True)
