@@ -74,62 +74,69 @@ class CondensedPreconditioner:
             options.delValue(f"{prefix}{key}")
         self._matrices: dict[str, PETSc.Mat] = {}
         self._vectors: dict[str, PETSc.Vec] = {}
+        self._K_c: PETSc.Mat | None = None
         self.num_active = 0
 
     # -- PC interface ------------------------------------------------------
 
     def setUp(self, pc: PETSc.PC) -> None:  # noqa: N802 (petsc4py's name)
+        # Every product runs over all multipliers, the inactive ones scaled to zero:
+        # then K_c's pattern follows J's, not the active set, and while it stays the
+        # factorization reuses its symbolic analysis.
         J = pc.getOperators()[0]
         self._release_matrices()
+        m, v = self._matrices, self._vectors
         A = J.createSubMatrix(self.is_u, self.is_u)
-        G = J.createSubMatrix(self.is_u, self.is_z)
-        C = J.createSubMatrix(self.is_z, self.is_u)
+        G = m["G"] = J.createSubMatrix(self.is_u, self.is_z)
+        C = m["C"] = J.createSubMatrix(self.is_z, self.is_u)
         diagonal = J.getDiagonal()
         d = diagonal.getArray(readonly=True)[self.num_u:].copy()
         diagonal.destroy()
         active = d == 0.0
         self.num_active = self.comm.allreduce(int(active.sum()), op=MPI.SUM)
-        inverse_d = np.where(active, 0.0, 1.0 / np.where(active, 1.0, d))
         normals, lengths = self._normals(G, active)
-        inverse_p = np.where(active, 1.0 / np.where(active, lengths, 1.0), 0.0)
-
-        vz = G.createVecRight()
-        self._vectors = {"inverse_d": vz, "inverse_p": vz.duplicate(), "active": vz.duplicate()}
-        self._vectors["inverse_d"].getArray()[:] = inverse_d
-        self._vectors["inverse_p"].getArray()[:] = inverse_p
-        self._vectors["active"].getArray()[:] = active
+        for name in ("inverse_d", "inverse_p", "active", "rz", "sz", "tz"):
+            v[name] = G.createVecRight()
         for name in ("ru", "rp", "rc", "du", "tu"):
-            self._vectors[name] = A.createVecRight()
-        for name in ("rz", "tz", "sz"):
-            self._vectors[name] = vz.duplicate()
-
-        T = self._normal_matrix(normals, A)
-        # A' = A - G d^-1 C
-        scaled_C = C.copy()
-        scaled_C.diagonalScale(L=self._vectors["inverse_d"])
-        GdC = G.matMult(scaled_C)
-        A_prime = A.copy()
-        A_prime.axpy(-1.0, GdC, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-        # B1 = (I - G P^-1 T) A'
-        G_scaled = G.copy()
-        G_scaled.diagonalScale(R=self._vectors["inverse_p"])
-        TA = T.matMult(A_prime)
-        correction = G_scaled.matMult(TA)
-        B1 = A_prime.copy()
-        B1.axpy(-1.0, correction, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-        # K_c = B1 - T^T (T B1 - C_a)
-        active_C = C.copy()
-        active_C.diagonalScale(L=self._vectors["active"])
-        normal_rows = T.matMult(B1)
-        normal_rows.axpy(-1.0, active_C, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-        K_c = B1.copy()
-        K_c.axpy(-1.0, T.transposeMatMult(normal_rows),
-                 structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-        for matrix in (scaled_C, GdC, TA, correction, B1, active_C, normal_rows):
+            v[name] = A.createVecRight()
+        v["inverse_d"].getArray()[:] = np.where(active, 0.0, 1.0 / np.where(active, 1.0, d))
+        v["inverse_p"].getArray()[:] = np.where(active, 1.0 / np.where(active, lengths, 1.0), 0.0)
+        v["active"].getArray()[:] = active
+        T = m["T"] = self._normal_matrix(normals, A)
+        different = PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN
+        # A' = A - G d^-1 C: the exact elimination of the rows with d != 0
+        scaled = C.copy()
+        scaled.diagonalScale(L=v["inverse_d"])
+        product = G.matMult(scaled)
+        A_prime = m["A_prime"] = A.copy()
+        A_prime.axpy(-1.0, product, structure=different)
+        for matrix in (scaled, product, A):
             matrix.destroy()
-        self._matrices = {"A": A, "G": G, "C": C, "T": T, "A_prime": A_prime,
-                          "G_scaled": G_scaled, "K_c": K_c}
-        self.ksp.setOperators(K_c)
+        # B1 = (I - G P^-1 T) A'
+        G_p = m["G_p"] = G.copy()
+        G_p.diagonalScale(R=v["inverse_p"])
+        TA = T.matMult(A_prime)
+        correction = G_p.matMult(TA)
+        K_c = A_prime.copy()
+        K_c.axpy(-1.0, correction, structure=different)
+        # K_c = B1 - T^T (T B1 - C_a): the normal rows at active nodes become constraints
+        C_a = C.copy()
+        C_a.diagonalScale(L=v["active"])
+        normal_rows = T.matMult(K_c)
+        normal_rows.axpy(-1.0, C_a, structure=different)
+        replaced = T.transposeMatMult(normal_rows)
+        K_c.axpy(-1.0, replaced, structure=different)
+        for matrix in (TA, correction, C_a, normal_rows, replaced):
+            matrix.destroy()
+        if self._K_c is not None and _same_pattern(self._K_c, K_c, self.comm):
+            # the same matrix object and pattern: the factorization reuses its analysis
+            K_c.copy(self._K_c, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+            K_c.destroy()
+        else:
+            if self._K_c is not None:
+                self._K_c.destroy()
+            self._K_c = K_c
+            self.ksp.setOperators(K_c)
         self.ksp.setUp()
 
     def apply(self, pc: PETSc.PC, x: PETSc.Vec, y: PETSc.Vec) -> None:
@@ -141,11 +148,10 @@ class CondensedPreconditioner:
         v["sz"].pointwiseMult(v["inverse_d"], v["rz"])
         m["G"].mult(v["sz"], v["rp"])
         v["rp"].aypx(-1.0, v["ru"])
-        # rc = (I - G P^-1 T) r'
+        # rc = (I - G P^-1 T) r', then rc - T^T (T rc - r_za)
         m["T"].mult(v["rp"], v["tz"])
-        m["G_scaled"].mult(v["tz"], v["rc"])
+        m["G_p"].mult(v["tz"], v["rc"])
         v["rc"].aypx(-1.0, v["rp"])
-        # rhs = rc - T^T (T rc - r_za)
         m["T"].mult(v["rc"], v["tz"])
         v["sz"].pointwiseMult(v["active"], v["rz"])
         v["tz"].axpy(-1.0, v["sz"])
@@ -156,7 +162,7 @@ class CondensedPreconditioner:
             # a NaN makes the outer Krylov method, and so the Newton step, fail
             y.set(np.nan)
             return
-        # dz = d^-1 (r_z - C du) + P^-1 T (r' - A' du)
+        # dz = d^-1 (r_z - C du) on the eliminated rows, P^-1 T (r' - A' du) on the active ones
         m["C"].mult(v["du"], v["sz"])
         v["sz"].aypx(-1.0, v["rz"])
         v["sz"].pointwiseMult(v["sz"], v["inverse_d"])
@@ -200,10 +206,9 @@ class CondensedPreconditioner:
     def _normal_matrix(self, normals: np.ndarray, A: PETSc.Mat) -> PETSc.Mat:
         """T: row j holds n_j^T on the dofs of slave node j (zeros when j is not active)."""
         indptr = np.arange(0, 2 * self.num_z + 1, 2, dtype=PETSc.IntType)
-        indices = self.z_node_dofs.reshape(-1).astype(PETSc.IntType)
         T = PETSc.Mat().createAIJ(
             size=((self.num_z, PETSc.DETERMINE), A.getSizes()[1]),
-            csr=(indptr, indices, normals.reshape(-1)),
+            csr=(indptr, self.z_node_dofs.reshape(-1).astype(PETSc.IntType), normals.reshape(-1)),
             comm=self.comm,
         )
         T.assemble()
@@ -218,6 +223,18 @@ class CondensedPreconditioner:
 
     def destroy(self, pc: PETSc.PC | None = None) -> None:
         self._release_matrices()
+        if self._K_c is not None:
+            self._K_c.destroy()
         self.ksp.destroy()
         self.is_u.destroy()
         self.is_z.destroy()
+
+
+def _same_pattern(a: PETSc.Mat, b: PETSc.Mat, comm: MPI.Intracomm) -> bool:
+    """Collective: do two AIJ matrices of the same layout have the same nonzero pattern?"""
+    same = a.getOwnershipRange() == b.getOwnershipRange()
+    if same:
+        indptr_a, indices_a, _ = a.getValuesCSR()
+        indptr_b, indices_b, _ = b.getValuesCSR()
+        same = np.array_equal(indptr_a, indptr_b) and np.array_equal(indices_a, indices_b)
+    return comm.allreduce(bool(same), op=MPI.LAND)
