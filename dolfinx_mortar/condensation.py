@@ -15,7 +15,9 @@ basis decouples the nodes) dz_a = P^-1 T (r' - A' du). The u rows then become
 (I - G P^-1 T)(A' du - r') = 0, whose components along the active normals
 vanish; those rows are replaced by the constraints C_a du = r_za:
 
-    K_c = (I - T^T T)(I - G P^-1 T) A' + T^T C_a,    A' = A - G d^-1 C.
+    K_c = (I - T^T T)(I - G P^-1 T) A' - T^T C_a,    A' = A - G d^-1 C
+
+(the constraint rows negated, so that their diagonal is positive).
 
 K_c has the displacement size only. Our mortar integrals carry the
 interpolated normal (Dn_jk = int Phi_j N_k n_h), so T G is not exactly
@@ -119,11 +121,13 @@ class CondensedPreconditioner:
         correction = G_p.matMult(TA)
         K_c = A_prime.copy()
         K_c.axpy(-1.0, correction, structure=different)
-        # K_c = B1 - T^T (T B1 - C_a): the normal rows at active nodes become constraints
+        # K_c = B1 - T^T (T B1 + C_a): the normal rows at active nodes become the
+        # constraints, negated so that their diagonal (c_n D_jj) is positive as the
+        # stiffness is (the constraints row C_a is -c_n D n on the slave node)
         C_a = C.copy()
         C_a.diagonalScale(L=v["active"])
         normal_rows = T.matMult(K_c)
-        normal_rows.axpy(-1.0, C_a, structure=different)
+        normal_rows.axpy(1.0, C_a, structure=different)
         replaced = T.transposeMatMult(normal_rows)
         K_c.axpy(-1.0, replaced, structure=different)
         for matrix in (TA, correction, C_a, normal_rows, replaced):
@@ -148,18 +152,21 @@ class CondensedPreconditioner:
         v["sz"].pointwiseMult(v["inverse_d"], v["rz"])
         m["G"].mult(v["sz"], v["rp"])
         v["rp"].aypx(-1.0, v["ru"])
-        # rc = (I - G P^-1 T) r', then rc - T^T (T rc - r_za)
+        # rc = (I - G P^-1 T) r', then rc - T^T (T rc + r_za)
         m["T"].mult(v["rp"], v["tz"])
         m["G_p"].mult(v["tz"], v["rc"])
         v["rc"].aypx(-1.0, v["rp"])
         m["T"].mult(v["rc"], v["tz"])
         v["sz"].pointwiseMult(v["active"], v["rz"])
-        v["tz"].axpy(-1.0, v["sz"])
+        v["tz"].axpy(1.0, v["sz"])
         m["T"].multTranspose(v["tz"], v["tu"])
         v["rc"].axpy(-1.0, v["tu"])
         self.ksp.solve(v["rc"], v["du"])
-        if self.ksp.getConvergedReason() < 0:
-            # a NaN makes the outer Krylov method, and so the Newton step, fail
+        reason = self.ksp.getConvergedReason()
+        if reason < 0 and reason != PETSc.KSP.ConvergedReason.DIVERGED_MAX_IT:
+            # a breakdown: a NaN makes the outer Krylov method, and the Newton step, fail
+            # (an iterative inner solve stopped by its iteration limit is still a
+            # preconditioner, which fgmres allows to vary)
             y.set(np.nan)
             return
         # dz = d^-1 (r_z - C du) on the eliminated rows, P^-1 T (r' - A' du) on the active ones
