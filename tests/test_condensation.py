@@ -193,3 +193,20 @@ def test_condensation_needs_dual_multipliers():
     pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"])
     with pytest.raises(ValueError, match="condensation=True needs multipliers='dual'"):
         ContactProblem(F, u, [], [pair], multipliers="standard", condensation=True)
+
+
+@pytest.mark.parallel
+def test_inner_solver_options_take_the_condensed_prefix():
+    """An inexact inner solve (block Jacobi/ILU, 10 GMRES steps) only costs outer iterations."""
+    inexact = {"condensed_ksp_type": "gmres", "condensed_pc_type": "bjacobi",
+               "condensed_ksp_max_it": 10}
+    setup = patch_traction(ratio=(3, 7), slave="bottom", condensation=True,
+                           petsc_options=inexact)
+    setup.apply_load(1.0)
+    report = setup.problem.solve()
+    inner = setup.problem._condenser.ksp
+    assert inner.getPC().getType() == "bjacobi" and inner.getType() == "gmres"
+    assert report.converged and report.linear_iterations > report.iterations
+    pressure = setup.problem.gathered_pressure()[1]
+    assert np.max(np.abs(pressure - 10.0)) <= 1e-10 * 10.0
+    setup.destroy()
