@@ -37,12 +37,6 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-CONDENSED_DEFAULTS = {
-    "ksp_type": "preonly",
-    "pc_type": "lu",
-    "pc_factor_mat_solver_type": "mumps",
-}
-
 
 class CondensedPreconditioner:
     """A petsc4py ``python`` PC: the condensed solve of the monolithic [u | z] system.
@@ -53,7 +47,8 @@ class CondensedPreconditioner:
         z_rows: this rank's monolithic rows of all multipliers (global indices).
         z_node_dofs: (len(z_rows), 2) global displacement dofs of the slave
             node of each owned multiplier (owned by this rank too).
-        prefix: options prefix of the inner solver of K_c (default MUMPS LU).
+        prefix: options prefix of the inner solver of K_c (ContactProblem puts
+            its defaults, MUMPS LU, into the options database).
     """
 
     def __init__(self, comm: MPI.Intracomm, u_rows, z_rows, z_node_dofs, prefix: str):
@@ -65,15 +60,7 @@ class CondensedPreconditioner:
         self.z_node_dofs = np.asarray(z_node_dofs, dtype=np.int64).reshape(self.num_z, 2)
         self.ksp = PETSc.KSP().create(comm)
         self.ksp.setOptionsPrefix(prefix)
-        options = PETSc.Options()
-        added = []
-        for key, value in CONDENSED_DEFAULTS.items():
-            if not options.hasName(f"{prefix}{key}"):
-                options[f"{prefix}{key}"] = value
-                added.append(key)
         self.ksp.setFromOptions()
-        for key in added:
-            options.delValue(f"{prefix}{key}")
         self._matrices: dict[str, PETSc.Mat] = {}
         self._vectors: dict[str, PETSc.Vec] = {}
         self._K_c: PETSc.Mat | None = None
