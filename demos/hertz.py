@@ -214,6 +214,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         "l2_pressure_error": error,
         "l2_pressure_error_rel": error_rel,
         "newton_iterations": [r.iterations for r in records],
+        "linear_iterations": [r.report.linear_iterations for r in records],
         "residuals_last_step": records[-1].report.residuals,
         "residuals_per_step": [r.report.residuals for r in records],
         "active_nodes": records[-1].active,

@@ -42,6 +42,11 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--active-set", choices=("semismooth", "fixed-point"), default="semismooth")
     parser.add_argument("--c-n", type=float, default=None, help="complementarity parameter")
     parser.add_argument("--penalty", type=float, default=None, help="penalty parameter eps")
+    parser.add_argument(
+        "--condensation",
+        action="store_true",
+        help="condense the (dual) multipliers: factorize a displacement-sized matrix",
+    )
     parser.add_argument("--json", type=Path, help="write a JSON summary here")
 
 
@@ -62,6 +67,7 @@ def problem_options(args) -> dict:
         "active_set": args.active_set,
         "c_n": args.c_n,
         "penalty": args.penalty,
+        "condensation": args.condensation,
     }
 
 
@@ -163,6 +169,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         "num_ranks": comm.size,
         "converged": report.converged,
         "newton_iterations": report.iterations,
+        "linear_iterations": report.linear_iterations,
         "residuals": report.residuals,
         "active_nodes": report.active,
         "max_pressure_deviation_rel": deviation,

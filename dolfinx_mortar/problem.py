@@ -101,6 +101,7 @@ class SolveReport:
     residuals: list[float]
     active: int
     outer_iterations: int = 1
+    linear_iterations: int = 0
     timings: dict[str, float] = dataclasses.field(default_factory=dict)
 
 
@@ -134,6 +135,12 @@ class ContactProblem:
         configuration: ``current`` (finite deformation, default) or
             ``reference`` (small strain: mortar integrals on the undeformed
             surfaces, to pair with linear elasticity).
+        condensation: solve the Newton systems by static condensation of
+            the multipliers (dual only): a displacement-sized matrix is
+            factorized (options prefix ``<prefix>condensed_``, default
+            MUMPS LU) and preconditions fgmres on the monolithic system
+            (``<prefix>ksp_``, default rtol 1e-12), so the solution is the
+            uncondensed one (:mod:`dolfinx_mortar.condensation`).
         petsc_options: SNES/KSP options (defaults: newtonls, full steps,
             MUMPS LU); the user's options database with the prefix wins.
         petsc_options_prefix: prefix of those options.
@@ -159,6 +166,7 @@ class ContactProblem:
         max_outer_iterations: int = 100,
         search_margin: float | None = None,
         configuration: str = "current",
+        condensation: bool = False,
         petsc_options: dict | None = None,
         petsc_options_prefix: str = "dolfinx_mortar_",
     ):
@@ -167,6 +175,11 @@ class ContactProblem:
         _check_choice("integration", integration, kernels.INTEGRATION_OPTIONS)
         _check_choice("normals", normals, kernels.NORMAL_OPTIONS)
         _check_choice("multipliers", multipliers, kernels.BASIS_OPTIONS)
+        if condensation and multipliers != "dual":
+            raise ValueError(
+                "condensation=True needs multipliers='dual' (with the standard basis the "
+                f"multipliers do not decouple node by node), got multipliers={multipliers!r}"
+            )
         if active_set == "fixed-point" and method != "lagrange":
             raise ValueError("active_set='fixed-point' applies to method='lagrange' only")
         if not pairs:
@@ -180,6 +193,8 @@ class ContactProblem:
         self.comm: MPI.Intracomm = self.V.mesh.comm
         self.bcs = list(bcs)
         self.method = method
+        self.condensation = bool(condensation)
+        self._condenser = None
         self.active_set_strategy = active_set
         self.augmented_tolerance = augmented_tolerance
         self.max_outer_iterations = max_outer_iterations
@@ -335,6 +350,16 @@ class ContactProblem:
             "mat_mumps_icntl_24": 1,
             "mat_mumps_cntl_3": 1e-12,
         }
+        if self.condensation:
+            # fgmres on [u | z], preconditioned by the condensed solve (a python PC);
+            # its inner solver takes the defaults (and the user's options) under condensed_
+            for key in ("pc_type", "pc_factor_mat_solver_type"):
+                del defaults[key]
+            defaults.update(ksp_type="fgmres", ksp_rtol=1e-12, ksp_atol=1e-50, ksp_max_it=200)
+            defaults.update({f"condensed_{key}": value for key, value in defaults.items()
+                             if key.startswith("mat_mumps")})
+            defaults.update(condensed_ksp_type="preonly", condensed_pc_type="lu",
+                            condensed_pc_factor_mat_solver_type="mumps")
         defaults.update(petsc_options)
         options = PETSc.Options()
         added = []
@@ -356,13 +381,35 @@ class ContactProblem:
         snes.getKSP().setFromOptions()
         if not user_atol:
             snes.setTolerances(atol=1e-11 * self._dirichlet_scale * self._slave_length)
-        kept = [name for name in added if name[len(prefix):].startswith("mat_")]
+        if self.condensation:
+            self._setup_condensation(snes.getKSP(), prefix)
+        kept = [name for name in added
+                if name[len(prefix):].removeprefix("condensed_").startswith("mat_")]
         for name in added:
             if name not in kept:
                 options.delValue(name)
         _OPTIONS_SET_BY_PROBLEMS.update(kept)
         self._options_finalizer = weakref.finalize(self, _delete_options, kept)
         self.snes = snes
+
+    def _setup_condensation(self, ksp: PETSc.KSP, prefix: str) -> None:
+        """The condensed solve as the (python) preconditioner of the monolithic KSP."""
+        from .condensation import CondensedPreconditioner
+
+        layout = self.layout
+        first = int(layout.offsets[self.comm.rank])
+        u_rows = first + np.arange(layout.owned_u.start, layout.owned_u.stop)
+        z_rows = first + np.arange(layout.owned_z.start, layout.owned_z.stop)
+        bs = self.V.dofmap.index_map_bs
+        node_dofs = np.concatenate(
+            [i.owned_multiplier_blocks[:, None] * bs + np.arange(bs) for i in self.interfaces]
+        ).reshape(-1, bs)
+        self._condenser = CondensedPreconditioner(
+            self.comm, u_rows, z_rows, node_dofs, prefix=f"{prefix}condensed_"
+        )
+        pc = ksp.getPC()
+        pc.setType(PETSc.PC.Type.PYTHON)
+        pc.setPythonContext(self._condenser)
 
     # -- state -------------------------------------------------------------
 
@@ -640,6 +687,7 @@ class ContactProblem:
             iterations=self.snes.getIterationNumber(),
             residuals=list(self._residual_history),
             active=0,
+            linear_iterations=self.snes.getLinearSolveIterations(),
         )
 
     def _fixed_point(self) -> SolveReport:
@@ -678,18 +726,21 @@ class ContactProblem:
 
     def _outer_loop(self, settled: typing.Callable[[], bool], failure_reason: int) -> SolveReport:
         """Newton solves until ``settled()`` (called after each converged one) says so."""
-        total_iterations, residuals = 0, []
+        total_iterations, residuals, linear_iterations = 0, [], 0
         for outer in range(1, self.max_outer_iterations + 1):
             report = self._newton()
             total_iterations += report.iterations
             residuals += report.residuals
+            linear_iterations += report.linear_iterations
             report.iterations, report.residuals, report.outer_iterations = (
                 total_iterations, residuals, outer)
+            report.linear_iterations = linear_iterations
             if not report.converged or settled():
                 return report
         return SolveReport(converged=False, reason=failure_reason, iterations=total_iterations,
                            residuals=residuals, active=0,
-                           outer_iterations=self.max_outer_iterations)
+                           outer_iterations=self.max_outer_iterations,
+                           linear_iterations=linear_iterations)
 
     def _averaged_pressure(self, k: int) -> np.ndarray:
         """p_j = int N_j lambda / int N_j = (D^T z)_j / (D^T 1)_j at owned slave nodes."""
@@ -810,6 +861,8 @@ class ContactProblem:
     def destroy(self) -> None:
         self._options_finalizer()
         self.snes.destroy()
+        if self._condenser is not None:
+            self._condenser.destroy()
         if self._system is not None:
             self._system.destroy()
         self._K.destroy()

@@ -1,0 +1,234 @@
+"""Static condensation of dual multipliers, as a preconditioner of the monolithic system.
+
+The Newton system of :class:`~dolfinx_mortar.problem.ContactProblem` is, per
+rank [u | z] (all multiplier fields together),
+
+    A du + G dz = r_u          (u rows; A = K + d(-B^T z)/du, G = -B^T)
+    C du + diag(d) dz = r_z    (multiplier rows; d_j is 0 or 1)
+
+Rows with d_j != 0 (inactive Lagrange, penalty, augmented) are eliminated
+exactly: dz_j = (r_z - C du)_j / d_j. The rows with d_j = 0 (active Lagrange)
+are condensed after Popp et al. with the unit normal n_j of slave node j:
+T (rows n_j^T on node j's dofs) turns the u rows into T A' du + T G dz_a =
+T r', and with P = diag(T G) (exact when T G is diagonal, i.e. when the dual
+basis decouples the nodes) dz_a = P^-1 T (r' - A' du). The u rows then become
+(I - G P^-1 T)(A' du - r') = 0, whose components along the active normals
+vanish; those rows are replaced by the constraints C_a du = r_za:
+
+    K_c = (I - T^T T)(I - G P^-1 T) A' - T^T C_a,    A' = A - G d^-1 C
+
+(the constraint rows negated, so that their diagonal is positive).
+
+K_c has the displacement size only. Our mortar integrals carry the
+interpolated normal (Dn_jk = int Phi_j N_k n_h), so T G is not exactly
+diagonal in general and the condensation is approximate; it is therefore
+used as the preconditioner of an outer Krylov method (fgmres) on the full
+monolithic matrix, which makes the Newton steps exact to the Krylov
+tolerance: the solution does not change, only how the linear systems are
+solved. When T G is diagonal the outer method converges in one iteration.
+
+The normal n_j is the direction of G's column j at node j's own dofs (the
+diagonal Dn_jj), so that P_jj = |Dn_jj| > 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+
+class CondensedPreconditioner:
+    """A petsc4py ``python`` PC: the condensed solve of the monolithic [u | z] system.
+
+    Args:
+        comm: communicator.
+        u_rows: this rank's monolithic rows of the displacements (global indices).
+        z_rows: this rank's monolithic rows of all multipliers (global indices).
+        z_node_dofs: (len(z_rows), 2) global displacement dofs of the slave
+            node of each owned multiplier (owned by this rank too).
+        prefix: options prefix of the inner solver of K_c (ContactProblem puts
+            its defaults, MUMPS LU, into the options database).
+    """
+
+    def __init__(self, comm: MPI.Intracomm, u_rows, z_rows, z_node_dofs, prefix: str):
+        self.comm = comm
+        self.is_u = PETSc.IS().createGeneral(np.asarray(u_rows, dtype=PETSc.IntType), comm=comm)
+        self.is_z = PETSc.IS().createGeneral(np.asarray(z_rows, dtype=PETSc.IntType), comm=comm)
+        self.num_u = len(u_rows)
+        self.num_z = len(z_rows)
+        self.z_node_dofs = np.asarray(z_node_dofs, dtype=np.int64).reshape(self.num_z, 2)
+        self.ksp = PETSc.KSP().create(comm)
+        self.ksp.setOptionsPrefix(prefix)
+        self.ksp.setFromOptions()
+        self._matrices: dict[str, PETSc.Mat] = {}
+        self._vectors: dict[str, PETSc.Vec] = {}
+        self._K_c: PETSc.Mat | None = None
+        self.num_active = 0
+
+    # -- PC interface ------------------------------------------------------
+
+    def setUp(self, pc: PETSc.PC) -> None:  # noqa: N802 (petsc4py's name)
+        # Every product runs over all multipliers, the inactive ones scaled to zero:
+        # then K_c's pattern follows J's, not the active set, and while it stays the
+        # factorization reuses its symbolic analysis.
+        J = pc.getOperators()[0]
+        self._release_matrices()
+        m, v = self._matrices, self._vectors
+        A = J.createSubMatrix(self.is_u, self.is_u)
+        G = m["G"] = J.createSubMatrix(self.is_u, self.is_z)
+        C = m["C"] = J.createSubMatrix(self.is_z, self.is_u)
+        diagonal = J.getDiagonal()
+        d = diagonal.getArray(readonly=True)[self.num_u:].copy()
+        diagonal.destroy()
+        active = d == 0.0
+        self.num_active = self.comm.allreduce(int(active.sum()), op=MPI.SUM)
+        normals, lengths = self._normals(G, active)
+        for name in ("inverse_d", "inverse_p", "active", "rz", "sz", "tz"):
+            v[name] = G.createVecRight()
+        for name in ("ru", "rp", "rc", "du", "tu"):
+            v[name] = A.createVecRight()
+        v["inverse_d"].getArray()[:] = np.where(active, 0.0, 1.0 / np.where(active, 1.0, d))
+        v["inverse_p"].getArray()[:] = np.where(active, 1.0 / np.where(active, lengths, 1.0), 0.0)
+        v["active"].getArray()[:] = active
+        T = m["T"] = self._normal_matrix(normals, A)
+        different = PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN
+        # A' = A - G d^-1 C: the exact elimination of the rows with d != 0
+        scaled = C.copy()
+        scaled.diagonalScale(L=v["inverse_d"])
+        product = G.matMult(scaled)
+        A_prime = m["A_prime"] = A.copy()
+        A_prime.axpy(-1.0, product, structure=different)
+        for matrix in (scaled, product, A):
+            matrix.destroy()
+        # B1 = (I - G P^-1 T) A'
+        G_p = m["G_p"] = G.copy()
+        G_p.diagonalScale(R=v["inverse_p"])
+        TA = T.matMult(A_prime)
+        correction = G_p.matMult(TA)
+        K_c = A_prime.copy()
+        K_c.axpy(-1.0, correction, structure=different)
+        # K_c = B1 - T^T (T B1 + C_a): the normal rows at active nodes become the
+        # constraints, negated so that their diagonal (c_n D_jj) is positive as the
+        # stiffness is (the constraints row C_a is -c_n D n on the slave node)
+        C_a = C.copy()
+        C_a.diagonalScale(L=v["active"])
+        normal_rows = T.matMult(K_c)
+        normal_rows.axpy(1.0, C_a, structure=different)
+        replaced = T.transposeMatMult(normal_rows)
+        K_c.axpy(-1.0, replaced, structure=different)
+        for matrix in (TA, correction, C_a, normal_rows, replaced):
+            matrix.destroy()
+        if self._K_c is not None and _same_pattern(self._K_c, K_c, self.comm):
+            # the same matrix object and pattern: the factorization reuses its analysis
+            K_c.copy(self._K_c, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+            K_c.destroy()
+        else:
+            if self._K_c is not None:
+                self._K_c.destroy()
+            self._K_c = K_c
+            self.ksp.setOperators(K_c)
+        self.ksp.setUp()
+
+    def apply(self, pc: PETSc.PC, x: PETSc.Vec, y: PETSc.Vec) -> None:
+        m, v = self._matrices, self._vectors
+        source = x.getArray(readonly=True)
+        v["ru"].getArray()[:] = source[: self.num_u]
+        v["rz"].getArray()[:] = source[self.num_u:]
+        # r' = r_u - G d^-1 r_z
+        v["sz"].pointwiseMult(v["inverse_d"], v["rz"])
+        m["G"].mult(v["sz"], v["rp"])
+        v["rp"].aypx(-1.0, v["ru"])
+        # rc = (I - G P^-1 T) r', then rc - T^T (T rc + r_za)
+        m["T"].mult(v["rp"], v["tz"])
+        m["G_p"].mult(v["tz"], v["rc"])
+        v["rc"].aypx(-1.0, v["rp"])
+        m["T"].mult(v["rc"], v["tz"])
+        v["sz"].pointwiseMult(v["active"], v["rz"])
+        v["tz"].axpy(1.0, v["sz"])
+        m["T"].multTranspose(v["tz"], v["tu"])
+        v["rc"].axpy(-1.0, v["tu"])
+        self.ksp.solve(v["rc"], v["du"])
+        reason = self.ksp.getConvergedReason()
+        if reason < 0 and reason != PETSc.KSP.ConvergedReason.DIVERGED_MAX_IT:
+            # a breakdown: a NaN makes the outer Krylov method, and the Newton step, fail
+            # (an iterative inner solve stopped by its iteration limit is still a
+            # preconditioner, which fgmres allows to vary)
+            y.set(np.nan)
+            return
+        # dz = d^-1 (r_z - C du) on the eliminated rows, P^-1 T (r' - A' du) on the active ones
+        m["C"].mult(v["du"], v["sz"])
+        v["sz"].aypx(-1.0, v["rz"])
+        v["sz"].pointwiseMult(v["sz"], v["inverse_d"])
+        m["A_prime"].mult(v["du"], v["tu"])
+        v["tu"].aypx(-1.0, v["rp"])
+        m["T"].mult(v["tu"], v["tz"])
+        v["tz"].pointwiseMult(v["tz"], v["inverse_p"])
+        v["sz"].axpy(1.0, v["tz"])
+        target = y.getArray()
+        target[: self.num_u] = v["du"].getArray(readonly=True)
+        target[self.num_u:] = v["sz"].getArray(readonly=True)
+
+    def view(self, pc: PETSc.PC, viewer: PETSc.Viewer) -> None:
+        viewer.printfASCII(f"static condensation of the multipliers ({self.num_active} active)\n")
+        self.ksp.view(viewer)
+
+    # -- pieces ------------------------------------------------------------
+
+    def _normals(self, G: PETSc.Mat, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Unit normals (n_z, 2) and |G[node j dofs, j]| of the active multipliers (0 elsewhere)."""
+        first_row = G.getOwnershipRange()[0]
+        first_col = G.getOwnershipRangeColumn()[0]
+        num_cols = G.getSize()[1]
+        indptr, indices, values = G.getValuesCSR()
+        # AIJ rows are sorted by column: the keys row * num_cols + col are sorted
+        keys = np.repeat(np.arange(self.num_u, dtype=np.int64), np.diff(indptr)) * num_cols
+        keys += indices
+        normals = np.zeros((self.num_z, 2))
+        selected = np.flatnonzero(active)
+        wanted = (self.z_node_dofs[selected] - first_row) * num_cols
+        wanted += (first_col + selected)[:, None]
+        position = np.minimum(np.searchsorted(keys, wanted), max(keys.size - 1, 0))
+        found = keys[position] == wanted if keys.size else np.zeros(wanted.shape, dtype=bool)
+        normals[selected] = np.where(found, values[position] if keys.size else 0.0, 0.0)
+        lengths = np.linalg.norm(normals, axis=1)
+        if np.any(lengths[selected] == 0.0):
+            raise RuntimeError("an active multiplier has no coupling to its own slave node")
+        normals[selected] /= lengths[selected, None]
+        return normals, lengths
+
+    def _normal_matrix(self, normals: np.ndarray, A: PETSc.Mat) -> PETSc.Mat:
+        """T: row j holds n_j^T on the dofs of slave node j (zeros when j is not active)."""
+        indptr = np.arange(0, 2 * self.num_z + 1, 2, dtype=PETSc.IntType)
+        T = PETSc.Mat().createAIJ(
+            size=((self.num_z, PETSc.DETERMINE), A.getSizes()[1]),
+            csr=(indptr, self.z_node_dofs.reshape(-1).astype(PETSc.IntType), normals.reshape(-1)),
+            comm=self.comm,
+        )
+        T.assemble()
+        return T
+
+    def _release_matrices(self) -> None:
+        for matrix in self._matrices.values():
+            matrix.destroy()
+        for vector in self._vectors.values():
+            vector.destroy()
+        self._matrices, self._vectors = {}, {}
+
+    def destroy(self, pc: PETSc.PC | None = None) -> None:
+        self._release_matrices()
+        if self._K_c is not None:
+            self._K_c.destroy()
+        self.ksp.destroy()
+        self.is_u.destroy()
+        self.is_z.destroy()
+
+
+def _same_pattern(a: PETSc.Mat, b: PETSc.Mat, comm: MPI.Intracomm) -> bool:
+    """Collective: do two AIJ matrices of the same layout have the same nonzero pattern?"""
+    same = a.getOwnershipRange() == b.getOwnershipRange()
+    if same:
+        indptr_a, indices_a, _ = a.getValuesCSR()
+        indptr_b, indices_b, _ = b.getValuesCSR()
+        same = np.array_equal(indptr_a, indptr_b) and np.array_equal(indices_a, indices_b)
+    return comm.allreduce(bool(same), op=MPI.LAND)
