@@ -4,14 +4,18 @@
 through a load (or displacement) parameter t from 0 to 1. A step whose Newton
 solve fails, or whose iterate inverts an element, is undone and retried with
 half the increment; after ``max_cutbacks`` halvings in a row it raises
-:class:`LoadSteppingError`. The contact search is redone inside the solves
-whenever surfaces moved past the search margin.
+:class:`LoadSteppingError`. After each step that converged without a cut-back
+the increment doubles again, up to the nominal one, and no step jumps over a
+point of the nominal grid (so the steps land on t = k (end - start) / num_steps
+again, where demos read their results). The contact search is redone inside
+the solves whenever surfaces moved past the search margin.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import pathlib
 import time
 import typing
@@ -101,12 +105,15 @@ def solve_load_steps(
     if num_steps < 1:
         raise ValueError(f"num_steps must be >= 1, got {num_steps}")
     records: list[StepRecord] = []
-    increment = (end - start) / num_steps
+    nominal = (end - start) / num_steps
+    increment = nominal
     t = start
     cutbacks = 0
     step = 0
     while t < end - 1e-12 * abs(end - start):
-        target = min(end, t + increment)
+        # never step over a point of the nominal grid, so cut-back steps grow back onto it
+        next_grid = start + math.ceil((t - start) / nominal * (1.0 + 1e-12) + 1e-9) * nominal
+        target = min(end, t + increment, next_grid)
         saved = problem.save_state()
         apply_load(target)
         begin = time.perf_counter()
@@ -151,8 +158,8 @@ def solve_load_steps(
             output.write(t)
         if on_step is not None:
             on_step(record)
-        if cutbacks and report.iterations <= 4:
-            increment = min(2.0 * increment, (end - start) / num_steps)
+        if increment < nominal and not cutbacks:
+            increment = min(2.0 * increment, nominal)
         cutbacks = 0
     return records
 

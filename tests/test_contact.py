@@ -252,6 +252,38 @@ def test_load_stepping_gives_up_with_a_clear_error():
     problem.destroy()
 
 
+def test_load_stepping_grows_back_onto_the_nominal_grid_after_a_cut_back():
+    """A solver that fails on load jumps above 0.15: 4 nominal steps of 0.25 are cut to
+    0.125, and every later step first halves, then grows back onto the grid, so each
+    t = k / 4 is reached exactly and no step is smaller than needed."""
+    from dolfinx_mortar.problem import SolveReport
+
+    class JumpLimitedProblem:
+        comm = MPI.COMM_WORLD
+
+        def __init__(self):
+            self.accepted, self.load = 0.0, 0.0
+
+        def save_state(self):
+            return self.accepted
+
+        def restore_state(self, state):
+            self.accepted = state
+
+        def solve(self):
+            converged = self.load - self.accepted <= 0.15 + 1e-12
+            if converged:
+                self.accepted = self.load
+            return SolveReport(converged=converged, reason=2 if converged else -5,
+                               iterations=3, residuals=[1.0], active=0)
+
+    problem = JumpLimitedProblem()
+    records = solve_load_steps(problem, lambda t: setattr(problem, "load", t), 4)
+    loads = [r.load for r in records]
+    assert loads == pytest.approx([0.125 * k for k in range(1, 9)], abs=1e-14)
+    assert [r.cutbacks for r in records] == [1, 0, 1, 0, 1, 0, 1, 0]
+
+
 @pytest.mark.parallel
 def test_separated_bodies_have_no_active_node_and_a_regular_system():
     """Bodies far apart: no pairs, no active node, Newton converges (identity z-rows)."""
