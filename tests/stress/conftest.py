@@ -20,6 +20,7 @@ import json
 import os
 import pathlib
 import platform
+import shlex
 import threading
 import time
 
@@ -186,7 +187,7 @@ def session_meta(config) -> dict:
     except OSError:
         pass
     return {
-        "command": "python3 -m pytest " + " ".join(config.invocation_params.args),
+        "command": "python3 -m pytest " + shlex.join(config.invocation_params.args),
         "library": library_label(),
         "started": _SESSION.get("started"),
         "wall_time_s": time.perf_counter() - _SESSION.get("start", time.perf_counter()),
