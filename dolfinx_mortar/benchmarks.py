@@ -16,9 +16,7 @@ Sections (``--only`` picks some):
     changed at a time from the default (Lagrange multipliers, semismooth active
     set, dual basis, segment-based integration, averaged normals). Errors,
     Newton iterations, dofs and the solve time split by phase (medians over
-    ``--repeats``, 3 in the full run, 1 in the quick run). The ``dual-condensed``
-    variant runs once ContactProblem accepts ``condensation=True``; until then its
-    row says "not implemented".
+    ``--repeats``, 3 in the full run, 1 in the quick run).
     -> work_precision.json / .png / .md (+ work_precision_cpu.png, work_precision_pmax.png)
 ``cost``
     Share of a Newton iteration spent on contact at >= 1e5 dofs (Hertz B, the
@@ -98,39 +96,9 @@ VARIANTS: list[dict] = [
      "label": "augmented Lagrange (eps = 10 E/h)"},
     {"name": "normals-slave", "args": ["--normals", "slave"], "label": "slave normals"},
     {"name": "normals-master", "args": ["--normals", "master"], "label": "master normals"},
-    # PLACEHOLDER for the condensed variant (issue 5): dual multipliers eliminated
-    # from the [u, z] system. ContactProblem(condensation=True) is being added
-    # separately; until ContactProblem accepts the keyword this variant is listed as
-    # not implemented (``available_variants``), once it does, it runs with no change
-    # here. ``problem_options`` go to ContactProblem directly (the demos have no flag).
-    {"name": "dual-condensed", "args": [], "problem_options": {"condensation": True},
+    {"name": "dual-condensed", "args": ["--condensation"],
      "label": "dual multipliers condensed out of the system (condensation=True)"},
 ]
-
-
-def variant_available(variant: dict) -> bool:
-    """Does ContactProblem accept every keyword of the variant's ``problem_options``?"""
-    import inspect
-
-    from dolfinx_mortar.problem import ContactProblem
-
-    accepted = inspect.signature(ContactProblem.__init__).parameters
-    return all(name in accepted for name in variant.get("problem_options", {}))
-
-
-def available_variants(variants: list[dict]) -> tuple[list[dict], list[dict]]:
-    """(the variants to run, the not implemented ones with a status line)."""
-    run, missing = [], []
-    for variant in variants:
-        if variant_available(variant):
-            run.append(variant)
-        else:
-            options = ", ".join(f"{k}={v!r}" for k, v in variant["problem_options"].items())
-            missing.append({"name": variant["name"], "label": variant["label"],
-                            "status": f"not implemented: ContactProblem has no {options}"})
-    return run, missing
-
-
 CASES = {
     "hertz-A": {"demo": "hertz", "args": ["--case", "A"], "title": "Hertz case A (rigid plate)",
                 "error": "l2_pressure_error_rel"},
@@ -276,15 +244,13 @@ def quiet_logging() -> None:
 
 
 def run_demo(name: str, argv: list[str], comm: MPI.Intracomm = MPI.COMM_WORLD,
-             on_problem: typing.Callable | None = None,
-             problem_options: dict | None = None) -> dict:
+             on_problem: typing.Callable | None = None) -> dict:
     """``demos/NAME.py``'s main(argv) with its printing captured.
 
     ``on_problem(problem)`` is called right after the demo builds its
     ContactProblem (to read sizes or to switch a reuse off for an A/B timing);
     whatever it returns is stored under ``summary["probe"]``, with the
-    process CPU time of all ``solve`` calls (``solve_cpu_s``). ``problem_options``
-    are passed to the demo's ContactProblem on top of what its arguments give.
+    process CPU time of all ``solve`` calls (``solve_cpu_s``).
     """
     module = demo(name)
     original = module.ContactProblem
@@ -292,7 +258,7 @@ def run_demo(name: str, argv: list[str], comm: MPI.Intracomm = MPI.COMM_WORLD,
 
     class Probed(original):
         def __init__(self, *args, **kwargs):
-            super().__init__(*args, **{**kwargs, **(problem_options or {})})
+            super().__init__(*args, **kwargs)
             if on_problem is not None:
                 probe.update(on_problem(self) or {})
 
@@ -383,9 +349,7 @@ def iterations_per_step(summary: dict) -> list[int]:
 
 
 def work_precision(refinements: list[int], repeats: int, variants: list[dict]) -> dict:
-    """Every case x refinement x variant, ``repeats`` times (interleaved: repeat outermost);
-    variants that ContactProblem cannot run yet are listed as not implemented."""
-    variants, not_implemented = available_variants(variants)
+    """Every case x refinement x variant, ``repeats`` times (interleaved: repeat outermost)."""
     samples: dict[tuple, list[dict]] = {}
     failures: dict[tuple, str] = {}
     penalty_base: dict[tuple, float] = {}
@@ -407,8 +371,7 @@ def work_precision(refinements: list[int], repeats: int, variants: list[dict]) -
                         argv += ["--penalty", repr(variant["penalty"] * base)]
                     start = time.perf_counter()
                     try:
-                        summary = run_demo(case["demo"], argv, on_problem=sizes_probe,
-                                           problem_options=variant.get("problem_options"))
+                        summary = run_demo(case["demo"], argv, on_problem=sizes_probe)
                     except Exception as error:  # noqa: BLE001 - recorded and reported
                         failures[key] = f"{type(error).__name__}: {error}"
                         log(f"[work-precision {repeat + 1}/{repeats}] {case_name} r{refinement} "
@@ -445,7 +408,6 @@ def work_precision(refinements: list[int], repeats: int, variants: list[dict]) -
                 record.update(
                     failed=False,
                     argv=first["argv"],
-                    problem_options=variant.get("problem_options", {}),
                     repeats=len(runs_of_key),
                     num_dofs=first["num_dofs"],
                     errors=errors,
@@ -466,7 +428,7 @@ def work_precision(refinements: list[int], repeats: int, variants: list[dict]) -
                 )
                 runs.append(record)
     return {"refinements": refinements, "repeats": repeats, "runs": runs,
-            "variants": variants, "not_implemented": not_implemented,
+            "variants": variants,
             "cases": {name: {k: v for k, v in case.items()} for name, case in CASES.items()}}
 
 
@@ -518,7 +480,7 @@ def work_precision_markdown(data: dict, finest_only: bool = False) -> str:
                                   "linear solve")]
                      + [f"{run['solve_cpu_s']:.3g}", f"{run['wall_time_s']:.3g}"])
             lines.append("| " + " | ".join(cells) + " |")
-        for item in data["not_implemented"]:
+        for item in data.get("not_implemented", []):  # runs before the variant existed
             lines.append(f"| {item['name']} | - | - | {item['status']} |"
                          + " |" * (len(header) - 4))
         lines.append("")

@@ -358,16 +358,6 @@ def test_separation_after_contact(lift, options):
     check_separation("neo-hookean", lift, **options)
 
 
-STALE_SWEPT_PAIRS = (
-    "the swept search (b2f4494, search.py: boxes from the positions of the last search to "
-    "now) keeps the pairs its last sweep crossed: lifted by 5.05 in 2 load steps, the last "
-    "search swept from a position still within the margin of the foundation, so 6 "
-    "candidate pairs remain at the end (no active node, zero force), and they stay: a "
-    "further solve at the same load does not search again (nothing moves), so the mortar "
-    "work for surfaces far apart never stops. (Semismooth and penalty cut back once here, "
-    "search more often and end with 0 pairs.) Fix: sweep from the last converged state, "
-    "or search again without the sweep when the swept result has no active node"
-)
 SEPARATION_OPTIONS = {
     "semismooth": {},
     "penalty": {"method": "penalty"},
@@ -383,13 +373,7 @@ def separation_params():
     for lift in [1e-6, 0.1, 5.0]:
         for material in ["linear", "neo-hookean"]:
             for name, options in SEPARATION_OPTIONS.items():
-                marks = []
-                stale = ("augmented", "standard", "quadrilateral", "slave-bottom")
-                if lift == 5.0 and material == "neo-hookean" and name in stale:
-                    marks = [pytest.mark.xfail(strict=True, reason=STALE_SWEPT_PAIRS)]
-                yield pytest.param(
-                    lift, material, options, marks=marks, id=f"{lift}-{material}-{name}"
-                )
+                yield pytest.param(lift, material, options, id=f"{lift}-{material}-{name}")
 
 
 @pytest.mark.slow
