@@ -122,9 +122,13 @@ class ContactProblem:
             default: the conditions decouple node by node, and on Hertz it
             puts the contact edge within one element where standard does not
             (docs/benchmarks.md).
-        c_n: complementarity parameter; default about E/h, estimated from the
-            bulk stiffness at the slave nodes and the slave facet length.
-        penalty: eps of penalty and augmented Lagrange; default the same E/h
+        c_n: complementarity parameter (unit pressure / length); default about
+            E/h of the two sides in series, 1 / (1/s_slave + 1/s_master), each s
+            estimated from the bulk stiffness at that side's nodes and its facet
+            length. It changes the Newton path, never the solution (measured on
+            ironing: max 11 Newton iterations with the slave's E/h alone, 8 with
+            the series value).
+        penalty: eps of penalty and augmented Lagrange; default the slave's E/h
             (10 E/h for augmented Lagrange, whose Uzawa updates converge
             faster with a stiffer eps: measured 0.87 per update at E/h, 0.43 at
             10 E/h on Hertz).
@@ -255,9 +259,12 @@ class ContactProblem:
         self.b = self.layout.create_vector()
         self._read_state_into_x()
 
-        self._row_scale, self._slave_length = self._stiffness_scale()
+        self._row_scale, self._slave_length, master_scale = self._stiffness_scale()
         self._dirichlet_scale = self._row_scale * self._slave_length
-        self.c_n = float(c_n) if c_n is not None else self._row_scale
+        # the two sides in series: the compliance of the contact, so that a stiff
+        # slave on a soft master (ironing's die) does not get an overly stiff c_n
+        contact_scale = 1.0 / (1.0 / self._row_scale + 1.0 / master_scale)
+        self.c_n = float(c_n) if c_n is not None else contact_scale
         if penalty is None:
             # Uzawa contracts like 1 / (1 + eps * contact compliance): a stiffer
             # eps makes augmented Lagrange converge in far fewer updates
@@ -289,40 +296,37 @@ class ContactProblem:
                     "supported)"
                 )
 
-    def _stiffness_scale(self) -> tuple[float, float]:
-        """(s, h): s about E/h, the mean bulk stiffness diagonal at slave dofs over h,
-        the mean slave facet length (reference configuration)."""
+    def _stiffness_scale(self) -> tuple[float, float, float]:
+        """(s, h, s_master): s about E/h of the slave side (the mean bulk stiffness
+        diagonal at slave dofs over h, the mean slave facet length in the reference
+        configuration) and the same s_master of the master side."""
         self._K.zeroEntries()
         dolfinx.fem.petsc.assemble_matrix(self._K, self.J_form)
         self._K.assemble()
         diagonal = self._K.getDiagonal()
         start = self._K.getOwnershipRange()[0]
-        values, lengths = [], []
-        for interface in self.interfaces:
-            owned = interface.slave.node_owned
-            dofs = interface.slave.node_dofs()[owned].reshape(-1) - start
-            values.append(np.abs(diagonal.getArray()[dofs]))
-            X = interface.slave.reference_coordinates[interface.slave.facets]
-            lengths.append(np.linalg.norm(X[:, 1] - X[:, 0], axis=1))
-        sums = self.comm.allreduce(
-            np.array(
-                [
-                    sum(v.sum() for v in values),
-                    sum(v.size for v in values),
-                    sum(v.sum() for v in lengths),
-                    sum(v.size for v in lengths),
-                ]
-            ),
-            op=MPI.SUM,
-        )
+        scales = []
+        for side in ("slave", "master"):
+            sums = np.zeros(4)
+            for interface in self.interfaces:
+                surface = getattr(interface, side)
+                dofs = surface.node_dofs()[surface.node_owned].reshape(-1) - start
+                values = np.abs(diagonal.getArray()[dofs])
+                X = surface.reference_coordinates[surface.facets]
+                lengths = np.linalg.norm(X[:, 1] - X[:, 0], axis=1)
+                sums += [values.sum(), values.size, lengths.sum(), lengths.size]
+            sums = self.comm.allreduce(sums, op=MPI.SUM)
+            if sums[1] == 0 or sums[3] == 0 or not sums[0] > 0 or not sums[2] > 0:
+                diagonal.destroy()
+                raise ValueError(
+                    f"cannot estimate the stiffness scale at the {side} nodes: the bulk "
+                    f"Jacobian has a zero diagonal there (is the {side} surface on a body of "
+                    "the form?)"
+                )
+            length = float(sums[2] / sums[3])
+            scales.append((float(sums[0] / sums[1]) / length, length))
         diagonal.destroy()
-        if sums[1] == 0 or sums[3] == 0 or not sums[0] > 0 or not sums[2] > 0:
-            raise ValueError(
-                "cannot estimate the stiffness scale at the slave nodes: the bulk Jacobian "
-                "has a zero diagonal there (is the slave surface on a body of the form?)"
-            )
-        length = float(sums[2] / sums[3])
-        return float(sums[0] / sums[1]) / length, length
+        return scales[0][0], scales[0][1], scales[1][0]
 
     def _setup_snes(self, petsc_options: dict, prefix: str) -> None:
         """SNES with our defaults; ``petsc_options`` and then the options database win.
