@@ -117,3 +117,24 @@ def interpolation_points(V: dolfinx.fem.FunctionSpace):
     """Reference points for interpolating an Expression into V (a method until 0.9)."""
     points = V.element.interpolation_points
     return points if DOLFINX_VERSION >= (0, 10) else points()
+
+
+def add_matrix_local(A, form, bcs) -> None:
+    """Add a bilinear form into A through A's local-to-global map, dof by dof.
+
+    The form's local dofs (owned and ghost, unrolled: block * bs + component)
+    are A's local indices (MatSetValuesLocal), as dolfinx assembles the
+    blocks of a block matrix. Rows and columns of the dofs in ``bcs`` get
+    zeros, their diagonal nothing. dolfinx 0.10 onwards packs constants and
+    coefficients from the Python form, 0.9 from the C++ one.
+    """
+    import dolfinx.cpp as _cpp
+
+    if DOLFINX_VERSION >= (0, 10):
+        constants = dolfinx.fem.pack_constants(form)
+        coefficients = dolfinx.fem.pack_coefficients(form)
+    else:
+        constants = _cpp.fem.pack_constants(form._cpp_object)
+        coefficients = _cpp.fem.pack_coefficients(form._cpp_object)
+    _cpp.fem.petsc.assemble_matrix(A, form._cpp_object, constants, coefficients,
+                                   [bc._cpp_object for bc in bcs], True)

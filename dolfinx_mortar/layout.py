@@ -43,8 +43,8 @@ class BlockLayout:
         self.num_fields = sizes.shape[1]
         self.num_u = sizes[:, 0]
         self.owned_u = self.owned(0)
-        self.owned_z = slice(int(self.within_rank[rank, 1]) if self.num_fields > 1 else self.num_owned,
-                             self.num_owned)
+        first_z = int(self.within_rank[rank, 1]) if self.num_fields > 1 else self.num_owned
+        self.owned_z = slice(first_z, self.num_owned)
 
     def owned(self, field: int) -> slice:
         """This rank's rows of ``field`` within its owned block."""
@@ -152,7 +152,7 @@ class CooMatrix:
 
     @classmethod
     def from_blocks(cls, comm: MPI.Intracomm, row_blocks, col_blocks, block_shape,
-                    row_sizes, col_sizes) -> CooMatrix:
+                    row_sizes, col_sizes, create: bool = True) -> CooMatrix:
         """The matrix of ``CooMatrix(comm, rows, cols, ...)`` for a pattern of dense blocks.
 
         Group g has the entries (row_blocks[g, i] * br + a, col_blocks[g, j] * bc + b)
@@ -160,7 +160,9 @@ class CooMatrix:
         drops its rows or columns. The block pattern is a sparse product of
         the groups' row- and column-block incidences (no sort of the
         entries); where a group's blocks go is looked up when the group is
-        first assembled.
+        first assembled. With ``create=False`` no PETSc matrix is made: the
+        object is only the pattern (``pattern_csr``) and the summation of
+        values for :meth:`add_groups` into another matrix.
         """
         self = cls.__new__(cls)
         row_blocks = np.asarray(row_blocks, dtype=np.int64)
@@ -213,9 +215,16 @@ class CooMatrix:
                                  dtype=np.int32 if num_blocks < 2**31 - 1 else np.int64),
             "known": np.zeros(num_groups, dtype=bool),
         }
+        if not create:
+            self.mat = None
+            return self
         self._create(comm, row_sizes, col_sizes)
         del self._indptr, self._indices  # the preallocation was their only use
         return self
+
+    def pattern_csr(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(rowmap, indptr, indices): the global rows of the pattern and their sorted columns."""
+        return self._rowmap, self._indptr, self._indices
 
     def _create(self, comm: MPI.Intracomm, row_sizes, col_sizes) -> None:
         self.mat = PETSc.Mat().create(comm=comm)
@@ -272,6 +281,19 @@ class CooMatrix:
         shape (nr, br, nc, bc, len(groups)) (or any shape with those
         entries in that order): the group axis last.
         """
+        return self._set(self._summed_groups(values, groups), self._ijv)
+
+    def add_groups(self, matrix: PETSc.Mat, values, groups) -> None:
+        """Add the listed groups' values to ``matrix`` (not assembled; its pattern has ours)."""
+        groups = np.asarray(groups, dtype=np.int64).reshape(-1)
+        if groups.size == 0:
+            return
+        indptr, indices, rowmap = self._ijv
+        matrix.setValuesIJV(indptr, indices, self._summed_groups(values, groups),
+                            addv=PETSc.InsertMode.ADD_VALUES, rowmap=rowmap)
+
+    def _summed_groups(self, values, groups) -> np.ndarray:
+        """The groups' values summed into the pattern, in the order of ``_ijv``."""
         if self._blocks is None:
             raise TypeError("assemble_groups needs a matrix built by CooMatrix.from_blocks")
         groups = np.asarray(groups, dtype=np.int64).reshape(-1)
@@ -289,7 +311,7 @@ class CooMatrix:
                 weights = np.ascontiguousarray(values[:, a, :, b, :]).reshape(-1)
                 sums = np.bincount(position, weights=weights, minlength=count + 1)
                 summed[a, :, b] = sums[:count]
-        return self._set(summed.reshape(-1), self._ijv)
+        return summed.reshape(-1)
 
     def _positions(self, groups: np.ndarray) -> np.ndarray:
         """(nr, nc, len(groups)) positions of the groups' blocks; dropped ones past the end."""
@@ -309,6 +331,106 @@ class CooMatrix:
         result = position[groups].transpose(1, 2, 0).astype(np.int64)
         result[result < 0] = blocks["count"]
         return result
+
+    def destroy(self) -> None:
+        if self.mat is not None:
+            self.mat.destroy()
+
+
+class MonolithicMatrix:
+    """The system matrix of a layout: a bulk block assembled in place, dense blocks, a diagonal.
+
+    The bulk bilinear form is assembled straight into this matrix through
+    its local-to-global map, which sends the local displacement dofs
+    (owned and ghost, unrolled) to their monolithic rows (MatSetValuesLocal,
+    as dolfinx assembles the blocks of a block matrix): no copy of the bulk
+    matrix. The dense blocks (one group per mortar pair, by global index,
+    rows of other ranks allowed) and a diagonal of owned rows are added to
+    it. The pattern is the union of the three, preallocated exactly and
+    fixed (new nonzeros are an error); another group pattern needs another
+    MonolithicMatrix.
+
+    Args:
+        comm: communicator.
+        sizes: (owned, global) rows and columns.
+        local_to_global: monolithic index of each local displacement dof.
+        bulk_pattern: (indptr, indices) of the bulk block's owned rows in
+            monolithic columns; they are the first rows of this rank.
+        group_rows, group_cols: (groups, nr) and (groups, nc) monolithic
+            indices of each group's dense block; negative ones are dropped.
+        diagonal_rows: owned monolithic rows that get a diagonal entry.
+    """
+
+    def __init__(self, comm: MPI.Intracomm, sizes, local_to_global, bulk_pattern,
+                 group_rows, group_cols, diagonal_rows):
+        import scipy.sparse
+
+        num_owned, num_global = (int(n) for n in sizes)
+        first = comm.exscan(num_owned) or 0
+        self.groups = CooMatrix.from_blocks(comm, group_rows, group_cols, (1, 1), sizes, sizes,
+                                            create=False)
+        group_rowmap, group_indptr, group_indices = self.groups.pattern_csr()
+        self.diagonal_rows = np.asarray(diagonal_rows, dtype=PETSc.IntType)
+        bulk_indptr, bulk_indices = bulk_pattern
+        num_bulk = bulk_indptr.size - 1
+        owned = bool(np.all((group_rowmap >= first) & (group_rowmap < first + num_owned)))
+        self.mat = PETSc.Mat().create(comm=comm)
+        self.mat.setType(PETSc.Mat.Type.AIJ)
+        self.mat.setSizes((sizes, sizes))
+        if comm.allreduce(owned, op=MPI.LAND):
+            shape = (num_owned, max(num_global, 1))
+            bulk_ptr = np.concatenate([bulk_indptr, np.full(num_owned - num_bulk, bulk_indptr[-1])])
+            pattern = scipy.sparse.csr_matrix(
+                (np.ones(bulk_indices.size), bulk_indices, bulk_ptr), shape=shape)
+            group_local = np.repeat(group_rowmap.astype(np.int64) - first, np.diff(group_indptr))
+            diagonal = self.diagonal_rows.astype(np.int64)
+            extra = scipy.sparse.coo_matrix(
+                (np.ones(group_local.size + diagonal.size),
+                 (np.concatenate([group_local, diagonal - first]),
+                  np.concatenate([group_indices, diagonal]))), shape=shape).tocsr()
+            pattern = (pattern + extra).tocsr()
+            pattern.sum_duplicates()
+            pattern.sort_indices()
+            self.mat.setPreallocationCSR((pattern.indptr.astype(PETSc.IntType),
+                                          pattern.indices.astype(PETSc.IntType)))
+        else:
+            preallocator = PETSc.Mat().create(comm=comm)
+            preallocator.setType(PETSc.Mat.Type.PREALLOCATOR)
+            preallocator.setSizes((sizes, sizes))
+            preallocator.setUp()
+            insert = PETSc.InsertMode.INSERT_VALUES
+            preallocator.setValuesIJV(
+                bulk_indptr.astype(PETSc.IntType), bulk_indices.astype(PETSc.IntType),
+                np.zeros(bulk_indices.size), addv=insert,
+                rowmap=np.arange(first, first + num_bulk, dtype=PETSc.IntType))
+            if group_indices.size:
+                preallocator.setValuesIJV(group_indptr, group_indices,
+                                          np.zeros(group_indices.size), addv=insert,
+                                          rowmap=group_rowmap)
+            self._add_diagonal(preallocator, np.zeros(self.diagonal_rows.size), insert)
+            preallocator.assemble()
+            preallocator.preallocatorPreallocate(self.mat, fill=True)
+            preallocator.destroy()
+        self.mat.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+        self.mat.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True)
+        lgmap = PETSc.LGMap().create(np.asarray(local_to_global, dtype=PETSc.IntType), comm=comm)
+        self.mat.setLGMap(lgmap, lgmap)
+        lgmap.destroy()
+
+    def _add_diagonal(self, matrix: PETSc.Mat, values: np.ndarray, mode) -> None:
+        if self.diagonal_rows.size:
+            matrix.setValuesIJV(np.arange(self.diagonal_rows.size + 1, dtype=PETSc.IntType),
+                                self.diagonal_rows, values, addv=mode, rowmap=self.diagonal_rows)
+
+    def add(self, group_values, groups, diagonal_values) -> None:
+        """Add the listed groups' blocks, (nr, nc, len(groups)), and the diagonal values.
+
+        The caller zeroes the matrix, adds the bulk form through the
+        local-to-global map (:func:`compat.add_matrix_local`) and assembles.
+        """
+        self.groups.add_groups(self.mat, group_values, groups)
+        self._add_diagonal(self.mat, np.asarray(diagonal_values, dtype=PETSc.ScalarType),
+                           PETSc.InsertMode.ADD_VALUES)
 
     def destroy(self) -> None:
         self.mat.destroy()

@@ -65,7 +65,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from . import compat, kernels
-from .layout import BlockLayout, CooMatrix, csr_to_coo, dirichlet_dofs
+from .layout import BlockLayout, MonolithicMatrix, dirichlet_dofs
 from .mortar import MortarInterface
 
 logger = logging.getLogger("dolfinx_mortar")
@@ -253,7 +253,7 @@ class ContactProblem:
 
         self._b_u = compat.create_vector(self.F_form)
         self._K = compat.create_matrix(self.J_form)
-        self._system: CooMatrix | None = None
+        self._system: MonolithicMatrix | None = None
         self._system_versions: tuple = ()
         self.x = self.layout.create_vector()
         self.b = self.layout.create_vector()
@@ -433,22 +433,37 @@ class ContactProblem:
             z.getArray()[:] = array[self.layout.owned(field)]
 
     def _inverted(self) -> bool:
-        """Collective: does any cell have a non-positive Jacobian determinant?"""
-        mesh = self.V.mesh
-        geometry = compat.geometry_dofmap(mesh)
-        num_cells = mesh.topology.index_map(mesh.topology.dim).size_local
-        X = mesh.geometry.x[:, :2][geometry[:num_cells]]
-        blocks = self.V.dofmap.list[:num_cells]
-        x = X + self.u.x.array.reshape(-1, 2)[blocks]
-        if geometry.shape[1] == 3:
-            corners = [(0, 1, 2)]
-        else:
-            corners = [(0, 1, 2), (1, 3, 0), (3, 2, 1), (2, 0, 3)]
+        """Collective: does any cell have a non-positive Jacobian determinant?
+
+        At each corner (a; b, c) the determinant is the cross product of the
+        current edges X_b - X_a + u_b - u_a and X_c - X_a + u_c - u_a; the
+        reference edges, the sign of their determinant and the dofs are kept
+        (this runs in every residual evaluation, over all cells).
+        """
+        if not hasattr(self, "_corner_data"):
+            mesh = self.V.mesh
+            geometry = compat.geometry_dofmap(mesh)
+            num_cells = mesh.topology.index_map(mesh.topology.dim).size_local
+            X = mesh.geometry.x[:, :2][geometry[:num_cells]]
+            blocks = np.asarray(self.V.dofmap.list[:num_cells], dtype=np.int64)
+            if geometry.shape[1] == 3:
+                corners = [(0, 1, 2)]
+            else:
+                corners = [(0, 1, 2), (1, 3, 0), (3, 2, 1), (2, 0, 3)]
+            self._corner_data = []
+            for a, b, c in corners:
+                first, second = X[:, b] - X[:, a], X[:, c] - X[:, a]
+                sign = np.sign(_cross(first, second))
+                self._corner_data.append(
+                    (blocks[:, a], blocks[:, b], blocks[:, c], first * sign[:, None],
+                     second, sign))
+        u = self.u.x.array.reshape(-1, 2)
         bad = False
-        for a, b, c in corners:
-            current = _cross(x[:, b] - x[:, a], x[:, c] - x[:, a])
-            reference = _cross(X[:, b] - X[:, a], X[:, c] - X[:, a])
-            bad |= bool(np.any(current * reference <= 0.0))
+        for a, b, c, first, second, sign in self._corner_data:
+            ua = u[a]
+            # sign * det(first + du_b, second + du_c), with first already times sign
+            current = _cross(first + sign[:, None] * (u[b] - ua), second + (u[c] - ua))
+            bad |= bool(np.any(current <= 0.0))
         return bool(self.comm.allreduce(bad, op=MPI.LOR))
 
     # -- contact -----------------------------------------------------------
@@ -572,84 +587,141 @@ class ContactProblem:
         self._assemble_system()
 
     def _assemble_system(self) -> PETSc.Mat:
+        """The monolithic Jacobian: bulk form assembled in place, contact blocks added.
+
+        The matrix (its pattern: bulk, the candidate pairs' dense blocks, the
+        diagonal) is rebuilt only when a new search changed the pairs.
+        """
         start = time.perf_counter()
-        K = self._K
-        K.zeroEntries()
-        dolfinx.fem.petsc.assemble_matrix(K, self.J_form, bcs=self.bcs)
-        K.assemble()
-        self.timings["bulk assembly"] += time.perf_counter() - start
+        self._update_system_pattern()
+        zeroing = time.perf_counter()
+        self._system.mat.zeroEntries()
+        zeroing = time.perf_counter() - zeroing
+        group_values, groups = [], []
+        offset = 0
+        for k in range(len(self.interfaces)):
+            blocks = self._contact_blocks(k)
+            if blocks is not None:
+                group_values.append(blocks[0])
+                groups.append(offset + blocks[1])
+            offset += self._system_pattern[0][k].shape[0]
+        if group_values:
+            group_values = np.concatenate(group_values, axis=2)
+            groups = np.concatenate(groups)
+        else:
+            group_values, groups = np.zeros((10, 14, 0)), np.zeros(0, dtype=np.int64)
+        diagonal = np.concatenate(
+            [np.full(self._system_fixed_rows.size, self._dirichlet_scale)]
+            + [self._multiplier_rows(k)[3] for k in range(len(self.interfaces))])
+        matrix = self._system.mat
+        self._system.add(group_values, groups, diagonal)
+        contact = time.perf_counter() - start - zeroing
         start = time.perf_counter()
-        versions = tuple(i._pattern_version for i in self.interfaces)
-        blocks = [self._contact_blocks(k) for k in range(len(self.interfaces))]
-        if self._system is None or versions != self._system_versions:
-            rows, cols, _ = csr_to_coo(K)
-            all_rows = [self.layout.u(rows)] + [b[0] for b in blocks]
-            all_cols = [self.layout.u(cols)] + [b[1] for b in blocks]
-            if self._system is not None:
-                self._system.destroy()
-            self._system = self.layout.create_matrix(
-                np.concatenate(all_rows), np.concatenate(all_cols)
-            )
-            self._system_versions = versions
-            if hasattr(self, "snes"):
-                self.snes.setJacobian(self._jacobian, self._system.mat)
-        values = [K.getValuesCSR()[2]] + [b[2] for b in blocks]
-        matrix = self._system.assemble(np.concatenate(values))
-        matrix.zeroRows(
-            self.layout.u(self._fixed_dofs).astype(PETSc.IntType), diag=self._dirichlet_scale
-        )
-        self.timings["mortar integration"] += time.perf_counter() - start
+        compat.add_matrix_local(matrix, self.J_form, self.bcs)
+        matrix.assemble()
+        self.timings["bulk assembly"] += time.perf_counter() - start + zeroing
+        self.timings["mortar integration"] += contact
         return matrix
 
-    def _contact_blocks(self, k: int):
-        """COO (rows, cols, values) of pair k's blocks in the monolithic numbering."""
+    def _contact_pattern(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Monolithic rows (n, 10) and columns (n, 14) of pair k's dense block per candidate pair.
+
+        Rows: the 8 force dofs (slave a, b, master c, d) and the 2 multipliers;
+        columns: the 12 pair dofs and the 2 multipliers; rows of Dirichlet dofs
+        are dropped (-1), they are identity rows.
+        """
         interface = self.interfaces[k]
-        layout = self.layout
-        field = k + 1
-        owned_rows = interface.multiplier_offset + np.arange(interface.num_owned_multipliers)
         if interface.quantities is None:
-            # before the first residual evaluation: an identity block, no pairs yet
-            diagonal = layout.z(owned_rows, field)
-            return diagonal, diagonal, np.ones(diagonal.size)
+            return np.zeros((0, 10), dtype=np.int64), np.zeros((0, 14), dtype=np.int64)
+        layout = self.layout
+        force_dofs = layout.u(interface._force_columns())
+        force_dofs[np.isin(force_dofs, self._system_fixed_all)] = -1
+        pair_z = layout.z(interface.pair_multipliers, k + 1)
+        rows = np.concatenate([force_dofs, pair_z], axis=1)
+        cols = np.concatenate([layout.u(interface.pair_dofs), pair_z], axis=1)
+        return rows, cols
+
+    def _update_system_pattern(self) -> None:
+        """(Re)build the monolithic matrix when the pairs' pattern changed (not on every search)."""
+        versions = tuple(i._pattern_version for i in self.interfaces)
+        if self._system is not None and versions == self._system_versions:
+            return
+        layout = self.layout
+        if not hasattr(self, "_system_bulk"):
+            # once: the bulk pattern in monolithic numbering and the local-to-global map
+            indptr, indices, _ = self._K.getValuesCSR()
+            index_map, bs = self.V.dofmap.index_map, self.V.dofmap.index_map_bs
+            blocks = index_map.local_to_global(
+                np.arange(index_map.size_local + index_map.num_ghosts, dtype=np.int32))
+            local_dofs = (blocks[:, None] * bs + np.arange(bs)).reshape(-1)
+            self._system_bulk = ((indptr.astype(np.int64), layout.u(indices)), layout.u(local_dofs))
+            fixed = layout.u(self._fixed_dofs)
+            # (dirichlet_dofs may list a few dofs owned by another rank; their owner has them too)
+            first = int(layout.offsets[self.comm.rank])
+            fixed = fixed[(fixed >= first) & (fixed < first + layout.num_u[self.comm.rank])]
+            self._system_fixed_rows = fixed
+            self._system_fixed_all = np.unique(np.concatenate(self.comm.allgather(fixed)))
+        pattern = tuple(zip(*(self._contact_pattern(k) for k in range(len(self.interfaces))),
+                            strict=True))
+        self._system_versions = versions
+        old = getattr(self, "_system_pattern", None)
+        same = self._system is not None and old is not None and all(
+            np.array_equal(a, b) for a, b in zip(old[0] + old[1], pattern[0] + pattern[1],
+                                                 strict=True))
+        if self.comm.allreduce(same, op=MPI.LAND):
+            return  # a search found the same pairs (or none again): keep the matrix
+        diagonal_rows = np.concatenate(
+            [self._system_fixed_rows]
+            + [layout.z(i.multiplier_offset + np.arange(i.num_owned_multipliers), k + 1)
+               for k, i in enumerate(self.interfaces)])
+        if self._system is not None:
+            self._system.destroy()
+        bulk_pattern, local_to_global = self._system_bulk
+        self._system = MonolithicMatrix(
+            self.comm, (layout.num_owned, layout.num_global), local_to_global, bulk_pattern,
+            np.concatenate(pattern[0]), np.concatenate(pattern[1]), diagonal_rows)
+        self._system_pattern = pattern
+        if hasattr(self, "snes"):
+            self.snes.setJacobian(self._jacobian, self._system.mat)
+
+    def _contact_blocks(self, k: int):
+        """Pair k's dense blocks (10, 14, m) and which candidate pairs they belong to (m,).
+
+        Rows and columns as in :meth:`_contact_pattern`: d(-B^T z)/du (8 x 12),
+        d(-B^T z)/dz = -B^T (8 x 2), d C/du (2 x 12); only the pairs that
+        contribute, from the factorized gradients (no full dual numbers).
+        None before the first evaluation (no pairs yet).
+        """
+        interface = self.interfaces[k]
         q = interface.quantities
-        z_pair = interface.node_values(self.multipliers[k])[interface.pair_nodes[:, 1:3]]
-        coefficients = interface._force_coefficients(q)  # (n, j, 4, 2)
-        force_dofs = layout.u(interface._force_columns())  # (n, 8)
-        pair_dofs = layout.u(interface.pair_dofs)  # (n, 12)
-        pair_z = layout.z(interface.pair_multipliers, field)  # (n, 2)
-        n = force_dofs.shape[0]
-        # d(-B^T z)/du
-        tangent = -np.einsum("nj,njkcv->nkcv", z_pair, coefficients.grad).reshape(n, 8, 12)
-        # d(-B^T z)/dz
-        coupling = -coefficients.value.reshape(n, 2, 8).transpose(0, 2, 1)
-        residual, alpha, beta, delta = self._multiplier_rows(k)
+        if q is None:
+            return None
+        rows = interface._rows(q)
+        z_nodes = interface.node_values(self.multipliers[k])
+        _, alpha, beta, _ = self._multiplier_rows(k)
         vectors = self._row_coefficients[k]
         vectors["gap"].getArray()[:] = alpha
         vectors["area"].getArray()[:] = beta
-        alpha_pair = interface.node_values(vectors["gap"])[interface.pair_nodes[:, 1:3]]
-        beta_pair = interface.node_values(vectors["area"])[interface.pair_nodes[:, 1:3]]
-        constraint = alpha_pair[:, :, None] * q.gap.grad + beta_pair[:, :, None] * q.area.grad
-        diagonal = layout.z(owned_rows, field)
-        rows = np.concatenate(
-            [
-                np.broadcast_to(force_dofs[:, :, None], (n, 8, 12)).reshape(-1),
-                np.broadcast_to(force_dofs[:, :, None], (n, 8, 2)).reshape(-1),
-                np.broadcast_to(pair_z[:, :, None], (n, 2, 12)).reshape(-1),
-                diagonal,
-            ]
-        )
-        cols = np.concatenate(
-            [
-                np.broadcast_to(pair_dofs[:, None, :], (n, 8, 12)).reshape(-1),
-                np.broadcast_to(pair_z[:, None, :], (n, 8, 2)).reshape(-1),
-                np.broadcast_to(pair_dofs[:, None, :], (n, 2, 12)).reshape(-1),
-                diagonal,
-            ]
-        )
-        values = np.concatenate(
-            [tangent.reshape(-1), coupling.reshape(-1), constraint.reshape(-1), delta]
-        )
-        return rows, cols, values
+        alpha_nodes = interface.node_values(vectors["gap"])
+        beta_nodes = interface.node_values(vectors["area"])
+        if rows.size == 0:
+            return None
+        slave_nodes = interface.pair_nodes[rows, 1:3]
+        z_pair, alpha_pair, beta_pair = (
+            v[slave_nodes] for v in (z_nodes, alpha_nodes, beta_nodes))
+        gradients = kernels.PairGradients
+        dn, mn = gradients.DN, gradients.MN
+        nodes = [(a, c) for a in range(2) for c in range(2)]
+        # -sum_j z_j d(coefficient_jkc)/dx: +Dn for the slave nodes, -Mn for the master nodes
+        terms = [[(dn + 4 * j + 2 * a + c, z_pair[:, j]) for j in range(2)] for a, c in nodes]
+        terms += [[(mn + 4 * j + 2 * a + c, -z_pair[:, j]) for j in range(2)] for a, c in nodes]
+        terms += [[(gradients.GAP + j, alpha_pair[:, j]), (gradients.AREA + j, beta_pair[:, j])]
+                  for j in range(2)]
+        values = np.zeros((10, 14, rows.size))
+        values[:, :12] = interface._combined_gradients(q, rows, terms)
+        coefficients = interface._force_coefficient_values(q, rows)  # (m, j, 4, 2)
+        values[:8, 12:] = -coefficients.reshape(rows.size, 2, 8).transpose(2, 1, 0)
+        return values, rows
 
     # -- solving -----------------------------------------------------------
 
@@ -824,9 +896,11 @@ class ContactProblem:
         q = interface.quantities
         if q is None:
             return np.zeros(2), np.zeros(2)
-        z_pair = interface.node_values(self.multipliers[k])[interface.pair_nodes[:, 1:3]]
-        slave = -np.einsum("nj,njkc->c", z_pair, q.Dn.value)
-        master = np.einsum("nj,njlc->c", z_pair, q.Mn.value)
+        rows = interface._rows(q)
+        z_pair = interface.node_values(self.multipliers[k])[interface.pair_nodes[rows, 1:3]]
+        coefficients = interface._force_coefficient_values(q, rows)  # -Dn (slave), Mn (master)
+        slave = np.einsum("nj,njkc->c", z_pair, coefficients[:, :, :2])
+        master = np.einsum("nj,njlc->c", z_pair, coefficients[:, :, 2:])
         return (self.comm.allreduce(slave, op=MPI.SUM), self.comm.allreduce(master, op=MPI.SUM))
 
     def pressure_function(self, k: int = 0, function: dolfinx.fem.Function | None = None):
