@@ -35,7 +35,7 @@ Slave nodes that no master facet covers cannot become active and stay
 inactive (z_j = 0) without any mortar work. With no active node the z-rows
 are identity rows, so the system is regular whenever the bulk problem is; a
 body held only by contact that loses every active node has a singular rigid
-mode, which MUMPS' null-pivot detection (ICNTL(24) with CNTL(3) = 1e-12, on
+mode, which MUMPS' null-pivot detection (ICNTL(24) with CNTL(3) = 1e-8, on
 by default) sets to a zero step instead of an arbitrary huge one; the residual
 test stays exact, so this can only slow Newton down, never change a solution.
 
@@ -349,10 +349,10 @@ class ContactProblem:
             "ksp_type": "preonly",
             "pc_type": "lu",
             "pc_factor_mat_solver_type": "mumps",
-            # null pivots (|pivot| <= 1e-12 ||A||): the rigid mode of a body held
+            # null pivots (|pivot| <= 1e-8 ||A||): the rigid mode of a body held
             # only by contact that lost every active node; its step is set to 0
             "mat_mumps_icntl_24": 1,
-            "mat_mumps_cntl_3": 1e-12,
+            "mat_mumps_cntl_3": 1e-8,
         }
         if self.condensation:
             # fgmres on [u | z], preconditioned by the condensed solve (a python PC);
