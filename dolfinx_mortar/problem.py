@@ -346,6 +346,9 @@ class ContactProblem:
             "snes_stol": 0.0,
             "snes_max_it": 30,
             "snes_divergence_tolerance": -1.0,
+            # at least one Newton step per solve: an increment whose residual is below
+            # the absolute tolerance (a 1e-12 push) must still be applied
+            "snes_force_iteration": True,
             "ksp_type": "preonly",
             "pc_type": "lu",
             "pc_factor_mat_solver_type": "mumps",
