@@ -56,34 +56,10 @@ def test_grazing_hertz(material):
     check_grazing_hertz(1e-6, material, steps=2)
 
 
-ZERO_ITERATIONS = (
-    "Newton accepts the start state without iterating (0 iterations) when the residual of a "
-    "new load or Dirichlet increment is below the absolute tolerance, which commit fcd8acc "
-    "scaled to the problem's force scale (problem.py: force-scaled rows, snes_atol): the "
-    "increment is never applied. {what}. Fix: the PETSc option snes_force_iteration (at "
-    "least one Newton iteration per solve); checked in a scratch run: {check}"
-)
-GRAZING_NOT_APPLIED = ZERO_ITERATIONS.format(
-    what="Hertz with 1e-9 x the load in 2 (5) load steps: step 2 (steps 2, 3 and 5) take 0 "
-    "iterations and the final contact force is 5e-9 (8e-9) instead of the load 1e-8",
-    check="1 iteration per step, force = load to 1e-14",
-)
-
-
-def grazing_params():
-    for factor in [1e-12, 1e-9, 1e-6, 1e-3]:
-        for material in ["linear", "neo-hookean"]:
-            for steps in [1, 2, 5]:
-                marks = []
-                if factor == 1e-9 and steps > 1:
-                    marks = [pytest.mark.xfail(strict=True, reason=GRAZING_NOT_APPLIED)]
-                yield pytest.param(
-                    factor, material, steps, marks=marks, id=f"{factor:g}-{material}-{steps}"
-                )
-
-
 @pytest.mark.slow
-@pytest.mark.parametrize("factor,material,steps", list(grazing_params()))
+@pytest.mark.parametrize("steps", [1, 2, 5])
+@pytest.mark.parametrize("material", ["linear", "neo-hookean"])
+@pytest.mark.parametrize("factor", [1e-12, 1e-9, 1e-6, 1e-3])
 def test_grazing_hertz_full(factor, material, steps):
     check_grazing_hertz(factor, material, steps)
 
@@ -154,25 +130,8 @@ def test_single_corner_contact(material, slave):
 @pytest.mark.parametrize("material", ["linear", "neo-hookean"])
 def test_single_corner_contact_full(material, slave, angle, cell_type):
     # pushes small enough that only the corner touches (the far end lifts by 2 angle)
-    pushes = [0.0, 1e-8, 1e-6, 1e-3 * angle]
+    pushes = [0.0, 1e-12, 1e-8, 1e-6, 1e-3 * angle]
     check_corner(material, slave, pushes, angle=angle, cell_type=cell_type)
-
-
-CORNER_PUSH_NOT_APPLIED = ZERO_ITERATIONS.format(
-    what="Punch corner pushed by 1e-12: 0 iterations, the prescribed displacement is not "
-    "imposed (u = 0), no contact force",
-    check="1 iteration, contact force 2.1e-10, pressure 6.2e-10 (linear, slave top, angle 1e-2)",
-)
-
-
-@pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=CORNER_PUSH_NOT_APPLIED)
-@pytest.mark.parametrize("cell_type", ["triangle", "quadrilateral"])
-@pytest.mark.parametrize("angle", [1e-1, 1e-2, 1e-3])
-@pytest.mark.parametrize("slave", ["top", "bottom"])
-@pytest.mark.parametrize("material", ["linear", "neo-hookean"])
-def test_single_corner_contact_smallest_push_full(material, slave, angle, cell_type):
-    check_corner(material, slave, [1e-12], angle=angle, cell_type=cell_type)
 
 
 # ----------------------------------------------------------------------------------------
@@ -222,6 +181,15 @@ SINGULAR_JUMP = (
     "returns a huge rigid step and, in the current configuration, the search then finds no "
     "pair and SNES reports convergence: the cylinder ends {where}"
 )
+UZAWA_FORCED_ITERATION = (
+    "augmented Lagrange never stops since 45ab7a9 made snes_force_iteration the default: "
+    "load 0 after the initial penetration, every Uzawa update is followed by at least one "
+    "Newton iteration, one node keeps flipping at zero pressure and the outer loop runs out "
+    "(SolveReport reason -101, 104 Newton iterations, 1 active node); with "
+    "snes_force_iteration off the same solve converges in 5 iterations with 0 active nodes "
+    "(scratch check). The outer loop's stopping test seems to rely on a solve that does not "
+    "iterate when nothing changed"
+)
 FIXED_POINT_CYCLE = (
     "the fixed-point active-set update compares the pressure and the weighted gap with 0 "
     "exactly (problem.py, _fixed_point: pressure < 0.0, gaps < 0.0), unlike the semismooth "
@@ -259,7 +227,12 @@ def test_initial_penetration(material, depth):
         ("linear", 0.005, {}),
         ("linear", 0.5, {}),
         ("linear", 0.05, {"method": "penalty"}),
-        ("linear", 0.05, {"method": "augmented"}),
+        pytest.param(
+            "linear",
+            0.05,
+            {"method": "augmented"},
+            marks=pytest.mark.xfail(strict=True, reason=UZAWA_FORCED_ITERATION),
+        ),
         ("linear", 0.05, {"multipliers": "standard"}),
         pytest.param(
             "linear",
