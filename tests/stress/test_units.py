@@ -92,40 +92,10 @@ PROBLEMS = {
     "neo-hookean-punch": {"material": "neo-hookean", "pressure_on": "punch", "pressure": 40.0},
 }
 
-ACTIVE_SET_UNITS = (
-    "the semismooth active-set test z_j - c_n g~_j >= 0 (problem.py, _decide_active) "
-    "compares a pressure z with c_n ~ E/h times the weighted gap g~ = int Phi_j g, whose "
-    "unit is length^2: c_n g~ has the unit of E x length, so the Newton path changes with "
-    "the length unit"
-)
-DIRICHLET_UNITS = (
-    "the SNES residual mixes force rows with Dirichlet rows u - g (units of length, "
-    "_residual: set_bc(b_u, bcs, u, -1)) and snes_atol = 1e-10 is absolute, so the "
-    "convergence test (rtol * r0, atol) depends on the units"
-)
-XFAILS = {
-    ("neo-hookean-punch", (1e3, 1e-6)): (
-        f"{ACTIVE_SET_UNITS}: at lengths x 1e3 the first load step fails 5 times (SNES "
-        "reasons -4 inverted element and -5 max iterations) and the stepper needs 33 steps "
-        f"of 2 Newton iterations instead of 2 steps of 4; and {DIRICHLET_UNITS}: with forces "
-        "x 1e-3 and Dirichlet rows x 1e3, Newton stops early and pressure / E differs by "
-        "1.2e-10, u / length by 2.6e-10"
-    ),
-    ("neo-hookean-punch", (1e3, 1.0)): (
-        f"{ACTIVE_SET_UNITS}: at lengths x 1e3 the first load step fails 5 times (SNES "
-        "reasons -4 and -5) and the stepper needs 33 steps of 3 Newton iterations instead of "
-        "2 steps of 4 (the final result agrees to 1.3e-14)"
-    ),
-    ("neo-hookean-punch", (1.0, 1e-6)): (
-        f"{DIRICHLET_UNITS}: with moduli x 1e-6 the initial residual is dominated by the "
-        "Dirichlet rows (4.4e-2 instead of 6.8e-5), rtol * r0 is reached one iteration early "
-        "(3 instead of 4 in step 2) and pressure / E differs by 1.0e-7, u / length by 1.4e-8"
-    ),
-    ("neo-hookean-uniform", (1.0, 1e-6)): (
-        f"{DIRICHLET_UNITS}: with moduli x 1e-6 Newton stops after 2 instead of 3 iterations "
-        "per load step and the result differs by 7.6e-8"
-    ),
-}
+# Fixed defects these cases caught (docs/stress.md): the semismooth decision compared a
+# pressure with c_n times a weighted gap of unit length^2, and the residual mixed force rows
+# with Dirichlet rows of unit length under an absolute tolerance (now the decision uses
+# g~/A and every row is a force).
 
 
 @functools.cache
@@ -160,11 +130,7 @@ def check_units(name: str, scaling: tuple[float, float]):
 def params(names, scalings):
     for name in names:
         for scaling in scalings:
-            reason = XFAILS.get((name, scaling))
-            marks = [pytest.mark.xfail(strict=True, reason=reason)] if reason else []
-            yield pytest.param(
-                name, scaling, marks=marks, id=f"{name}-L{scaling[0]:g}-E{scaling[1]:g}"
-            )
+            yield pytest.param(name, scaling, id=f"{name}-L{scaling[0]:g}-E{scaling[1]:g}")
 
 
 @pytest.mark.parametrize("name,scaling", list(params(PROBLEMS, SCALINGS)))
