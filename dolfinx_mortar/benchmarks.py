@@ -1168,9 +1168,9 @@ def skipping_markdown(data: dict) -> str:
               f"{st.get('searches_skipped')} | {st.get('evaluations')} | "
               f"{1e3 * st.get('time_integration', 0.0):.2f} | {t['mortar integration']:.3g} | "
               f"{t['total']:.3g} | {far['plain']['timings']['total']:.3g} |", "",
-              "The 'mortar integration' phase is not ~0 although there are no pairs: it includes "
-              "copying the bulk matrix into the monolithic [u, z] matrix and the identity rows "
-              "of the inactive multipliers.", ""]
+              "With no pairs the 'mortar integration' phase holds only the multiplier rows "
+              "(identity rows of the inactive multipliers) and the residual bookkeeping; the "
+              "bulk is assembled in place into the monolithic [u, z] matrix.", ""]
     lines += ["#### Uncovered slave nodes (Hertz B, no mortar work for them)", "",
               "| run | ref | slave nodes | uncovered | slave facets x master facets | pairs "
               "evaluated | segments | kernel per evaluation [ms] | estimated if all covered "
