@@ -334,15 +334,15 @@ class ContactProblem:
         Options are put into the database only for setFromOptions and removed
         again, except the factorization ones (``mat_*``): PETSc reads those at
         every symbolic factorization, so they stay until :meth:`destroy` (or
-        garbage collection). The default absolute tolerance 1e-11 k h is
-        a force that moves a node by 1e-11 h, in the units of the problem.
+        garbage collection). The default absolute tolerance 1e-13 k h is
+        a force that moves a node by 1e-13 h, in the units of the problem.
         """
         snes = PETSc.SNES().create(self.comm)
         snes.setOptionsPrefix(prefix)
         defaults = {
             "snes_type": "newtonls",
             "snes_linesearch_type": "basic",
-            "snes_rtol": 1e-10,
+            "snes_rtol": 1e-12,
             "snes_stol": 0.0,
             "snes_max_it": 30,
             "snes_divergence_tolerance": -1.0,
@@ -387,7 +387,7 @@ class ContactProblem:
         snes.setFromOptions()
         snes.getKSP().setFromOptions()
         if not user_atol:
-            snes.setTolerances(atol=1e-11 * self._dirichlet_scale * self._slave_length)
+            snes.setTolerances(atol=1e-13 * self._dirichlet_scale * self._slave_length)
         if self.condensation:
             self._setup_condensation(snes.getKSP(), prefix)
         kept = [name for name in added
