@@ -28,10 +28,13 @@ def demo(name: str):
 
 
 @pytest.mark.parallel
+@pytest.mark.parametrize("refinement", ["0", "1"])
 @pytest.mark.parametrize("ratio", ["1:1", "2:3", "3:7", "1:7"])
 @pytest.mark.parametrize("slave", ["top", "bottom"])
-def test_patch_test_segment_lagrange_is_exact(ratio, slave):
-    summary = demo("patch_test").main(["--ratio", ratio, "--slave", slave])
+def test_patch_test_segment_lagrange_is_exact(ratio, slave, refinement):
+    summary = demo("patch_test").main(
+        ["--ratio", ratio, "--slave", slave, "--refinement", refinement]
+    )
     assert summary["converged"]
     assert summary["max_pressure_deviation_rel"] <= 1e-10
     assert summary["max_stress_deviation_rel"] <= 1e-10
