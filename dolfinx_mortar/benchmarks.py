@@ -950,8 +950,9 @@ def cost_markdown(data: dict) -> str:
             f"{100 * r['kernel_share']:.1f} % | "
             f"{'met' if r['contact_share'] <= GOALS['contact_share'] else 'missed'} |")
     lines += ["", "contact share = (contact search + mortar integration) / total of "
-              "ContactProblem.solve; 'mortar integration' includes building the monolithic "
-              "[u, z] matrix (a copy of the bulk matrix); 'mortar kernels' = "
+              "ContactProblem.solve; 'mortar integration' includes the contact blocks and "
+              "the multiplier rows of the monolithic [u, z] matrix (the bulk is assembled in "
+              "place, under 'bulk'); 'mortar kernels' = "
               "MortarInterface.statistics time_search + time_integration only.", ""]
     lines += ["#### Mortar time against slave facets (Hertz B, Neo-Hookean, current configuration)",
               "", "| ref | dofs | slave facets | pairs | segments | evaluations | kernel per "
