@@ -82,6 +82,32 @@ def l2_pressure_error(x_nodes, p_nodes, a, p0, samples_per_facet=64) -> tuple[fl
     return math.sqrt(error2), math.sqrt(error2 / norm2)
 
 
+def bulk_problem(tagged, u, materials):
+    """(F, traction, bcs) of the Hertz meshes: internal work minus a uniform traction
+    (a Constant, set per load step) on the facets "load"; the lower body's "support"
+    clamped and u_x = 0 on the symmetry lines of both bodies (no rigid sliding)."""
+    mesh, markers = tagged.mesh, tagged.markers
+    V = u.function_space
+    v = ufl.TestFunction(V)
+    ds = ufl.Measure("ds", domain=mesh, subdomain_data=tagged.facet_tags)
+    traction = dolfinx.fem.Constant(mesh, np.array([0.0, 0.0]))
+    F = internal_work(u, v, materials, tagged.cell_tags) - ufl.inner(traction, v) * ds(
+        markers["load"]
+    )
+    fdim = mesh.topology.dim - 1
+    support = tagged.facet_tags.find(markers["support"])
+    bcs = [
+        dolfinx.fem.dirichletbc(
+            np.zeros(2), dolfinx.fem.locate_dofs_topological(V, fdim, support), V
+        )
+    ]
+    for name in ("symmetry_slave", "symmetry_master"):
+        facets = tagged.facet_tags.find(markers[name])
+        dofs = dolfinx.fem.locate_dofs_topological(V.sub(0), fdim, facets)
+        bcs.append(dolfinx.fem.dirichletbc(np.float64(0.0), dofs, V.sub(0)))
+    return F, traction, bcs
+
+
 def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -125,28 +151,11 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     mesh, markers = tagged.mesh, tagged.markers
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
     u = dolfinx.fem.Function(V, name="displacement")
-    v = ufl.TestFunction(V)
     materials = {
         markers["cylinder"]: Material(args.E_cylinder, args.nu_cylinder, args.material),
         markers["block"]: Material(E_block, nu_block, args.material),
     }
-    ds = ufl.Measure("ds", domain=mesh, subdomain_data=tagged.facet_tags)
-    traction = dolfinx.fem.Constant(mesh, np.array([0.0, 0.0]))
-    F = internal_work(u, v, materials, tagged.cell_tags) - ufl.inner(traction, v) * ds(
-        markers["load"]
-    )
-
-    fdim = mesh.topology.dim - 1
-    support = tagged.facet_tags.find(markers["support"])
-    bcs = [
-        dolfinx.fem.dirichletbc(
-            np.zeros(2), dolfinx.fem.locate_dofs_topological(V, fdim, support), V
-        )
-    ]
-    for name in ("symmetry_slave", "symmetry_master"):
-        facets = tagged.facet_tags.find(markers[name])
-        dofs = dolfinx.fem.locate_dofs_topological(V.sub(0), fdim, facets)
-        bcs.append(dolfinx.fem.dirichletbc(np.float64(0.0), dofs, V.sub(0)))
+    F, traction, bcs = bulk_problem(tagged, u, materials)
 
     configuration = "reference" if args.material == "linear" else "current"
     pair = ContactPair(

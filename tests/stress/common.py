@@ -475,27 +475,11 @@ def hertz(
     mesh, markers = tagged.mesh, tagged.markers
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
     u = dolfinx.fem.Function(V, name="displacement")
-    v = ufl.TestFunction(V)
     materials = {
         markers["cylinder"]: Material(HERTZ_E, HERTZ_NU, material),
         markers["block"]: Material(HERTZ_E, HERTZ_NU, material),
     }
-    ds = ufl.Measure("ds", domain=mesh, subdomain_data=tagged.facet_tags)
-    traction = dolfinx.fem.Constant(mesh, np.array([0.0, 0.0]))
-    F = internal_work(u, v, materials, tagged.cell_tags) - ufl.inner(traction, v) * ds(
-        markers["load"]
-    )
-    fdim = mesh.topology.dim - 1
-    support = tagged.facet_tags.find(markers["support"])
-    bcs = [
-        dolfinx.fem.dirichletbc(
-            np.zeros(2), dolfinx.fem.locate_dofs_topological(V, fdim, support), V
-        )
-    ]
-    for name in ("symmetry_slave", "symmetry_master"):
-        facets = tagged.facet_tags.find(markers[name])
-        dofs = dolfinx.fem.locate_dofs_topological(V.sub(0), fdim, facets)
-        bcs.append(dolfinx.fem.dirichletbc(np.float64(0.0), dofs, V.sub(0)))
+    F, traction, bcs = module.bulk_problem(tagged, u, materials)
     configuration = "reference" if material == "linear" else "current"
     problem = contact_problem(
         tagged, F, u, bcs, "cylinder-block", configuration=configuration, **options
