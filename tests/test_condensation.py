@@ -184,18 +184,6 @@ def test_separated_bodies_condense_to_the_bulk_matrix():
 
 
 @pytest.mark.parallel
-def test_condensation_needs_dual_multipliers():
-    tagged = meshes.patch_test(ratio=(2, 3))
-    V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (2,)))
-    u = dolfinx.fem.Function(V)
-    F = internal_work(u, ufl.TestFunction(V), {0: Material(1.0, 0.3, "linear")})
-    markers = tagged.markers
-    pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"])
-    with pytest.raises(ValueError, match="condensation=True needs multipliers='dual'"):
-        ContactProblem(F, u, [], [pair], multipliers="standard", condensation=True)
-
-
-@pytest.mark.parallel
 def test_inner_solver_options_take_the_condensed_prefix():
     """An inexact inner solve (block Jacobi/ILU, 10 GMRES steps) only costs outer iterations."""
     inexact = {"condensed_ksp_type": "gmres", "condensed_pc_type": "bjacobi",

@@ -275,6 +275,8 @@ def test_bad_options_and_inputs():
         ContactProblem(F, u, [], [pair], method="penalty", active_set="fixed-point")
     with pytest.raises(ValueError, match="c_n must be positive"):
         ContactProblem(F, u, [], [pair], c_n=-1.0)
+    with pytest.raises(ValueError, match="condensation=True needs multipliers='dual'"):
+        ContactProblem(F, u, [], [pair], multipliers="standard", condensation=True)
     with pytest.raises(SurfaceError, match="marks no facet"):
         ContactProblem(F, u, [], [ContactPair(tagged.facet_tags, 999, markers["contact_master"])])
     # a slave surface on the master's body: both tags on the foundation
