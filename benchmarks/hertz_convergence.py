@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import pathlib
 import sys
 
@@ -38,14 +39,35 @@ def fitted_rate(h: np.ndarray, error: np.ndarray) -> float:
     return float(np.polyfit(np.log(h), np.log(error), 1)[0])
 
 
-def run(radii, refinements, comm) -> dict:
+def profile_difference(x, p, x_ref, p_ref) -> float:
+    """Relative L2 distance of two piecewise-linear pressure profiles p(x), p_ref(x_ref).
+
+    Both are linear between the union of their nodes, so the integral of the squared
+    difference is exact: h (d0^2 + d0 d1 + d1^2) / 3 on each piece.
+    """
+    lo, hi = max(x[0], x_ref[0]), min(x[-1], x_ref[-1])
+    nodes = np.union1d(x, x_ref)
+    nodes = nodes[(nodes >= lo) & (nodes <= hi)]
+    h = np.diff(nodes)
+
+    def squared(values):
+        v0, v1 = values[:-1], values[1:]
+        return float(np.sum(h * (v0 * v0 + v0 * v1 + v1 * v1) / 3.0))
+
+    reference = np.interp(nodes, x_ref, p_ref)
+    return math.sqrt(squared(np.interp(nodes, x, p) - reference) / squared(reference))
+
+
+def run(radii, refinements, comm, reference_refinement=None) -> dict:
     results = {}
     for radius in radii:
         rows = []
+        profiles = []
         for refinement in refinements:
             summary = hertz.main(
                 ["--radius", str(radius), "--refinement", str(refinement), "--steps", "2"], comm
             )
+            profiles.append(summary["pressure_profile"])
             rows.append(
                 {
                     key: summary[key]
@@ -70,25 +92,73 @@ def run(radii, refinements, comm) -> dict:
             "rows": rows,
             "l2_rate": fitted_rate(h, l2) if len(rows) > 1 else None,
         }
+        if reference_refinement is not None:
+            reference = hertz.main(
+                [
+                    "--radius",
+                    str(radius),
+                    "--refinement",
+                    str(reference_refinement),
+                    "--steps",
+                    "2",
+                ],
+                comm,
+            )
+            x_ref = np.array(reference["pressure_profile"]["x"])
+            p_ref = np.array(reference["pressure_profile"]["pressure"])
+            for row, profile in zip(rows, profiles, strict=True):
+                row["l2_difference_to_reference_rel"] = profile_difference(
+                    np.array(profile["x"]), np.array(profile["pressure"]), x_ref, p_ref
+                )
+            difference = np.array([r["l2_difference_to_reference_rel"] for r in rows])
+            results[str(radius)]["reference"] = {
+                "refinement": reference_refinement,
+                "num_dofs": reference["num_dofs"],
+                "h_contact": reference["h_contact"],
+                "l2_pressure_error_rel": reference["l2_pressure_error_rel"],
+                "p_max_error_rel": reference["p_max_error_rel"],
+                "wall_time_s": reference["wall_time_s"],
+            }
+            results[str(radius)]["l2_rate_to_reference"] = fitted_rate(h, difference)
     return results
 
 
 def markdown(results: dict) -> str:
     lines = []
     for radius, data in results.items():
-        lines.append(
-            f"R = {radius} (a/R = {data['a_over_R']:.3f}): fitted L2 rate "
-            f"{data['l2_rate']:.2f} over {len(data['rows'])} meshes\n"
+        reference = data.get("reference")
+        header = (
+            f"R = {radius} (a/R = {data['a_over_R']:.3f}): fitted L2 rate against Hertz "
+            f"{data['l2_rate']:.2f} over {len(data['rows'])} meshes"
         )
-        lines.append("| refinement | dofs | h / a | p_max error | a error (elements) | L2 error "
-                     "| Newton per step | time (s) |")
-        lines.append("|---|---|---|---|---|---|---|---|")
+        extra_head = extra_rule = ""
+        if reference is not None:
+            header += (
+                f"; against the refinement-{reference['refinement']} solution of the same "
+                f"problem ({reference['num_dofs']} dofs, h/a "
+                f"{reference['h_contact'] / data['rows'][0]['a_exact']:.4f}) "
+                f"{data['l2_rate_to_reference']:.2f}. That solution itself is "
+                f"{100 * reference['l2_pressure_error_rel']:.2f} % from Hertz in L2 "
+                f"(p_max {100 * reference['p_max_error_rel']:+.2f} %)."
+            )
+            extra_head, extra_rule = f" L2 to ref {reference['refinement']} |", "---|"
+        lines.append(header + "\n")
+        lines.append(
+            "| refinement | dofs | h / a | p_max error | a error (elements) | L2 error "
+            f"|{extra_head} Newton per step | time (s) |"
+        )
+        lines.append(f"|---|---|---|---|---|---|{extra_rule}---|---|")
         for r in data["rows"]:
+            extra = (
+                f" {100 * r['l2_difference_to_reference_rel']:.2f} % |"
+                if reference is not None
+                else ""
+            )
             lines.append(
                 f"| {r['refinement']} | {r['num_dofs']} | {r['h_contact'] / r['a_exact']:.4f} "
                 f"| {100 * r['p_max_error_rel']:+.2f} % | {r['a_error_in_elements']:.2f} "
-                f"| {100 * r['l2_pressure_error_rel']:.2f} % "
-                f"| {', '.join(map(str, r['newton_iterations']))} | {r['wall_time_s']:.1f} |"
+                f"| {100 * r['l2_pressure_error_rel']:.2f} % |{extra}"
+                f" {', '.join(map(str, r['newton_iterations']))} | {r['wall_time_s']:.1f} |"
             )
         lines.append("")
     return "\n".join(lines)
@@ -100,10 +170,15 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     )
     parser.add_argument("--radii", type=float, nargs="+", default=[8.0, 128.0])
     parser.add_argument("--refinements", type=int, nargs="+", default=[0, 1, 2, 3])
+    parser.add_argument(
+        "--reference-refinement",
+        type=int,
+        help="also fit the rate against this (finer) refinement of the same problem",
+    )
     parser.add_argument("--json", type=pathlib.Path)
     parser.add_argument("--markdown", type=pathlib.Path)
     args = parser.parse_args(argv)
-    results = run(args.radii, args.refinements, comm)
+    results = run(args.radii, args.refinements, comm, args.reference_refinement)
     if comm.rank == 0:
         text = markdown(results)
         print(text)
