@@ -16,7 +16,8 @@ Sections (``--only`` picks some):
     changed at a time from the default (Lagrange multipliers, semismooth active
     set, dual basis, segment-based integration, averaged normals). Errors,
     Newton iterations, dofs and the solve time split by phase (medians over
-    ``--repeats``, 3 in the full run, 1 in the quick run).
+    ``--repeats``, 3 in the full run, 1 in the quick run; the finest refinement,
+    whose solves take a minute or more, ``--finest-repeats``, 1 by default).
     -> work_precision.json / .png / .md (+ work_precision_cpu.png, work_precision_pmax.png)
 ``cost``
     Share of a Newton iteration spent on contact at >= 1e5 dofs (Hertz B, the
@@ -351,8 +352,11 @@ def iterations_per_step(summary: dict) -> list[int]:
 # -- section 1: work-precision ---------------------------------------------------------------
 
 
-def work_precision(refinements: list[int], repeats: int, variants: list[dict]) -> dict:
-    """Every case x refinement x variant, ``repeats`` times (interleaved: repeat outermost)."""
+def work_precision(refinements: list[int], repeats: int, variants: list[dict],
+                   finest_repeats: int | None = None) -> dict:
+    """Every case x refinement x variant, ``repeats`` times (interleaved: repeat outermost);
+    the finest refinement only ``finest_repeats`` times (default: ``repeats``)."""
+    finest_repeats = repeats if finest_repeats is None else finest_repeats
     samples: dict[tuple, list[dict]] = {}
     failures: dict[tuple, str] = {}
     penalty_base: dict[tuple, float] = {}
@@ -361,6 +365,8 @@ def work_precision(refinements: list[int], repeats: int, variants: list[dict]) -
     for repeat in range(repeats):
         for case_name, case in CASES.items():
             for refinement in refinements:
+                if refinement == refinements[-1] and repeat >= finest_repeats:
+                    continue
                 for variant in variants:
                     key = (case_name, variant["name"], refinement)
                     if key in failures:
@@ -430,7 +436,8 @@ def work_precision(refinements: list[int], repeats: int, variants: list[dict]) -
                     sizes=first["probe"],
                 )
                 runs.append(record)
-    return {"refinements": refinements, "repeats": repeats, "runs": runs,
+    return {"refinements": refinements, "repeats": repeats, "finest_repeats": finest_repeats,
+            "runs": runs,
             "variants": variants,
             "cases": {name: {k: v for k, v in case.items()} for name, case in CASES.items()}}
 
@@ -894,7 +901,9 @@ def parallel_runs(refinement: int, repeats: int, ranks: list[int]) -> dict:
 
 
 def cost_of_contact(quick: bool, repeats: int, ranks: list[int],
-                    big_refinement: int | None) -> dict:
+                    big_refinement: int | None, far_apart_repeats: int | None = None) -> dict:
+    """``repeats`` for every Hertz run (the scaling, the share and the ranks); the
+    far-apart A/B takes at least 5 (3 quick): it measures a difference of a few %."""
     # mortar time against slave facets (Neo-Hookean: integrals in every iteration); the
     # last refinement is the first with >= 1e5 dofs (quick: 3)
     run_demo("hertz", ["--case", "B", "--refinement", "0", "--material", "neo-hookean"])
@@ -931,7 +940,7 @@ def cost_of_contact(quick: bool, repeats: int, ranks: list[int],
     linear = contact_share_record(hertz_runs(big, repeats, "linear", tag="cost share"),
                                   f"linear r{big}")
     share = {"linear": linear, "neo-hookean": scaling[-1]}
-    far = far_apart(big, 3 if quick else max(repeats, 5))
+    far = far_apart(big, far_apart_repeats or (3 if quick else max(repeats, 5)))
     parallel = parallel_runs(big, repeats, ranks)
     return {"big_refinement": big, "share": share, "scaling": scaling, "slopes": slopes,
             "far_apart": far, "parallel": parallel}
@@ -1293,6 +1302,10 @@ def main(argv=None) -> int:
                         help="run only these sections (parallel: the mpirun worker)")
     parser.add_argument("--repeats", type=int, default=None,
                         help="timed repeats (median); default 3, quick 1")
+    parser.add_argument("--finest-repeats", type=int, default=None,
+                        help="repeats of the finest work-precision refinement and of the cost "
+                             "section's Hertz runs (default 1 in the full run, where those "
+                             "solves take a minute or more; quick: --repeats)")
     parser.add_argument("--refinements", type=int, nargs="+", default=None,
                         help="work-precision refinements (default 0..4, quick 0..2)")
     parser.add_argument("--variants", nargs="+", default=None,
@@ -1310,6 +1323,8 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     quiet_logging()
     repeats = args.repeats if args.repeats is not None else (1 if args.quick else 3)
+    finest_repeats = (args.finest_repeats if args.finest_repeats is not None
+                      else (repeats if args.quick else min(repeats, 1)))
 
     if args.only == ["parallel"] or args.worker_json:
         if args.worker_json is None:
@@ -1338,11 +1353,12 @@ def main(argv=None) -> int:
     with LoadMonitor() as monitor:
         if "work-precision" in sections:
             start = time.perf_counter()
-            work = work_precision(refinements, repeats, variants)
+            work = work_precision(refinements, repeats, variants, finest_repeats)
             timings["work-precision"] = time.perf_counter() - start
         if "cost" in sections:
             start = time.perf_counter()
-            cost = cost_of_contact(args.quick, repeats, args.ranks, args.big_refinement)
+            cost = cost_of_contact(args.quick, finest_repeats, args.ranks, args.big_refinement,
+                                   far_apart_repeats=None if args.quick else max(repeats, 5))
             timings["cost"] = time.perf_counter() - start
         if "skip" in sections:
             start = time.perf_counter()
@@ -1351,11 +1367,14 @@ def main(argv=None) -> int:
     elapsed = time.perf_counter() - begin
     load = monitor.summary()
     meta = {"command": command, "label": args.label, "quick": args.quick, "repeats": repeats,
-            "machine": machine,
+            "finest_repeats": finest_repeats, "machine": machine,
             "load_average_1min": load, "load_at_end": list(os.getloadavg()),
             "elapsed_s": elapsed, "section_times_s": timings,
             "note": ("quick run: 1 repeat, timings are single samples" if repeats == 1 else
-                     f"medians over {repeats} repeats")}
+                     f"medians over {repeats} repeats"
+                     + (f"; the finest work-precision refinement and the cost section's Hertz "
+                        f"runs {finest_repeats} (the far-apart A/B {max(repeats, 5)})"
+                        if finest_repeats != repeats else ""))}
     if work is not None:
         write_json(output / "work_precision.json", {"meta": meta, **work})
     if cost is not None:

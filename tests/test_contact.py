@@ -83,6 +83,24 @@ def hertz(args, comm=MPI.COMM_WORLD):
     return demo("hertz").main(["--refinement", "0", "--steps", "2", *args], comm=comm)
 
 
+def test_hertz_matches_theory_and_converges():
+    """Case B at the demo's default (refinement 2): p_max within 2 % of p0, the half-width
+    within one slave element, the force equal to the load; cases A and C within 3 % on
+    p0; the L2 pressure error falls at a least-squares rate >= 0.8 over refinements 0-3
+    (Hertz's sqrt edge allows at most about 1 for P1 multipliers)."""
+    rows = [hertz(["--refinement", str(r)], comm=MPI.COMM_SELF) for r in range(4)]
+    default = rows[2]
+    assert abs(default["p_max_error_rel"]) <= 0.02
+    assert default["a_error_in_elements"] <= 1.0
+    assert default["total_force_error_rel"] <= 1e-8
+    h = np.array([r["h_contact"] for r in rows])
+    error = np.array([r["l2_pressure_error_rel"] for r in rows])
+    assert np.polyfit(np.log(h), np.log(error), 1)[0] >= 0.8, error
+    for case in ("A", "C"):
+        summary = hertz(["--case", case, "--refinement", "2"], comm=MPI.COMM_SELF)
+        assert abs(summary["p_max_error_rel"]) <= 0.03, case
+
+
 def test_semismooth_solution_does_not_depend_on_c_n():
     """c_n from 1e-2 to 1e2 times the default (four decades): the same solution."""
     reference = hertz([])
