@@ -113,6 +113,7 @@ def run(radii, refinements, comm, reference_refinement=None, extra=()) -> dict:
                     str(reference_refinement),
                     "--steps",
                     "2",
+                    *extra,
                 ],
                 comm,
             )
@@ -127,6 +128,7 @@ def run(radii, refinements, comm, reference_refinement=None, extra=()) -> dict:
                 "refinement": reference_refinement,
                 "num_dofs": reference["num_dofs"],
                 "h_contact": reference["h_contact"],
+                "normals": reference["normals"],
                 "l2_pressure_error_rel": reference["l2_pressure_error_rel"],
                 "p_max_error_rel": reference["p_max_error_rel"],
                 "wall_time_s": reference["wall_time_s"],
