@@ -15,8 +15,8 @@ Normals: with linear elasticity (the default, what Hertz theory assumes) the
 mortar integrals live on the undeformed configuration, where the averaged
 normals of the cylinder's arc tilt by x/R (0.12 rad at the edge of the zone)
 away from the common normal of the linearized theory, the block's. That tilt
-alone holds the L2 pressure error at about 1.6 % however fine the mesh
-(benchmarks/results/hertz_convergence_R8.md), so ``--normals`` defaults to
+moves the converged pressure 1.7 % (L2) away from Hertz however fine the mesh
+(benchmarks/results/hertz_convergence_R8_averaged.md), so ``--normals`` defaults to
 ``master`` for ``--material linear`` and to the library's ``averaged`` for the
 finite-strain models, whose integrals follow the deformed, flattened arc.
 

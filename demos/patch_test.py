@@ -47,6 +47,9 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="condense the (dual) multipliers: factorize a displacement-sized matrix",
     )
+    parser.add_argument(
+        "--search-margin", type=float, default=None, help="contact search margin (a length)"
+    )
     parser.add_argument("--json", type=Path, help="write a JSON summary here")
 
 
@@ -68,6 +71,7 @@ def problem_options(args) -> dict:
         "c_n": args.c_n,
         "penalty": args.penalty,
         "condensation": args.condensation,
+        "search_margin": args.search_margin,
     }
 
 

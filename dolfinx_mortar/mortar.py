@@ -262,34 +262,37 @@ class MortarInterface:
         undeformed surfaces before the first) to the current ones, so that
         pairs are found however far one update moved the surfaces through
         each other (:mod:`search`). With
-        ``configuration="reference"`` the integrals are taken once on the
-        undeformed surfaces and only the gap follows u (small strain).
+        ``configuration="reference"`` the integrals are taken on the undeformed
+        surfaces (again only after a new search) and only the gap follows u
+        (small strain); the search still follows x, so pairs that start further
+        apart than the margin are found once the gap closes.
         """
         stats = self.statistics
         start = time.perf_counter()
         slave_x = self.slave.current_coordinates(u)
         master_x = self.master.current_coordinates(u)
-        if self.configuration == "reference":
-            if self._reference_quantities is None:
-                slave_X = self.slave.reference_coordinates
-                master_X = self.master.reference_coordinates
-                self._search(slave_X, master_X)
-                self.reuse.searched(np.concatenate([slave_X, master_X]))
+        moving = np.concatenate([slave_x, master_x])
+        reference = self.configuration == "reference"
+        if self.reuse.needs_search(moving, self.comm) or (
+            reference and self._reference_quantities is None
+        ):
+            ns = self.slave.num_nodes
+            undeformed = np.concatenate(
+                [self.slave.reference_coordinates, self.master.reference_coordinates]
+            )
+            origin = self.reuse.sweep_start(moving, undeformed)
+            self._search(slave_x, master_x, origin[:ns], origin[ns:])
+            self.reuse.searched(moving, origin, self.comm)
+            if reference:
+                # pairs are found where the surfaces are (a gap wider than the margin
+                # may have closed), integrals taken on the undeformed surfaces
+                self._refresh_coordinates(undeformed[:ns], undeformed[ns:])
                 self._reference_node_x = self._node_x.copy()
-            else:
-                self.reuse.skipped()
-            self._refresh_coordinates(slave_x, master_x)
-        else:
-            moving = np.concatenate([slave_x, master_x])
-            if self.reuse.needs_search(moving, self.comm):
-                ns = self.slave.num_nodes
-                origin = self.reuse.sweep_start(moving, np.concatenate(
-                    [self.slave.reference_coordinates, self.master.reference_coordinates]))
-                self._search(slave_x, master_x, origin[:ns], origin[ns:])
-                self.reuse.searched(moving, origin, self.comm)
-            else:
-                self.reuse.skipped()
+                self._reference_quantities = None
                 self._refresh_coordinates(slave_x, master_x)
+        else:
+            self.reuse.skipped()
+            self._refresh_coordinates(slave_x, master_x)
         stats.searches_done = self.reuse.searches_done
         stats.searches_skipped = self.reuse.searches_skipped
         stats.time_search += time.perf_counter() - start

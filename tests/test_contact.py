@@ -101,6 +101,22 @@ def test_hertz_matches_theory_and_converges():
         assert abs(summary["p_max_error_rel"]) <= 0.03, case
 
 
+@pytest.mark.parametrize("material", ["linear", "neo-hookean"])
+def test_hertz_solution_does_not_depend_on_search_margin(material):
+    """A margin of 1/50 of the default (far below the initial gaps at the edge of the
+    zone): pairs are searched again as the gap closes, for the small-strain
+    (reference-configuration) integrals as for the finite-strain ones."""
+    args = ["--refinement", "1", "--material", material]
+    reference = hertz(args, comm=MPI.COMM_SELF)
+    margin = 2.0 * reference["h_contact"] / 50.0
+    other = hertz([*args, "--search-margin", str(margin)], comm=MPI.COMM_SELF)
+    done = [s["contact_statistics"]["cylinder-block"]["searches_done"] for s in (reference, other)]
+    assert done[1] > done[0]
+    assert other["active_nodes"] == reference["active_nodes"]
+    assert other["p_max"] == pytest.approx(reference["p_max"], rel=1e-8)
+    assert other["a_contact"] == pytest.approx(reference["a_contact"], rel=1e-8)
+
+
 def test_semismooth_solution_does_not_depend_on_c_n():
     """c_n from 1e-2 to 1e2 times the default (four decades): the same solution."""
     reference = hertz([])
