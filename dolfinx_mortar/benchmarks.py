@@ -5,7 +5,7 @@ One command runs everything and writes JSON, PNG and markdown into ``--output``
 there, byte for byte::
 
     tools/run python3 -m dolfinx_mortar.benchmarks --quick       # < 10 min on 2 cores
-    tools/run python3 -m dolfinx_mortar.benchmarks               # the full run (about 1.5 h)
+    tools/run python3 -m dolfinx_mortar.benchmarks               # the full run (about 65 min)
     tools/run python3 -m dolfinx_mortar.benchmarks --only cost skip --output scratch/b
 
 Sections (``--only`` picks some):

@@ -280,9 +280,15 @@ class MortarInterface:
             undeformed = np.concatenate(
                 [self.slave.reference_coordinates, self.master.reference_coordinates]
             )
-            origin = self.reuse.sweep_start(moving, undeformed)
-            self._search(slave_x, master_x, origin[:ns], origin[ns:])
-            self.reuse.searched(moving, origin, self.comm)
+            if reference:
+                # swept from the undeformed surfaces, whose pairs the linearized gap
+                # holds at any penetration (a soft penalty sinks far past the margin)
+                self._search(slave_x, master_x, undeformed[:ns], undeformed[ns:])
+                self.reuse.searched(moving)
+            else:
+                origin = self.reuse.sweep_start(moving, undeformed)
+                self._search(slave_x, master_x, origin[:ns], origin[ns:])
+                self.reuse.searched(moving, origin, self.comm)
             if reference:
                 # pairs are found where the surfaces are (a gap wider than the margin
                 # may have closed), integrals taken on the undeformed surfaces
