@@ -264,8 +264,9 @@ class MortarInterface:
         each other (:mod:`search`). With
         ``configuration="reference"`` the integrals are taken on the undeformed
         surfaces (again only after a new search) and only the gap follows u
-        (small strain); the search still follows x, so pairs that start further
-        apart than the margin are found once the gap closes.
+        (small strain); the search still follows x, swept from the undeformed
+        surfaces, so pairs that start further apart than the margin are found
+        once the gap closes and kept however deep a penalty lets them sink.
         """
         stats = self.statistics
         start = time.perf_counter()
@@ -282,20 +283,18 @@ class MortarInterface:
             )
             if reference:
                 # swept from the undeformed surfaces, whose pairs the linearized gap
-                # holds at any penetration (a soft penalty sinks far past the margin)
+                # holds at any penetration (a soft penalty sinks far past the margin);
+                # the integrals are then taken again on the undeformed surfaces
                 self._search(slave_x, master_x, undeformed[:ns], undeformed[ns:])
                 self.reuse.searched(moving)
-            else:
-                origin = self.reuse.sweep_start(moving, undeformed)
-                self._search(slave_x, master_x, origin[:ns], origin[ns:])
-                self.reuse.searched(moving, origin, self.comm)
-            if reference:
-                # pairs are found where the surfaces are (a gap wider than the margin
-                # may have closed), integrals taken on the undeformed surfaces
                 self._refresh_coordinates(undeformed[:ns], undeformed[ns:])
                 self._reference_node_x = self._node_x.copy()
                 self._reference_quantities = None
                 self._refresh_coordinates(slave_x, master_x)
+            else:
+                origin = self.reuse.sweep_start(moving, undeformed)
+                self._search(slave_x, master_x, origin[:ns], origin[ns:])
+                self.reuse.searched(moving, origin, self.comm)
         else:
             self.reuse.skipped()
             self._refresh_coordinates(slave_x, master_x)
