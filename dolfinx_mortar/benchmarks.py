@@ -1324,7 +1324,7 @@ def main(argv=None) -> int:
     quiet_logging()
     repeats = args.repeats if args.repeats is not None else (1 if args.quick else 3)
     finest_repeats = (args.finest_repeats if args.finest_repeats is not None
-                      else (repeats if args.quick else min(repeats, 1)))
+                      else (repeats if args.quick else 1))
 
     if args.only == ["parallel"] or args.worker_json:
         if args.worker_json is None:

@@ -204,13 +204,8 @@ def test_contact_jacobian_taylor(normals, method):
     active = [a.copy() for a in problem.active]
     assert problem.num_active() > 0
     J = problem._assemble_system()
-    rng = np.random.default_rng(11 + problem.comm.rank)
-    h = x0.duplicate()
-    h.setArray(rng.standard_normal(h.getLocalSize()))
     # no change of the active set within the steps, and none at Dirichlet dofs
-    h.getArray()[
-        np.isin(np.arange(*h.getOwnershipRange()), problem.layout.u(problem._fixed_dofs))
-    ] = 0.0
+    h = random_direction(problem, x0, seed=11)
     Jh = h.duplicate()
     J.mult(h, Jh)
     remainders = []
@@ -226,6 +221,17 @@ def test_contact_jacobian_taylor(normals, method):
         remainders.append(r.norm())
     slope = np.polyfit(np.log(steps), np.log(remainders), 1)[0]
     assert slope == pytest.approx(2.0, abs=0.1), remainders
+
+
+def random_direction(problem: ContactProblem, x0, seed: int):
+    """A random [u, z] direction (per-rank seed), zero at the Dirichlet dofs."""
+    rng = np.random.default_rng(seed + problem.comm.rank)
+    d = x0.duplicate()
+    d.setArray(rng.standard_normal(d.getLocalSize()))
+    d.getArray()[
+        np.isin(np.arange(*d.getOwnershipRange()), problem.layout.u(problem._fixed_dofs))
+    ] = 0.0
+    return d
 
 
 class _ProblemBuilt(Exception):
@@ -267,12 +273,7 @@ def test_patch_test_jacobian_is_exact_in_the_reference_configuration():
     assert all(a.all() for a in active) and problem.num_active() > 0
     problem._decide_active = lambda k: active[k]
     J = problem._assemble_system()
-    rng = np.random.default_rng(5 + problem.comm.rank)
-    d = x0.duplicate()
-    d.setArray(rng.standard_normal(d.getLocalSize()))
-    d.getArray()[
-        np.isin(np.arange(*d.getOwnershipRange()), problem.layout.u(problem._fixed_dofs))
-    ] = 0.0
+    d = random_direction(problem, x0, seed=5)
     Jd = d.duplicate()
     J.mult(d, Jd)
     for eps in (1e-3, 1e-4):
