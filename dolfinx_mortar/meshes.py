@@ -575,8 +575,9 @@ def ironing(
     """Ironing: a die with a rounded bottom above an elastic block [0, 12] x [0, 4].
 
     The die spans x in [0.2, 1.4]; its bottom is a circular arc of radius 0.75 whose
-    lowest point (0.8, 4.2) leaves an initial gap of 0.2, its side walls are vertical up
-    to the arc's ends (y = 4.5) and its top is flat at y = 5.2. Element sizes at
+    lowest point (0.8, 4.2) leaves an initial gap of 0.2, its side walls rise vertically
+    from the arc's ends (y = 4.5) to its flat top at y = 5.4 (the die is 1.2 tall, as in
+    Yastrebov's statement of the benchmark). Element sizes at
     refinement 0: 0.05 on the die arc (h_contact), 0.1 along the whole block top (the
     die slides along it), growing by GROWTH with distance up to 0.8; all (and the growth) divided by
     2**refinement.
@@ -615,7 +616,8 @@ def ironing(
             m.point(centre_x, lowest),
             m.point(centre_x + 0.6, arc_end_y),
         )
-        top_left, top_right = m.point(centre_x - 0.6, 5.2), m.point(centre_x + 0.6, 5.2)
+        top_y = lowest + 1.2
+        top_left, top_right = m.point(centre_x - 0.6, top_y), m.point(centre_x + 0.6, top_y)
         arcs = [m.arc(arc_left, centre, bottom), m.arc(bottom, centre, arc_right)]
         walls = [m.line(arc_right, top_right), m.line(top_left, arc_left)]
         die_top = m.line(top_right, top_left)

@@ -241,7 +241,7 @@ def test_patch_test_slave_aliases():
 def test_ironing_geometry():
     radius, half_angle = 0.75, math.asin(0.6 / 0.75)
     segment = 0.5 * radius**2 * (2 * half_angle - math.sin(2 * half_angle))
-    die_area = 1.2 * (5.2 - 4.5) + segment
+    die_area = 1.2 * (5.4 - 4.5) + segment
     errors = []
     for refinement in (0, 1):
         tagged = meshes.ironing(refinement=refinement)
