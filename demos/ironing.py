@@ -1,13 +1,17 @@
 """Shallow ironing: a stiff die pressed into a soft block, then slid along it (large sliding).
 
-Block 12 x 4 (bottom fixed), die 1.2 wide with a circular bottom of radius
-0.75, initial gap 0.2; compressible Neo-Hookean, die E = 6.896e9, block
+Block 12 x 4 (bottom fixed), die 1.2 wide and 1.2 tall with a circular bottom of
+radius 0.75, initial gap 0.2; compressible Neo-Hookean, die E = 6.896e9, block
 E = 6.896e8, nu = 0.32, frictionless, plane strain (benchmarks.md, section 3).
 The die top moves down 1.0 over t in [0, 1] (0.2 of it closes the gap), then
 +10 horizontally over t in [1, 2]. Reference (read off a published plot,
 +-3 %): vertical force about 2.7e8 at t = 1, plateau about 3.38e8 over
 t in [1.2, 1.8], about 2.9e8 at t = 2; horizontal force about +0.3e8 at t = 1,
 about 0 while sliding, about -0.2e8 at t = 2.
+
+This demo's plane-strain plateau is 4.02e8, 19 % above that reference, which is
+the lowest of the published curves for this setup; docs/benchmarks.md (section 3)
+gives what is known of the difference.
 
 The force on the block is measured twice: as the mortar contact force of the
 die on the block, and as the reaction at the driven die top (the bulk residual
@@ -82,6 +86,10 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         default="die",
         help="which surface carries the multipliers (die: its arc; block: its top)",
     )
+    parser.add_argument("--E-die", type=float, default=DIE_E, help="Young's modulus of the die")
+    parser.add_argument(
+        "--E-block", type=float, default=BLOCK_E, help="Young's modulus of the block"
+    )
     parser.add_argument("--depth", type=float, default=1.0, help="downward stroke of the die")
     parser.add_argument("--slide", type=float, default=10.0, help="horizontal stroke of the die")
     parser.add_argument("--output", type=pathlib.Path, help="directory for CSV, PNG, ParaView")
@@ -95,8 +103,8 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     u = dolfinx.fem.Function(V, name="displacement")
     v = ufl.TestFunction(V)
     materials = {
-        markers["die"]: Material(DIE_E, NU, "neo-hookean"),
-        markers["block"]: Material(BLOCK_E, NU, "neo-hookean"),
+        markers["die"]: Material(args.E_die, NU, "neo-hookean"),
+        markers["block"]: Material(args.E_block, NU, "neo-hookean"),
     }
     F = internal_work(u, v, materials, tagged.cell_tags)
     fdim = mesh.topology.dim - 1
@@ -182,6 +190,8 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     summary = {
         **problem_options(args),
         "slave": args.slave,
+        "E_die": args.E_die,
+        "E_block": args.E_block,
         "refinement": args.refinement,
         "cell_type": args.cell_type,
         "num_ranks": comm.size,
