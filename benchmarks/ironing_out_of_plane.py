@@ -167,10 +167,10 @@ def solve(model: str, cells, penalty: float, t_values, comm) -> dict:
     history = []
     start = time.perf_counter()
 
-    def step(t: float) -> int:
-        """Newton at the target penalty; failing that, ramp it up from 10 E/h."""
+    def step(t: float, previous: np.ndarray) -> int:
+        """Newton at the target penalty; failing that, from ``previous`` (the last
+        converged state) ramp the penalty up from 10 E/h."""
         centre.value[:] = die_position(t)
-        previous = u.x.array.copy()
         epsilon.value = penalty * BLOCK_E / h
         try:
             return newton(t)
@@ -188,7 +188,7 @@ def solve(model: str, cells, penalty: float, t_values, comm) -> dict:
             t = pending[0]
             previous = u.x.array.copy()
             try:
-                iteration = step(t)
+                iteration = step(t, previous)
             except RuntimeError:
                 u.x.array[:] = previous
                 if t - reached < 1e-3:
