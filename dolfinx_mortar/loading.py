@@ -3,11 +3,14 @@
 :func:`solve_load_steps` drives a :class:`~dolfinx_mortar.problem.ContactProblem`
 through a load (or displacement) parameter t from 0 to 1. A step whose Newton
 solve fails, or whose iterate inverts an element, is undone and retried with
-half the increment; after ``max_cutbacks`` halvings in a row it raises
-:class:`LoadSteppingError`. After each step that converged without a cut-back
-the increment doubles again, up to the nominal one, and no step jumps over a
-point of the nominal grid (so the steps land on t = k (end - start) / num_steps
-again, where demos read their results). The contact search is redone inside
+half the increment; after ``max_cutbacks`` halvings in a row, or when the
+increment would fall below ``min_increment``, it raises
+:class:`LoadSteppingError` with the cause in words (inverted elements and where,
+the SNES reason, a linear solver failure) and the last converged t. After
+each step that converged without a cut-back the increment doubles again, up
+to the nominal one, and no step jumps over a point of the nominal grid (so the
+steps land on t = k (end - start) / num_steps again, where demos read their
+results). The contact search is redone inside
 the solves whenever surfaces moved past the search margin.
 """
 
@@ -30,7 +33,20 @@ logger = logging.getLogger("dolfinx_mortar")
 
 
 class LoadSteppingError(RuntimeError):
-    """Newton failed even after the last allowed cut-back."""
+    """Newton failed even after the last allowed cut-back, or the increment became too small.
+
+    Attributes:
+        last_converged: t of the last accepted step (the state the problem is left in).
+        failed: t of the step that failed last.
+        report: the :class:`~dolfinx_mortar.problem.SolveReport` of that failed solve.
+    """
+
+    def __init__(self, message: str, last_converged: float = math.nan,
+                 failed: float = math.nan, report: SolveReport | None = None):
+        super().__init__(message)
+        self.last_converged = last_converged
+        self.failed = failed
+        self.report = report
 
 
 @dataclasses.dataclass
@@ -51,7 +67,8 @@ class ContactOutput:
     """Displacement and contact pressure per step, as VTX (ADIOS2 BP) for ParaView.
 
     Writes ``directory/displacement.bp`` and ``directory/contact_pressure.bp``
-    (open either in ParaView with the ADIOS2 VTX reader).
+    (open either in ParaView with the ADIOS2 VTX reader). Creating, writing and
+    closing are collective.
     """
 
     def __init__(self, problem: ContactProblem, directory: str | pathlib.Path):
@@ -68,11 +85,13 @@ class ContactOutput:
         ]
 
     def write(self, t: float) -> None:
+        """Write the current displacement and pressure at time t. Collective."""
         self.problem.pressure_function(0, self.pressure)
         for writer in self._writers:
             writer.write(t)
 
     def close(self) -> None:
+        """Close the files. Collective."""
         for writer in self._writers:
             writer.close()
 
@@ -83,12 +102,14 @@ def solve_load_steps(
     num_steps: int,
     *,
     max_cutbacks: int = 6,
+    min_increment: float | None = None,
     output: ContactOutput | None = None,
     on_step: typing.Callable[[StepRecord], None] | None = None,
     start: float = 0.0,
     end: float = 1.0,
+    check_penetration: bool = True,
 ) -> list[StepRecord]:
-    """Solve for t = start + (end - start) k / num_steps, k = 1 .. num_steps.
+    """Solve for t = start + (end - start) k / num_steps, k = 1 .. num_steps. Collective.
 
     Args:
         problem: the contact problem; its current state is the start.
@@ -96,20 +117,34 @@ def solve_load_steps(
             (Constants, Dirichlet Functions); called before each solve.
         num_steps: nominal number of equal steps.
         max_cutbacks: halvings allowed in a row before giving up.
+        min_increment: give up when a cut-back would make the increment smaller
+            than this (default 1e-6 of the nominal step): a load that inverts
+            elements or loses the body otherwise creeps towards the critical t
+            in ever smaller steps.
         output: written after every accepted step.
         on_step: called after every accepted step (e.g. to record forces).
+        check_penetration: after every accepted step, warn when nodes ended it
+            deep inside the other body (:meth:`ContactProblem.check_penetration`).
 
     Raises:
-        LoadSteppingError: Newton failed after ``max_cutbacks`` halvings.
+        LoadSteppingError: Newton failed after ``max_cutbacks`` halvings in a row,
+            or the increment fell below ``min_increment``; the message names the
+            cause (inverted elements, the SNES reason in words, a linear solver
+            failure), the last converged t and the t that failed. The problem is
+            left in the last converged state.
     """
     if num_steps < 1:
         raise ValueError(f"num_steps must be >= 1, got {num_steps}")
     records: list[StepRecord] = []
     nominal = (end - start) / num_steps
+    if min_increment is None:
+        min_increment = 1e-6 * abs(nominal)
     increment = nominal
     t = start
     cutbacks = 0
     step = 0
+    penetration_check = getattr(problem, "check_penetration", None) if check_penetration else None
+    inverting: tuple[float, object] | None = None  # (t, Inversion) of the last inverting attempt
     while t < end - 1e-12 * abs(end - start):
         # never step over a point of the nominal grid, so cut-back steps grow back onto it
         next_grid = start + math.ceil((t - start) / nominal * (1.0 + 1e-12) + 1e-9) * nominal
@@ -121,17 +156,33 @@ def solve_load_steps(
         elapsed = problem.comm.allreduce(time.perf_counter() - begin, op=MPI.MAX)
         if not report.converged:
             problem.restore_state(saved)
-            cutbacks += 1
-            if cutbacks > max_cutbacks:
+            cause = report.cause()
+            if report.inversion.count:
+                inverting = (target, report.inversion)
+            if cutbacks + 1 > max_cutbacks or 0.5 * increment < min_increment:
                 apply_load(t)
-                raise LoadSteppingError(
-                    f"no convergence from t = {t:.6g} to {target:.6g} after {max_cutbacks} "
-                    f"cut-backs (last SNES reason {report.reason}, {report.iterations} iterations)"
+                limit = (
+                    f"after {cutbacks} cut-backs"
+                    if cutbacks + 1 > max_cutbacks
+                    else f"with the increment down to {increment:.3g}: half of it would be "
+                    f"below min_increment = {min_increment:.3g}"
                 )
+                t_text, target_text = _distinct(t, target)
+                raise LoadSteppingError(
+                    f"no convergence from t = {t_text} to {target_text} {limit} "
+                    f"(last SNES reason {cause.removeprefix('SNES reason ')}). The last "
+                    f"converged step ended at t = {t_text}; the step to t = {target_text} "
+                    f"failed after {report.iterations} Newton iterations."
+                    + _diagnosis(problem, report, inverting, t - abs(nominal)),
+                    last_converged=t,
+                    failed=target,
+                    report=report,
+                )
+            cutbacks += 1
             increment *= 0.5
             _log(
                 problem,
-                f"step {step + 1}: t = {target:.6g} failed (SNES reason {report.reason}); "
+                f"step {step + 1}: t = {target:.6g} failed: {cause}; "
                 f"cut back to increment {increment:.4g}",
             )
             continue
@@ -154,6 +205,8 @@ def solve_load_steps(
             f"active {report.active:5d}  residual {record.residual:.3e}  "
             f"time {elapsed:.3f} s",
         )
+        if penetration_check is not None:
+            penetration_check()
         if output is not None:
             output.write(t)
         if on_step is not None:
@@ -162,6 +215,50 @@ def solve_load_steps(
             increment = min(2.0 * increment, nominal)
         cutbacks = 0
     return records
+
+
+def _distinct(a: float, b: float) -> tuple[str, str]:
+    """a and b with 6 significant digits, or as many more as it takes to tell them apart."""
+    for digits in range(6, 18):
+        first, second = f"{a:.{digits}g}", f"{b:.{digits}g}"
+        if first != second or a == b:
+            break
+    return first, second
+
+
+def _diagnosis(problem, report: SolveReport, inverting, since: float) -> str:
+    """What the failure points to, for the causes we can tell apart (collective)."""
+    text = ""
+    recent = inverting is not None and inverting[0] >= since
+    if report.inversion.count:
+        text += " Elements invert before the step can converge."
+    elif recent:
+        text += (
+            f" An earlier attempt, to t = {inverting[0]:.8g}, inverted elements: "
+            f"{inverting[1].describe()}."
+        )
+    compressed = getattr(problem, "most_compressed_cell", None)
+    if compressed is not None:
+        ratio, where = compressed()
+        if where is not None and ratio < 0.1:
+            location = ", ".join(f"{c:.4g}" for c in where)
+            text += (
+                f" At the last converged state the most compressed element has det F = "
+                f"{ratio:.3g} (reference point ({location})): it is about to be inverted."
+            )
+            recent = True
+    if report.inversion.count or recent:
+        text += (
+            " The load or prescribed displacement is too large for the mesh and material "
+            "there: refine the mesh, use a material that resists compression, or check that "
+            "no body is free to move as a rigid body."
+        )
+    if report.linear_solver_failure:
+        text += (
+            " The linear solver failed: a singular system usually means a body whose rigid-body "
+            "motion no boundary condition or active contact holds."
+        )
+    return text
 
 
 def _log(problem: ContactProblem, message: str) -> None:

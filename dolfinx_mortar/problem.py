@@ -55,6 +55,7 @@ import dataclasses
 import logging
 import time
 import typing
+import warnings
 import weakref
 
 import dolfinx
@@ -64,7 +65,7 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from . import compat, kernels
+from . import compat, diagnostics, kernels
 from .layout import BlockLayout, MonolithicMatrix, dirichlet_dofs
 from .mortar import MortarInterface
 
@@ -103,10 +104,34 @@ class SolveReport:
     outer_iterations: int = 1
     linear_iterations: int = 0
     timings: dict[str, float] = dataclasses.field(default_factory=dict)
+    inversion: diagnostics.Inversion = dataclasses.field(default_factory=diagnostics.Inversion)
+    """Inverted cells of the Newton iterate that stopped a failed solve (count 0 otherwise)."""
+    linear_solver_failure: str = ""
+    """Why the linear solver failed (reason DIVERGED_LINEAR_SOLVE), in PETSc's words."""
+
+    def cause(self) -> str:
+        """Why the solve failed, in words ("converged" if it did not fail)."""
+        if self.converged:
+            return "converged"
+        parts = [f"SNES reason {diagnostics.describe_snes_reason(self.reason)}"]
+        if self.inversion.count:
+            parts.append(f"{self.inversion.describe()} in a Newton iterate")
+        if self.linear_solver_failure:
+            parts.append(self.linear_solver_failure)
+        return "; ".join(parts)
 
 
 class ContactProblem:
     """Mortar contact problem with multipliers, penalty or augmented Lagrange.
+
+    Building it is collective, and so are :meth:`solve`, :meth:`num_active`,
+    :meth:`contact_forces`, :meth:`gathered_pressure`, :meth:`pressure_function`,
+    :meth:`statistics`, :meth:`check_penetration` and :meth:`destroy`: call them on
+    every rank of the mesh's communicator (on one rank alone they wait forever).
+    :meth:`contact_pressure`, :meth:`save_state` and :meth:`restore_state` are local.
+
+    Warns (:class:`ContactWarning`) when a slave surface looks away from its
+    master where the two are closest: a tag on the wrong face of its body.
 
     Args:
         F: bulk residual form F(u; v) (internal minus external virtual work).
@@ -224,6 +249,9 @@ class ContactProblem:
             for pair in self.pairs
         ]
         self._check_slave_body()
+        self._inversion_check = diagnostics.InversionCheck(self.V)
+        self._last_inversion = diagnostics.Inversion()
+        self._check_facing()
         bs = self.V.dofmap.index_map_bs
         self._fixed_dofs = dirichlet_dofs(self.bcs, self.V)
         fixed_blocks = np.unique(self._fixed_dofs // bs)
@@ -295,6 +323,76 @@ class ContactProblem:
                     "same body; is the slave surface on the wrong body? (self-contact is not "
                     "supported)"
                 )
+
+    def _pair_name(self, k: int) -> str:
+        pair = self.pairs[k]
+        label = f"'{pair.name}' " if pair.name else ""
+        return f"contact pair {label}(slave tag {pair.slave}, master tag {pair.master})"
+
+    def _check_facing(self) -> None:
+        """Warn when a slave surface looks away from its master where the two are closest."""
+        for k, interface in enumerate(self.interfaces):
+            slave, master = interface.slave, interface.master
+            facing = diagnostics.facing_report(
+                self.comm, slave.current_coordinates(self.u), slave.facets,
+                master.current_coordinates(self.u), master.facets)
+            if facing.looks_away:
+                _warn(
+                    self.comm,
+                    f"{self._pair_name(k)}: the slave surface looks away from its master. Where "
+                    f"the two surfaces are closest ({facing.distance:.3g} apart), "
+                    f"{facing.facets_looking_away} of {facing.facets_compared} slave facets have "
+                    "an outward normal pointing the same way as the nearest master facet's "
+                    f"(mean cosine {facing.mean_cosine:+.2f}; facing surfaces have -1), so no "
+                    "facet can ever touch its master and the bodies would pass through each "
+                    "other. Likely cause: the slave or the master tag is on the wrong face of "
+                    "its body (outward normals point out of each body).",
+                )
+
+    def most_compressed_cell(self) -> tuple[float, tuple[float, ...] | None]:
+        """(J, reference point): the smallest det F = det(current) / det(reference) of any
+        cell at the current u (per corner for quadrilaterals), and that cell's midpoint.
+
+        Collective. J <= 0 means an inverted element; J near 0 one about to invert.
+        """
+        return self._inversion_check.worst(self.u.x.array)
+
+    def check_penetration(self, threshold: float = 0.5) -> list[diagnostics.Penetration]:
+        """Nodes of either surface deep behind the other one, per pair; warns if any.
+
+        Collective. Mortar contact enforces the gap in a weighted sense, so
+        nodes may sit slightly inside the other body (a few per cent of an
+        element at corners); a node more than ``threshold`` facet lengths
+        behind the other surface means contact failed to act there.
+        :func:`~dolfinx_mortar.loading.solve_load_steps` calls this after every
+        accepted step.
+        """
+        reports = []
+        for k, interface in enumerate(self.interfaces):
+            slave, master = interface.slave, interface.master
+            slave_x = slave.current_coordinates(self.u)
+            master_x = master.current_coordinates(self.u)
+            report = diagnostics.penetration_report(
+                self.comm, threshold, slave_x[slave.node_owned], slave_x, slave.facets,
+                master_x[master.node_owned], master_x, master.facets)
+            reports.append(report)
+            if report.count:
+                other = "master" if report.side == "slave" else "slave"
+                where = ", ".join(f"{c:.4g}" for c in report.where)
+                causes = ["the slave or master tag on the wrong face of its body (normals "
+                          "reversed)", "a load step that moved the bodies through each other "
+                          f"by more than the search margin ({interface.reuse.margin:.3g})"]
+                if self.method != "lagrange":
+                    causes.append(f"a penalty parameter too soft (penalty={self.penalty:.3g})")
+                _warn(
+                    self.comm,
+                    f"{self._pair_name(k)}: {report.count} {report.side} node(s) ended the step "
+                    f"behind the {other} surface by more than {threshold:g} facet lengths "
+                    f"(deepest {report.depth:.3g} facet lengths, at ({where})), beyond what "
+                    "the weighted (mortar) gap condition allows. Likely causes: "
+                    + "; ".join(causes) + ".",
+                )
+        return reports
 
     def _stiffness_scale(self) -> tuple[float, float, float]:
         """(s, h, s_master): s about E/h of the slave side (the mean bulk stiffness
@@ -440,40 +538,6 @@ class ContactProblem:
         for field, z in enumerate(self.multipliers, start=1):
             z.getArray()[:] = array[self.layout.owned(field)]
 
-    def _inverted(self) -> bool:
-        """Collective: does any cell have a non-positive Jacobian determinant?
-
-        At each corner (a; b, c) the determinant is the cross product of the
-        current edges X_b - X_a + u_b - u_a and X_c - X_a + u_c - u_a; the
-        reference edges, the sign of their determinant and the dofs are kept
-        (this runs in every residual evaluation, over all cells).
-        """
-        if not hasattr(self, "_corner_data"):
-            mesh = self.V.mesh
-            geometry = compat.geometry_dofmap(mesh)
-            num_cells = mesh.topology.index_map(mesh.topology.dim).size_local
-            X = mesh.geometry.x[:, :2][geometry[:num_cells]]
-            blocks = np.asarray(self.V.dofmap.list[:num_cells], dtype=np.int64)
-            if geometry.shape[1] == 3:
-                corners = [(0, 1, 2)]
-            else:
-                corners = [(0, 1, 2), (1, 3, 0), (3, 2, 1), (2, 0, 3)]
-            self._corner_data = []
-            for a, b, c in corners:
-                first, second = X[:, b] - X[:, a], X[:, c] - X[:, a]
-                sign = np.sign(_cross(first, second))
-                self._corner_data.append(
-                    (blocks[:, a], blocks[:, b], blocks[:, c], first * sign[:, None],
-                     second, sign))
-        u = self.u.x.array.reshape(-1, 2)
-        bad = False
-        for a, b, c, first, second, sign in self._corner_data:
-            ua = u[a]
-            # sign * det(first + du_b, second + du_c), with first already times sign
-            current = _cross(first + sign[:, None] * (u[b] - ua), second + (u[c] - ua))
-            bad |= bool(np.any(current <= 0.0))
-        return bool(self.comm.allreduce(bad, op=MPI.LOR))
-
     # -- contact -----------------------------------------------------------
 
     def _update_contact(self) -> None:
@@ -565,9 +629,11 @@ class ContactProblem:
 
     def _residual(self, snes: PETSc.SNES, x: PETSc.Vec, b: PETSc.Vec) -> None:
         self._write_x_into_state(x)
-        if self._inverted():
-            # an inverted element: a NaN residual makes SNES stop with
-            # DIVERGED_FNORM_NAN, and the load stepper cuts the step back
+        inversion = self._inversion_check(self.u.x.array)
+        if inversion.count:
+            # a NaN residual makes SNES stop with DIVERGED_FNORM_NAN; the report
+            # names the inverted cells and the load stepper cuts the step back
+            self._last_inversion = inversion
             b.set(np.nan)
             return
         self._update_contact()
@@ -734,7 +800,7 @@ class ContactProblem:
     # -- solving -----------------------------------------------------------
 
     def solve(self) -> SolveReport:
-        """Solve one load step from the current state (u and multipliers).
+        """Solve one load step from the current state (u and multipliers). Collective.
 
         Returns a report; does not raise when Newton fails (the load stepper
         cuts the step back), but raises for errors in the input.
@@ -762,10 +828,11 @@ class ContactProblem:
 
     def _newton(self) -> SolveReport:
         self._residual_history = []
+        self._last_inversion = diagnostics.Inversion()
         self.snes.solve(None, self.x)
         reason = self.snes.getConvergedReason()
         self._write_x_into_state(self.x)
-        return SolveReport(
+        report = SolveReport(
             converged=reason > 0,
             reason=reason,
             iterations=self.snes.getIterationNumber(),
@@ -773,6 +840,11 @@ class ContactProblem:
             active=0,
             linear_iterations=self.snes.getLinearSolveIterations(),
         )
+        if reason <= 0:
+            report.inversion = self._last_inversion
+        if reason == PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE:
+            report.linear_solver_failure = diagnostics.describe_ksp_failure(self.snes.getKSP())
+        return report
 
     def _fixed_point(self) -> SolveReport:
         """Outer loop of the fixed-point active-set strategy (paper, section 5)."""
@@ -783,7 +855,8 @@ class ContactProblem:
         for k, z in enumerate(self.multipliers):
             covered, gap = self._nodal_gaps(k)
             self._frozen_active.append(covered & ((z.getArray(readonly=True) > 0) | (gap <= 0)))
-        return self._outer_loop(self._update_frozen_active_sets, failure_reason=-100)
+        return self._outer_loop(self._update_frozen_active_sets,
+                                failure_reason=diagnostics.FIXED_POINT_NOT_SETTLED)
 
     def _update_frozen_active_sets(self) -> bool:
         """One fixed-point update; True when no node changed on any rank.
@@ -847,7 +920,8 @@ class ContactProblem:
 
     def _uzawa(self) -> SolveReport:
         """Augmented Lagrange: Newton at fixed lam, then lam <- z, until lam settles."""
-        return self._outer_loop(self._update_augmented_multipliers, failure_reason=-101)
+        return self._outer_loop(self._update_augmented_multipliers,
+                                failure_reason=diagnostics.UZAWA_NOT_SETTLED)
 
     def _update_augmented_multipliers(self) -> bool:
         """lam <- z; True when max|change| <= augmented_tolerance max|lam| on all ranks."""
@@ -866,6 +940,7 @@ class ContactProblem:
     # -- state for load stepping --------------------------------------------
 
     def save_state(self) -> dict:
+        """This rank's part of u, the multipliers and the Uzawa multipliers (not collective)."""
         return {
             "u": self.u.x.array.copy(),
             "z": [z.getArray(readonly=True).copy() for z in self.multipliers],
@@ -873,6 +948,7 @@ class ContactProblem:
         }
 
     def restore_state(self, state: dict) -> None:
+        """Put back a :meth:`save_state` (not collective; call it on every rank)."""
         self.u.x.array[:] = state["u"]
         for z, values in zip(self.multipliers, state["z"], strict=True):
             z.getArray()[:] = values
@@ -882,10 +958,13 @@ class ContactProblem:
     # -- results -----------------------------------------------------------
 
     def num_active(self) -> int:
+        """Active slave nodes of all pairs, summed over the ranks. Collective."""
         return int(self.comm.allreduce(sum(int(a.sum()) for a in self.active), op=MPI.SUM))
 
     def contact_pressure(self, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
-        """(reference coordinates, nodal pressure z_j) of pair k's owned slave nodes."""
+        """(reference coordinates, nodal pressure z_j) of pair k's slave nodes owned by this
+        rank. Not collective: each rank sees only its own nodes (:meth:`gathered_pressure`
+        gives all of them)."""
         interface = self.interfaces[k]
         return (
             interface.owned_multiplier_coordinates.copy(),
@@ -893,7 +972,7 @@ class ContactProblem:
         )
 
     def gathered_pressure(self, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
-        """The same on every rank, for all slave nodes, sorted by x coordinate."""
+        """The same on every rank, for all slave nodes, sorted by x coordinate. Collective."""
         coordinates, pressure = self.contact_pressure(k)
         coordinates = np.vstack(self.comm.allgather(coordinates))
         pressure = np.concatenate(self.comm.allgather(pressure))
@@ -901,7 +980,10 @@ class ContactProblem:
         return coordinates[order], pressure[order]
 
     def contact_forces(self, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
-        """Total contact force (2-vector) on the slave and on the master side of pair k."""
+        """Total contact force (2-vector) on the slave and on the master side of pair k.
+
+        Collective: call it on every rank (each gets the sums over all ranks).
+        """
         interface = self.interfaces[k]
         q = interface.quantities
         if q is None:
@@ -914,7 +996,10 @@ class ContactProblem:
         return (self.comm.allreduce(slave, op=MPI.SUM), self.comm.allreduce(master, op=MPI.SUM))
 
     def pressure_function(self, k: int = 0, function: dolfinx.fem.Function | None = None):
-        """A P1 scalar Function with the contact pressure at the slave nodes (0 elsewhere)."""
+        """A P1 scalar Function with the contact pressure at the slave nodes (0 elsewhere).
+
+        Collective (creating a Function and updating its ghosts).
+        """
         if function is None:
             space = dolfinx.fem.functionspace(self.V.mesh, ("Lagrange", 1))
             function = dolfinx.fem.Function(space, name="contact_pressure")
@@ -926,6 +1011,7 @@ class ContactProblem:
         return function
 
     def statistics(self) -> dict:
+        """Search and integration counters per pair (sums over the ranks). Collective."""
         result = {}
         for k, (pair, interface) in enumerate(zip(self.pairs, self.interfaces, strict=True)):
             s = interface.statistics
@@ -947,6 +1033,7 @@ class ContactProblem:
         return result
 
     def destroy(self) -> None:
+        """Free the PETSc objects. Collective."""
         self._options_finalizer()
         self.snes.destroy()
         if self._condenser is not None:
@@ -973,10 +1060,17 @@ def _delete_options(names: list[str]) -> None:
             _OPTIONS_SET_BY_PROBLEMS.discard(name)
 
 
+class ContactWarning(UserWarning):
+    """A contact set-up or result that is probably not what the user meant."""
+
+
+def _warn(comm: MPI.Intracomm, message: str) -> None:
+    """A :class:`ContactWarning` on every rank (the same text), so that a warnings filter
+    set to "error" raises on every rank instead of leaving the others waiting."""
+    warnings.warn(message, ContactWarning, stacklevel=3)
+
+
 def _check_choice(name: str, value, allowed) -> None:
     if value not in allowed:
         raise ValueError(f"unknown {name} {value!r}; expected one of {tuple(allowed)}")
 
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]

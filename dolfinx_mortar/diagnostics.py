@@ -1,0 +1,320 @@
+"""Checks that turn silent wrong answers into messages.
+
+A contact solve can end "successfully" with a useless answer: a slave surface
+tagged on the face of its body that looks away from the master never meets
+it, and the bodies pass through each other with zero contact force. A failed
+solve can end in PETSc reason codes that do not say what went wrong. This
+module holds the checks behind the messages of :class:`ContactProblem` and
+:func:`~dolfinx_mortar.loading.solve_load_steps`:
+
+* :func:`describe_snes_reason`: a SNES (or our outer loops') reason in words;
+* :class:`InversionCheck`: cells whose Jacobian determinant is not positive,
+  counted, with the worst one located;
+* :func:`facing_report`: where slave and master are closest, do their
+  outward normals point at each other (run when a problem is built);
+* :func:`penetration_report`: surface nodes that ended a converged step deep
+  behind the other surface (run after each accepted load step).
+
+All functions that take a communicator are collective.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from mpi4py import MPI
+from scipy.spatial import cKDTree
+
+FIXED_POINT_NOT_SETTLED = -100
+"""SolveReport reason: the fixed-point active set kept changing."""
+UZAWA_NOT_SETTLED = -101
+"""SolveReport reason: the augmented Lagrange (Uzawa) updates did not settle."""
+
+_SNES_REASON_WORDS = {
+    2: ("CONVERGED_FNORM_ABS", "the residual norm fell below the absolute tolerance"),
+    3: ("CONVERGED_FNORM_RELATIVE", "the residual norm fell below the relative tolerance"),
+    4: ("CONVERGED_SNORM_RELATIVE", "the Newton step became small relative to the solution"),
+    5: ("CONVERGED_ITS", "the maximum number of iterations was reached (counted as converged)"),
+    -1: ("DIVERGED_FUNCTION_DOMAIN", "the residual could not be evaluated at the iterate"),
+    -2: ("DIVERGED_FUNCTION_COUNT", "too many residual evaluations"),
+    -3: ("DIVERGED_LINEAR_SOLVE", "the linear solver failed"),
+    -4: ("DIVERGED_FNORM_NAN", "the residual is NaN or infinite"),
+    -5: ("DIVERGED_MAX_IT", "no convergence within the maximum number of Newton iterations"),
+    -6: ("DIVERGED_LINE_SEARCH", "the line search failed"),
+    -7: ("DIVERGED_INNER", "an inner solve failed"),
+    -8: ("DIVERGED_LOCAL_MIN", "Newton stalled in a local minimum of the residual norm"),
+    -9: ("DIVERGED_DTOL", "the residual grew beyond the divergence tolerance"),
+    -10: ("DIVERGED_JACOBIAN_DOMAIN", "the Jacobian could not be evaluated at the iterate"),
+    -11: ("DIVERGED_TR_DELTA", "the trust region became too small"),
+    FIXED_POINT_NOT_SETTLED: (
+        "FIXED_POINT_NOT_SETTLED",
+        "the fixed-point active set kept changing (max_outer_iterations reached)",
+    ),
+    UZAWA_NOT_SETTLED: (
+        "UZAWA_NOT_SETTLED",
+        "the augmented Lagrange updates did not settle (max_outer_iterations reached)",
+    ),
+}
+
+
+def describe_snes_reason(reason: int) -> str:
+    """``"-4 DIVERGED_FNORM_NAN (the residual is NaN or infinite)"`` for a reason code."""
+    name, words = _SNES_REASON_WORDS.get(int(reason), ("UNKNOWN", "no description"))
+    return f"{int(reason)} {name} ({words})"
+
+
+def describe_ksp_failure(ksp) -> str:
+    """Why the linear solve failed, from the KSP's and its preconditioner's reasons."""
+    from petsc4py import PETSc
+
+    def name_of(enum, value) -> str:
+        for key in dir(enum):
+            if not key.startswith("_") and getattr(enum, key) == value:
+                return key
+        return str(value)
+
+    reason = ksp.getConvergedReason()
+    text = f"KSP reason {reason} {name_of(PETSc.KSP.ConvergedReason, reason)}"
+    try:
+        failed = ksp.getPC().getFailedReason()
+    except AttributeError:  # pragma: no cover - older petsc4py
+        failed = 0
+    if failed:
+        text += f", preconditioner failure {name_of(PETSc.PC.FailedReason, failed)}"
+        if "FACTOR" in name_of(PETSc.PC.FailedReason, failed):
+            text += " (the factorization met a zero or tiny pivot: a singular system, e.g. a "
+            text += "body with a free rigid-body motion)"
+    return text
+
+
+@dataclasses.dataclass
+class Inversion:
+    """Inverted cells of one state: how many, and where the worst one is."""
+
+    count: int = 0
+    where: tuple[float, ...] | None = None
+    """Reference coordinates of the midpoint of the cell with the most negative determinant."""
+
+    def describe(self) -> str:
+        if not self.count:
+            return "no inverted element"
+        location = ", ".join(f"{c:.4g}" for c in self.where) if self.where else "?"
+        return (
+            f"{self.count} inverted element{'s' if self.count != 1 else ''} (Jacobian "
+            f"determinant <= 0; the worst at reference point ({location}))"
+        )
+
+
+class InversionCheck:
+    """Counts cells with a non-positive Jacobian determinant at x = X + u (2D, P1).
+
+    At each corner (a; b, c) the determinant is the cross product of the
+    current edges X_b - X_a + u_b - u_a and X_c - X_a + u_c - u_a; the
+    reference edges, the sign of their determinant and the dofs are kept,
+    since this runs in every residual evaluation, over all cells.
+    """
+
+    def __init__(self, V):
+        from . import compat
+
+        mesh = V.mesh
+        self.comm = mesh.comm
+        geometry = compat.geometry_dofmap(mesh)
+        num_cells = mesh.topology.index_map(mesh.topology.dim).size_local
+        X = mesh.geometry.x[:, :2][geometry[:num_cells]]
+        self._midpoints = X.mean(axis=1)
+        blocks = np.asarray(V.dofmap.list[:num_cells], dtype=np.int64)
+        if geometry.shape[1] == 3:
+            corners = [(0, 1, 2)]
+        else:
+            corners = [(0, 1, 2), (1, 3, 0), (3, 2, 1), (2, 0, 3)]
+        self._corners = []
+        for a, b, c in corners:
+            first, second = X[:, b] - X[:, a], X[:, c] - X[:, a]
+            determinant = _cross(first, second)
+            sign = np.sign(determinant)
+            # relative to the reference determinant: the worst cell is the relatively worst
+            self._corners.append((blocks[:, a], blocks[:, b], blocks[:, c], first * sign[:, None],
+                                  second, sign, np.abs(determinant)))
+
+    def local_ratios(self, u: np.ndarray) -> np.ndarray:
+        """Per owned cell: min over corners of det(current) / |det(reference)|."""
+        u = u.reshape(-1, 2)
+        worst = np.full(self._midpoints.shape[0], np.inf)
+        for a, b, c, first, second, sign, scale in self._corners:
+            ua = u[a]
+            # sign * det(first + du_b, second + du_c), with first already times sign
+            current = _cross(first + sign[:, None] * (u[b] - ua), second + (u[c] - ua))
+            np.minimum(worst, current / scale, out=worst)
+        return worst
+
+    def worst(self, u: np.ndarray) -> tuple[float, tuple[float, ...] | None]:
+        """Collective: the smallest det(current) / det(reference) over all cells, and where."""
+        ratios = self.local_ratios(u)
+        local = (np.inf, None)
+        if ratios.size:
+            values = np.where(np.isnan(ratios), -np.inf, ratios)
+            i = int(np.argmin(values))
+            local = (float(values[i]), tuple(float(c) for c in self._midpoints[i]))
+        return min(self.comm.allgather(local), key=lambda w: w[0])
+
+    def __call__(self, u: np.ndarray) -> Inversion:
+        """Collective: the inverted cells of displacement array ``u`` (owned and ghost blocks)."""
+        ratios = self.local_ratios(u)
+        bad = ~(ratios > 0.0)  # NaN counts as inverted
+        count = self.comm.allreduce(int(np.count_nonzero(bad)), op=MPI.SUM)
+        if not count:
+            return Inversion()
+        local_worst = (np.inf, None)
+        if bad.any():
+            values = np.where(np.isnan(ratios), -np.inf, ratios)
+            i = int(np.argmin(values))
+            local_worst = (float(values[i]), tuple(float(c) for c in self._midpoints[i]))
+        candidates = [w for w in self.comm.allgather(local_worst) if w[1] is not None]
+        return Inversion(count=count, where=min(candidates, key=lambda w: w[0])[1])
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+
+
+def _facet_geometry(x: np.ndarray, facets: np.ndarray):
+    """Centres, outward unit normals and lengths of 2D facets (start -> end, normal (t_y, -t_x))."""
+    start, end = x[facets[:, 0]], x[facets[:, 1]]
+    tangent = end - start
+    length = np.linalg.norm(tangent, axis=1)
+    normal = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1) / np.where(length > 0, length, 1)[
+        :, None
+    ]
+    return 0.5 * (start + end), normal, length
+
+
+@dataclasses.dataclass
+class Facing:
+    """Where the two surfaces of a pair are closest, how their normals stand to each other."""
+
+    facets_compared: int
+    """Slave facets in the closest zone: within 2 slave facet lengths of the closest."""
+    facets_looking_away: int
+    """Of those, how many have n_slave . n_master > 0.5 with their nearest master facet."""
+    mean_cosine: float
+    distance: float
+    """The smallest distance between a slave and a master facet centre."""
+
+    @property
+    def looks_away(self) -> bool:
+        return self.facets_compared > 0 and 2 * self.facets_looking_away > self.facets_compared
+
+
+def facing_report(comm: MPI.Intracomm, slave_x: np.ndarray, slave_facets: np.ndarray,
+                  master_x: np.ndarray, master_facets: np.ndarray) -> Facing:
+    """Collective: do the slave and the master surface face each other where they are closest?
+
+    Contact needs opposed outward normals (the kernels pair only facets with
+    n_slave . n_master < 0). A slave tagged on the wrong face of its body, or
+    a master whose outward normal points into the slave's side, gives
+    normals that point the same way where the surfaces are closest: contact
+    can then never become active, and the bodies pass through each other.
+    Surfaces in contact at an angle (cosine near 0) are not flagged.
+    """
+    s_centre, s_normal, s_length = _facet_geometry(slave_x, slave_facets)
+    m_centre, m_normal, _ = _facet_geometry(master_x, master_facets)
+    m_centre = np.vstack(comm.allgather(m_centre))
+    m_normal = np.vstack(comm.allgather(m_normal))
+    total_length = comm.allreduce(np.array([s_length.sum(), s_length.size]), op=MPI.SUM)
+    if m_centre.shape[0] == 0 or total_length[1] == 0:
+        return Facing(0, 0, float("nan"), float("inf"))
+    h = total_length[0] / total_length[1]
+    if s_centre.shape[0]:
+        distance, nearest = cKDTree(m_centre).query(s_centre)
+    else:
+        distance, nearest = np.zeros(0), np.zeros(0, dtype=np.int64)
+    smallest = comm.allreduce(float(np.min(distance, initial=np.inf)), op=MPI.MIN)
+    zone = distance <= smallest + 2.0 * h
+    cosine = np.einsum("ij,ij->i", s_normal[zone], m_normal[nearest[zone]])
+    compared, away, cosines = comm.allreduce(
+        np.array([zone.sum(), np.count_nonzero(cosine > 0.5), cosine.sum()], dtype=np.float64),
+        op=MPI.SUM,
+    )
+    return Facing(int(compared), int(away), float(cosines / max(compared, 1)), smallest)
+
+
+@dataclasses.dataclass
+class Penetration:
+    """Surface nodes that lie behind the other surface by more than a threshold."""
+
+    count: int = 0
+    depth: float = 0.0
+    """The largest depth, relative to the local facet length."""
+    where: tuple[float, ...] | None = None
+    side: str = ""
+    """"slave" (slave nodes behind the master surface) or "master" (the reverse)."""
+
+
+def penetration_report(comm: MPI.Intracomm, threshold: float,
+                       slave_points: np.ndarray, slave_x: np.ndarray, slave_facets: np.ndarray,
+                       master_points: np.ndarray, master_x: np.ndarray,
+                       master_facets: np.ndarray) -> Penetration:
+    """Collective: nodes of either surface that lie behind the other by > threshold x facet length.
+
+    A node is behind a surface when the nearest facet of that surface (by
+    the distance to the segment) has the node on its inner side and the
+    node projects inside the facet. Mortar contact enforces the gap in a
+    weighted (integral) sense, so corner nodes may sit slightly inside the
+    other body (a few per cent of an element); a node deeper than
+    ``threshold`` facet lengths means contact was not enforced there.
+
+    Args:
+        slave_points, master_points: this rank's owned nodes of each surface.
+        slave_x, slave_facets, master_x, master_facets: this rank's facets.
+    """
+    worst = Penetration()
+    for side, points, x, facets in (
+        ("slave", slave_points, master_x, master_facets),
+        ("master", master_points, slave_x, slave_facets),
+    ):
+        found = _behind(comm, points, x, facets, threshold)
+        if found.count:
+            found.side = side
+            if found.depth > worst.depth:
+                found.count += worst.count
+                worst = found
+            else:
+                worst.count += found.count
+    return worst
+
+
+def _behind(comm, points, x, facets, threshold) -> Penetration:
+    # every facet of the other surface: a node may be behind one at any depth
+    start = np.vstack(comm.allgather(x[facets[:, 0]]))
+    end = np.vstack(comm.allgather(x[facets[:, 1]]))
+    depth = np.zeros(0)
+    deep = np.zeros(0, dtype=bool)
+    if start.shape[0] and points.shape[0]:
+        tangent = end - start
+        length = np.linalg.norm(tangent, axis=1)
+        normal = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1) / length[:, None]
+        k = min(8, start.shape[0])
+        _, candidates = cKDTree(0.5 * (start + end)).query(points, k=k)
+        candidates = candidates.reshape(points.shape[0], k)
+        relative = points[:, None, :] - start[candidates]
+        t = np.einsum("nkc,nkc->nk", relative, tangent[candidates]) / length[candidates] ** 2
+        closest = start[candidates] + np.clip(t, 0.0, 1.0)[..., None] * tangent[candidates]
+        distance = np.linalg.norm(points[:, None, :] - closest, axis=2)
+        best = np.argmin(distance, axis=1)
+        rows = np.arange(points.shape[0])
+        facet = candidates[rows, best]
+        t_best = t[rows, best]
+        depth = -np.einsum("nc,nc->n", relative[rows, best], normal[facet]) / length[facet]
+        deep = (t_best >= 0.0) & (t_best <= 1.0) & (depth > threshold)
+    count = comm.allreduce(int(np.count_nonzero(deep)), op=MPI.SUM)
+    local = (0.0, None)
+    if deep.any():
+        i = int(np.argmax(np.where(deep, depth, -np.inf)))
+        local = (float(depth[i]), tuple(float(c) for c in points[i]))
+    gathered = [g for g in comm.allgather(local) if g[1] is not None]
+    if not count:
+        return Penetration()
+    depth_max, where = max(gathered, key=lambda g: g[0])
+    return Penetration(count=count, depth=depth_max, where=where)

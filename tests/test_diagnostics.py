@@ -1,0 +1,179 @@
+"""Failures and silent wrong answers turned into messages (dolfinx_mortar.diagnostics).
+
+A punch driven into a block with its slave surface tagged on the face that looks
+away from the block must not pass through silently; a load that inverts elements
+must end in a message that says so; every PETSc reason gets its name and words.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import dolfinx
+import numpy as np
+import pytest
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from dolfinx_mortar import diagnostics, meshes
+from dolfinx_mortar.loading import LoadSteppingError, solve_load_steps
+from dolfinx_mortar.materials import Material, internal_work
+from dolfinx_mortar.problem import ContactPair, ContactProblem, ContactWarning, SolveReport
+
+
+def punch(comm, slave_face: str, material: str = "neo-hookean"):
+    """The patch test's punch [4, 6] x [5, 7], its sides driven down, on the foundation.
+
+    ``slave_face``: "bottom" (right: it faces the foundation) or "top" (wrong: it
+    looks away from the foundation's top, the master)."""
+    tagged = meshes.patch_test(ratio=(3, 2), comm=comm)
+    mesh, markers = tagged.mesh, tagged.markers
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    u = dolfinx.fem.Function(V)
+    F = internal_work(u, ufl.TestFunction(V), {0: Material(1000.0, 0.3, material)})
+    sides = dolfinx.mesh.locate_entities_boundary(
+        mesh, 1, lambda x: (np.isclose(x[0], 4.0) | np.isclose(x[0], 6.0)) & (x[1] > 5.5))
+    bottom = tagged.facet_tags.find(markers["foundation_bottom"])
+    drive = dolfinx.fem.Function(V)
+    bcs = [
+        dolfinx.fem.dirichletbc(np.zeros(2), dolfinx.fem.locate_dofs_topological(V, 1, bottom), V),
+        dolfinx.fem.dirichletbc(drive, dolfinx.fem.locate_dofs_topological(V, 1, sides)),
+    ]
+    slave = markers["punch_contact" if slave_face == "bottom" else "punch_top"]
+    pair = ContactPair(tagged.facet_tags, slave, markers["foundation_contact"], name="punch")
+
+    def apply_load(depth):
+        def set_depth(t):
+            drive.x.array.reshape(-1, 2)[:, 1] = -depth * t
+        return set_depth
+
+    return F, u, bcs, pair, apply_load
+
+
+@pytest.mark.parallel
+def test_slave_surface_tagged_on_the_wrong_face_warns_at_setup_and_after_steps(comm):
+    F, u, bcs, pair, apply_load = punch(comm, "top")
+    with pytest.warns(ContactWarning, match=r"contact pair 'punch'.*looks away from its master"
+                      r".*3 of 3 slave facets.*wrong face"):
+        problem = ContactProblem(F, u, bcs, [pair])
+    with pytest.warns(ContactWarning, match=r"'punch'.*3 master node\(s\) ended the step behind "
+                      r"the slave surface.*wrong face") as caught:
+        solve_load_steps(problem, apply_load(1.0), 2)
+    assert len([w for w in caught if issubclass(w.category, ContactWarning)]) == 2
+    slave_force, _ = problem.contact_forces()
+    assert problem.num_active() == 0 and np.all(slave_force == 0.0)  # what went unnoticed
+    problem.destroy()
+
+
+@pytest.mark.parallel
+def test_the_right_face_gives_no_warning_and_a_contact_force(comm):
+    F, u, bcs, pair, apply_load = punch(comm, "bottom")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ContactWarning)
+        problem = ContactProblem(F, u, bcs, [pair])
+        solve_load_steps(problem, apply_load(0.1), 2)
+    slave_force, master_force = problem.contact_forces()
+    assert slave_force[1] > 10.0
+    assert np.allclose(slave_force, -master_force, rtol=1e-9, atol=1e-9 * abs(slave_force[1]))
+    assert all(r.count == 0 for r in problem.check_penetration())
+    problem.destroy()
+
+
+def test_an_inverting_load_ends_in_a_message_that_says_inverted(comm):
+    """Pressing the punch 4.5 deep into a foundation 5 tall: elements under its corners
+    invert; the cut-backs stop at min_increment and the error names the inversion."""
+    F, u, bcs, pair, apply_load = punch(comm, "bottom")
+    problem = ContactProblem(F, u, bcs, [pair])
+    with pytest.raises(LoadSteppingError, match=r"(?s)no convergence from t = .*inverted") as info:
+        solve_load_steps(problem, apply_load(4.5), 2)
+    error = info.value
+    message = str(error)
+    assert "The last converged step ended at t = " in message
+    assert 0.0 < error.last_converged < error.failed < 1.0
+    assert f"{error.last_converged:.6g}" in message
+    assert "min_increment" in message
+    problem.destroy()
+
+
+def test_cut_backs_stop_at_min_increment_with_the_times_in_the_message():
+    """A solver that cannot pass t = 0.3: the increments halve until min_increment."""
+
+    class Wall:
+        comm = MPI.COMM_WORLD
+
+        def __init__(self):
+            self.load = self.accepted = 0.0
+
+        def save_state(self):
+            return self.accepted
+
+        def restore_state(self, state):
+            self.accepted = state
+
+        def solve(self):
+            converged = self.load <= 0.3
+            if converged:
+                self.accepted = self.load
+            return SolveReport(converged=converged, reason=2 if converged else -6,
+                               iterations=4, residuals=[1.0], active=0)
+
+    wall = Wall()
+    with pytest.raises(LoadSteppingError, match=r"no convergence from t = 0\.29\d+ to 0\.30\d+ "
+                       r"with "
+                       r"the increment down to .* min_increment = 0\.001.*DIVERGED_LINE_SEARCH "
+                       r"\(the line search failed\)") as info:
+        solve_load_steps(wall, lambda t: setattr(wall, "load", t), 4, max_cutbacks=50,
+                         min_increment=1e-3)
+    assert 0.3 - 4e-3 < info.value.last_converged <= 0.3 < info.value.failed < 0.3 + 4e-3
+
+
+def test_every_snes_reason_has_a_name_and_words():
+    reasons = PETSc.SNES.ConvergedReason
+    for name in dir(reasons):
+        if name.startswith(("CONVERGED", "DIVERGED")) and name != "CONVERGED_ITERATING":
+            text = diagnostics.describe_snes_reason(getattr(reasons, name))
+            assert text.startswith(f"{getattr(reasons, name)} {name} (")
+    assert "UZAWA" in diagnostics.describe_snes_reason(diagnostics.UZAWA_NOT_SETTLED)
+
+
+def test_a_singular_factorization_is_described():
+    matrix = PETSc.Mat().createAIJ((3, 3), nnz=1, comm=MPI.COMM_SELF)
+    for i, value in enumerate([1.0, 0.0, 1.0]):
+        matrix.setValue(i, i, value)
+    matrix.assemble()
+    ksp = PETSc.KSP().create(MPI.COMM_SELF)
+    ksp.setOperators(matrix)
+    ksp.setType("preonly")
+    ksp.getPC().setType("lu")
+    ksp.setErrorIfNotConverged(False)
+    b, x = matrix.createVecs()
+    b.set(1.0)
+    ksp.solve(b, x)
+    text = diagnostics.describe_ksp_failure(ksp)
+    for words in ("DIVERGED_PCSETUP_FAILED", "FACTOR_NUMERIC_ZEROPIVOT", "zero or tiny pivot"):
+        assert words in text
+    ksp.destroy()
+    matrix.destroy()
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("cell_type", ["triangle", "quadrilateral"])
+def test_inversion_check_counts_and_locates_the_inverted_cells(comm, cell_type):
+    """u = (0, -2 y) on [0, 1]^2 maps y -> -y: every cell is inverted (det F = -1); u = 0
+    leaves det F = 1; squashing the cells with x < 0.25 to det F = 0.5 locates the worst."""
+    mesh = dolfinx.mesh.create_unit_square(comm, 4, 4, getattr(dolfinx.mesh.CellType, cell_type))
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    check = diagnostics.InversionCheck(V)
+    u = dolfinx.fem.Function(V)
+    assert check(u.x.array).count == 0
+    assert check.worst(u.x.array)[0] == pytest.approx(1.0, rel=1e-12)
+    u.interpolate(lambda x: np.stack([np.zeros_like(x[0]), -2.0 * x[1]]))
+    num_cells = mesh.topology.index_map(2).size_global
+    inversion = check(u.x.array)
+    assert inversion.count == num_cells
+    assert "inverted element" in inversion.describe()
+    u.interpolate(lambda x: np.stack([-0.5 * np.minimum(x[0], 0.25), np.zeros_like(x[0])]))
+    ratio, where = check.worst(u.x.array)
+    assert check(u.x.array).count == 0
+    assert ratio == pytest.approx(0.5, rel=1e-12) and where[0] < 0.25
