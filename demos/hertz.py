@@ -20,15 +20,23 @@ moves the converged pressure 1.7 % (L2) away from Hertz however fine the mesh
 ``master`` for ``--material linear`` and to the library's ``averaged`` for the
 finite-strain models, whose integrals follow the deformed, flattened arc.
 
+Mesh: refined (h = a/5, halved per --refinement) where the contact zone is, with
+a the Hertz half-width of the --load, --radius and moduli given, and every other
+length a multiple of a or R: the same dimensionless problem in other units
+(lengths x s, moduli x m, load x s m) gives the same p_max / p0 and a / a_exact.
+
+Outputs (``--output DIR``): hertz_pressure.png and hertz_pressure.csv (pressure of
+the slave nodes and Hertz's at their x), paraview/displacement.bp and
+paraview/contact_pressure.bp (every load step); ``--json FILE`` writes the summary.
+
 Run:  mpirun -n 2 python3 demos/hertz.py --refinement 2 --json hertz.json --output results/hertz
 """
 
 from __future__ import annotations
 
-import argparse
+import csv
 import math
 import pathlib
-import sys
 import time
 
 import dolfinx
@@ -36,14 +44,11 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-sys.path.insert(0, str(pathlib.Path(__file__).parent))
-
-from patch_test import add_common_arguments, problem_options, write_summary  # noqa: E402
-
-from dolfinx_mortar import meshes  # noqa: E402
-from dolfinx_mortar.loading import ContactOutput, configure_logging, solve_load_steps  # noqa: E402
-from dolfinx_mortar.materials import Material, internal_work  # noqa: E402
-from dolfinx_mortar.problem import ContactPair, ContactProblem  # noqa: E402
+from dolfinx_mortar import cli, meshes
+from dolfinx_mortar.cli import problem_options, write_summary
+from dolfinx_mortar.loading import ContactOutput, configure_logging, solve_load_steps
+from dolfinx_mortar.materials import Material, internal_work
+from dolfinx_mortar.problem import ContactPair, ContactProblem
 
 CASES = {
     # load P, E and nu of the lower body (the cylinder is always E = 200, nu = 0.3)
@@ -118,28 +123,53 @@ def bulk_problem(tagged, u, materials):
 
 
 def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    parser = cli.parser(__doc__)
+    parser.add_argument(
+        "--case", choices=tuple(CASES), default="B", help="A rigid plate, B block, C two cylinders"
     )
-    parser.add_argument("--case", choices=tuple(CASES), default="B")
-    parser.add_argument("--radius", type=float, default=8.0)
-    parser.add_argument("--load", type=float, default=None, help="force P per unit thickness")
-    parser.add_argument("--E-cylinder", type=float, default=200.0)
-    parser.add_argument("--nu-cylinder", type=float, default=0.3)
-    parser.add_argument("--E-block", type=float, default=None)
-    parser.add_argument("--nu-block", type=float, default=None)
+    parser.add_argument("--radius", type=float, default=8.0, help="cylinder radius R")
+    parser.add_argument(
+        "--load",
+        type=float,
+        default=None,
+        help="force P per unit thickness (None: the case's, " + _case_values("load") + ")",
+    )
+    parser.add_argument(
+        "--E-cylinder", type=float, default=200.0, help="Young's modulus of the cylinder"
+    )
+    parser.add_argument(
+        "--nu-cylinder", type=float, default=0.3, help="Poisson's ratio of the cylinder"
+    )
+    parser.add_argument(
+        "--E-block",
+        type=float,
+        default=None,
+        help="Young's modulus of the lower body (None: the case's, "
+        + _case_values("E_block")
+        + ")",
+    )
+    parser.add_argument(
+        "--nu-block",
+        type=float,
+        default=None,
+        help="Poisson's ratio of the lower body (None: the case's, 0.3)",
+    )
     parser.add_argument(
         "--material",
         choices=("linear", "neo-hookean", "saint-venant-kirchhoff"),
         default="linear",
         help="linear (small strain, what Hertz theory assumes) or finite-strain models",
     )
-    parser.add_argument("--refinement", type=int, default=2)
-    parser.add_argument("--cell-type", choices=("triangle", "quadrilateral"), default="triangle")
+    parser.add_argument(
+        "--refinement", type=int, default=2, help="halves the element sizes per level"
+    )
+    parser.add_argument(
+        "--cell-type", choices=("triangle", "quadrilateral"), default="triangle", help="cells"
+    )
     parser.add_argument("--steps", type=int, default=2, help="load steps")
-    parser.add_argument("--output", type=pathlib.Path, help="directory for ParaView files and PNG")
-    add_common_arguments(parser)
-    parser.set_defaults(normals=None)
+    cli.add_common_arguments(
+        parser, normals=None, normals_help="None: master for --material linear, else averaged"
+    )
     args = parser.parse_args(argv)
     if args.normals is None:
         args.normals = "master" if args.material == "linear" else "averaged"
@@ -148,17 +178,31 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     load = args.load if args.load is not None else case["load"]
     E_block = args.E_block if args.E_block is not None else case["E_block"]
     nu_block = args.nu_block if args.nu_block is not None else case["nu_block"]
+    for option, value in (
+        ("--radius", args.radius),
+        ("--load", load),
+        ("--E-cylinder", args.E_cylinder),
+        ("--E-block", E_block),
+    ):
+        if not value > 0.0:
+            parser.error(f"{option} must be positive, got {value}")
+    for option, value in (("--nu-cylinder", args.nu_cylinder), ("--nu-block", nu_block)):
+        if not -1.0 < value < 0.5:
+            parser.error(f"{option} must lie in (-1, 0.5), got {value}")
     exact = hertz_solution(
         load, args.radius, args.E_cylinder, args.nu_cylinder, E_block, nu_block, args.case
     )
     start = time.perf_counter()
 
+    # the refined zone follows the Hertz a of this load and these moduli, so that
+    # the same dimensionless problem gets the same mesh in every unit system
     tagged = meshes.hertz(
         case=args.case,
         refinement=args.refinement,
         radius=args.radius,
         cell_type=args.cell_type,
         comm=comm,
+        half_width=exact["a"],
     )
     mesh, markers = tagged.mesh, tagged.markers
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
@@ -269,9 +313,29 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         write_summary(args.json, summary)
         if args.output:
             plot(args.output / "hertz_pressure.png", x_nodes, pressure, exact, summary)
-            print(f"results written to {args.output}/ (hertz_pressure.png, paraview/*.bp)")
+            write_profile(args.output / "hertz_pressure.csv", x_nodes, pressure, exact)
+            print(
+                f"results written to {args.output}/ (hertz_pressure.png, hertz_pressure.csv, "
+                "paraview/*.bp)"
+            )
     problem.destroy()
     return summary
+
+
+def _case_values(key: str) -> str:
+    return ", ".join(f"{name} {values[key]:g}" for name, values in CASES.items())
+
+
+def write_profile(path: pathlib.Path, x_nodes, pressure, exact) -> None:
+    """The slave nodes' pressure and Hertz's at their x, as CSV."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as stream:
+        writer = csv.writer(stream)
+        writer.writerow(["x", "pressure", "pressure_hertz"])
+        for x, p, p_exact in zip(
+            x_nodes, pressure, hertz_pressure(x_nodes, exact["a"], exact["p0"]), strict=True
+        ):
+            writer.writerow([repr(float(x)), repr(float(p)), repr(float(p_exact))])
 
 
 def plot(path: pathlib.Path, x_nodes, pressure, exact, summary) -> None:

@@ -18,18 +18,17 @@ die on the block, and as the reaction at the driven die top (the bulk residual
 summed over the die-top nodes); the die is in equilibrium, so the two agree to
 round-off (``max_reaction_mismatch_rel``).
 
-Outputs: JSON summary, CSV and PNG of the contact forces against t (slave and
-master sides, which must balance), ParaView files per step.
+Outputs (``--output DIR``): ironing_forces.csv and ironing_forces.png (contact
+forces against t, slave and master sides, which must balance) and
+paraview/displacement.bp, paraview/contact_pressure.bp (every step); ``--json
+FILE`` writes the summary.
 
 Run:  mpirun -n 2 python3 demos/ironing.py --output results/ironing
 """
 
 from __future__ import annotations
 
-import argparse
 import csv
-import pathlib
-import sys
 import time
 
 import dolfinx
@@ -37,14 +36,11 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-sys.path.insert(0, str(pathlib.Path(__file__).parent))
-
-from patch_test import add_common_arguments, problem_options, write_summary  # noqa: E402
-
-from dolfinx_mortar import meshes  # noqa: E402
-from dolfinx_mortar.loading import ContactOutput, configure_logging, solve_load_steps  # noqa: E402
-from dolfinx_mortar.materials import Material, internal_work  # noqa: E402
-from dolfinx_mortar.problem import ContactPair, ContactProblem  # noqa: E402
+from dolfinx_mortar import cli, meshes
+from dolfinx_mortar.cli import problem_options, write_summary
+from dolfinx_mortar.loading import ContactOutput, configure_logging, solve_load_steps
+from dolfinx_mortar.materials import Material, internal_work
+from dolfinx_mortar.problem import ContactPair, ContactProblem
 
 DIE_E, BLOCK_E, NU = 6.896e9, 6.896e8, 0.32
 REFERENCE_PLATEAU = 3.38e8
@@ -65,12 +61,10 @@ def die_displacement(t: float, depth: float, slide: float) -> tuple[float, float
 
 
 def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    parser.add_argument("--refinement", type=int, default=0)
+    parser = cli.parser(__doc__)
+    parser.add_argument("--refinement", type=int, default=0, help="halves h per level")
     parser.add_argument(
-        "--cell-type", choices=("triangle", "quadrilateral"), default="quadrilateral"
+        "--cell-type", choices=("triangle", "quadrilateral"), default="quadrilateral", help="cells"
     )
     parser.add_argument(
         "--steps",
@@ -92,8 +86,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     )
     parser.add_argument("--depth", type=float, default=1.0, help="downward stroke of the die")
     parser.add_argument("--slide", type=float, default=10.0, help="horizontal stroke of the die")
-    parser.add_argument("--output", type=pathlib.Path, help="directory for CSV, PNG, ParaView")
-    add_common_arguments(parser)
+    cli.add_common_arguments(parser)
     args = parser.parse_args(argv)
     configure_logging(comm)
     start = time.perf_counter()

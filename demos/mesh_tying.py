@@ -10,23 +10,27 @@ with a manufactured one:
 * ``--solution smooth``: a smooth field with the matching body force; the
   errors must fall like h^2 in L2 and h in H1 over the refinements.
 
-Run:  mpirun -n 2 python3 demos/mesh_tying.py --refinements 5 --json tying.json
+Outputs (``--output DIR``): the errors against h (PNG and CSV, one row per
+mesh) and the tied displacement of the finest mesh for ParaView
+(paraview/displacement.bp); ``--json FILE`` writes the summary.
+
+Run:  mpirun -n 2 python3 demos/mesh_tying.py --refinements 5 --json tying.json --output out
 """
 
 from __future__ import annotations
 
-import argparse
-import json
+import csv
+import pathlib
 import time
-from pathlib import Path
 
 import dolfinx
 import dolfinx.fem.petsc
+import dolfinx.io
 import numpy as np
 import ufl
 from mpi4py import MPI
 
-from dolfinx_mortar import compat, meshes
+from dolfinx_mortar import cli, compat, meshes
 from dolfinx_mortar.tying import MeshTying
 
 E, NU = 1.0, 0.3
@@ -57,7 +61,10 @@ def solve(
     basis: str,
     cell_type: str,
     comm: MPI.Intracomm,
+    paraview: pathlib.Path | None = None,
 ) -> dict:
+    """Solve the tied problem on one mesh; its errors, and the solution in ``paraview``
+    (a VTX .bp file) if given."""
     tagged = meshes.tied_blocks(ratio=ratio, refinement=refinement, cell_type=cell_type, comm=comm)
     mesh = tagged.mesh
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
@@ -87,6 +94,13 @@ def solve(
     )
     tying.solve()
     wall = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
+    if paraview is not None:
+        if comm.rank == 0:
+            paraview.parent.mkdir(parents=True, exist_ok=True)
+        comm.Barrier()
+        writer = dolfinx.io.VTXWriter(comm, paraview, [uh])
+        writer.write(0.0)
+        writer.close()
 
     def integrate(expression) -> float:
         return comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(expression)), op=MPI.SUM)
@@ -116,25 +130,36 @@ def fitted_rate(h, error) -> float:
 
 
 def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    parser = cli.parser(__doc__)
     parser.add_argument(
         "--refinements", type=int, default=5, help="number of meshes (each halves h)"
     )
     parser.add_argument(
         "--ratio", default="3:4", help="interface elements lower:upper, e.g. 3:4 or 1:7"
     )
-    parser.add_argument("--solution", choices=("smooth", "linear"), default="smooth")
-    parser.add_argument("--basis", choices=("standard", "dual"), default="standard")
-    parser.add_argument("--cell-type", choices=("triangle", "quadrilateral"), default="triangle")
-    parser.add_argument("--json", type=Path, help="write the summary here")
-    parser.add_argument("--png", type=Path, help="write the convergence plot here")
+    parser.add_argument(
+        "--solution",
+        choices=("smooth", "linear"),
+        default="smooth",
+        help="manufactured solution (linear: P1 reproduces it exactly)",
+    )
+    parser.add_argument(
+        "--basis", choices=("standard", "dual"), default="standard", help="multiplier basis"
+    )
+    parser.add_argument(
+        "--cell-type", choices=("triangle", "quadrilateral"), default="triangle", help="cells"
+    )
     args = parser.parse_args(argv)
+    if args.refinements < 1:
+        parser.error(f"--refinements must be at least 1, got {args.refinements}")
     ratio = tuple(int(n) for n in args.ratio.split(":"))
     runs = []
     for refinement in range(args.refinements):
-        run = solve(refinement, ratio, args.solution, args.basis, args.cell_type, comm)
+        last = refinement == args.refinements - 1
+        paraview = args.output / "paraview" / "displacement.bp" if args.output and last else None
+        run = solve(
+            refinement, ratio, args.solution, args.basis, args.cell_type, comm, paraview=paraview
+        )
         runs.append(run)
         if comm.rank == 0:
             print(
@@ -166,30 +191,42 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
                 f"(finest 4 meshes: L2 {summary['l2_rate_finest']:.3f}, "
                 f"H1 {summary['h1_rate_finest']:.3f})"
             )
-        if args.json:
-            args.json.parent.mkdir(parents=True, exist_ok=True)
-            args.json.write_text(json.dumps(summary, indent=2))
-        if args.png and len(runs) >= 2:
-            import matplotlib
-
-            matplotlib.use("Agg")
-            import matplotlib.pyplot as plt
-
-            fig, ax = plt.subplots(figsize=(5, 4))
-            ax.loglog(
-                h, [r["l2_error"] for r in runs], "o-", label=f"L2 (rate {summary['l2_rate']:.2f})"
-            )
-            ax.loglog(
-                h, [r["h1_error"] for r in runs], "s-", label=f"H1 (rate {summary['h1_rate']:.2f})"
-            )
-            ax.set_xlabel("h (lower block)")
-            ax.set_ylabel("error")
-            ax.set_title(f"mortar mesh tying, ratio {args.ratio}, {args.basis} basis")
-            ax.legend()
-            ax.grid(True, which="both", alpha=0.3)
-            args.png.parent.mkdir(parents=True, exist_ok=True)
-            fig.savefig(args.png, dpi=120, bbox_inches="tight")
+        cli.write_summary(args.json, summary)
+        if args.output:
+            write_csv(args.output / "mesh_tying_errors.csv", runs)
+            if len(runs) >= 2:
+                plot(args.output / "mesh_tying_convergence.png", h, runs, summary, args)
+            print(f"results written to {args.output}/", flush=True)
     return summary
+
+
+def write_csv(path: pathlib.Path, runs: list[dict]) -> None:
+    """One row per mesh: h, sizes and errors."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as stream:
+        writer = csv.DictWriter(stream, fieldnames=list(runs[0]))
+        writer.writeheader()
+        writer.writerows(runs)
+
+
+def plot(path: pathlib.Path, h, runs: list[dict], summary: dict, args) -> None:
+    """L2 and H1 errors against h, log-log, with the fitted rates."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5, 4))
+    ax.loglog(h, [r["l2_error"] for r in runs], "o-", label=f"L2 (rate {summary['l2_rate']:.2f})")
+    ax.loglog(h, [r["h1_error"] for r in runs], "s-", label=f"H1 (rate {summary['h1_rate']:.2f})")
+    ax.set_xlabel("h (lower block)")
+    ax.set_ylabel("error")
+    ax.set_title(f"mortar mesh tying, ratio {args.ratio}, {args.basis} basis")
+    ax.legend()
+    ax.grid(True, which="both", alpha=0.3)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120, bbox_inches="tight")
+    plt.close(fig)
 
 
 if __name__ == "__main__":

@@ -8,85 +8,49 @@ multipliers reproduces it to solver tolerance for any mesh ratio and either
 slave side; element-based integration does not (its error is reported);
 penalty gives a uniform pressure with a uniform penetration p / eps.
 
+Outputs (``--output DIR``): the pressure along the interface (PNG) and the
+displacement and contact pressure for ParaView (paraview/*.bp); ``--json FILE``
+writes the summary.
+
 Run:  mpirun -n 3 python3 demos/patch_test.py --ratio 3:7 --slave bottom --json patch.json
 """
 
 from __future__ import annotations
 
-import argparse
-import json
+import pathlib
 import time
-from pathlib import Path
 
 import dolfinx
 import numpy as np
 import ufl
 from mpi4py import MPI
 
-from dolfinx_mortar import compat, meshes
+from dolfinx_mortar import cli, compat, meshes
+from dolfinx_mortar.cli import problem_options, write_summary
+from dolfinx_mortar.loading import ContactOutput
 from dolfinx_mortar.materials import Material, internal_work
 from dolfinx_mortar.problem import ContactPair, ContactProblem
 
 E, NU, PRESSURE = 1000.0, 0.4, 10.0
 
 
-def add_common_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options every contact demo shares (method, integration, normals, ...)."""
-    parser.add_argument(
-        "--method", choices=("lagrange", "penalty", "augmented"), default="lagrange"
-    )
-    parser.add_argument("--integration", choices=("segment", "element"), default="segment")
-    parser.add_argument("--gauss-points", type=int, default=None, help="per segment / slave facet")
-    parser.add_argument("--normals", choices=("averaged", "slave", "master"), default="averaged")
-    parser.add_argument("--multipliers", choices=("standard", "dual"), default="dual")
-    parser.add_argument("--active-set", choices=("semismooth", "fixed-point"), default="semismooth")
-    parser.add_argument("--c-n", type=float, default=None, help="complementarity parameter")
-    parser.add_argument("--penalty", type=float, default=None, help="penalty parameter eps")
-    parser.add_argument(
-        "--condensation",
-        action="store_true",
-        help="condense the (dual) multipliers: factorize a displacement-sized matrix",
-    )
-    parser.add_argument(
-        "--search-margin", type=float, default=None, help="contact search margin (a length)"
-    )
-    parser.add_argument("--json", type=Path, help="write a JSON summary here")
-
-
-def write_summary(path: Path | None, summary: dict) -> None:
-    """The --json option: write the demo's summary there (call it on one rank)."""
-    if path:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(summary, indent=2))
-
-
-def problem_options(args) -> dict:
-    return {
-        "method": args.method,
-        "integration": args.integration,
-        "num_gauss_points": args.gauss_points,
-        "normals": args.normals,
-        "multipliers": args.multipliers,
-        "active_set": args.active_set,
-        "c_n": args.c_n,
-        "penalty": args.penalty,
-        "condensation": args.condensation,
-        "search_margin": args.search_margin,
-    }
-
-
 def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    parser = cli.parser(__doc__)
     parser.add_argument("--ratio", default="3:2", help="punch:foundation interface elements")
-    parser.add_argument("--slave", choices=("top", "bottom"), default="top")
-    parser.add_argument("--refinement", type=int, default=0)
-    parser.add_argument("--cell-type", choices=("triangle", "quadrilateral"), default="triangle")
     parser.add_argument(
-        "--material", choices=("linear", "neo-hookean", "saint-venant-kirchhoff"), default="linear"
+        "--slave", choices=("top", "bottom"), default="top", help="which surface is the slave"
     )
-    add_common_arguments(parser)
+    parser.add_argument("--refinement", type=int, default=0, help="halves h per level")
+    parser.add_argument(
+        "--cell-type", choices=("triangle", "quadrilateral"), default="triangle", help="cells"
+    )
+    parser.add_argument(
+        "--material",
+        choices=("linear", "neo-hookean", "saint-venant-kirchhoff"),
+        default="linear",
+        help="bulk material of both bodies",
+    )
+    cli.add_common_arguments(parser)
     args = parser.parse_args(argv)
     ratio = tuple(int(n) for n in args.ratio.split(":"))
     start = time.perf_counter()
@@ -138,6 +102,10 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     report = problem.solve()
     if not report.converged:
         raise RuntimeError(f"patch test did not converge (SNES reason {report.reason})")
+    if args.output:
+        output = ContactOutput(problem, args.output / "paraview")
+        output.write(1.0)
+        output.close()
 
     coordinates, pressure = problem.gathered_pressure()
     interior = (coordinates[:, 0] > 4.0 + 1e-9) & (coordinates[:, 0] < 6.0 - 1e-9)
@@ -199,8 +167,37 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
             flush=True,
         )
         write_summary(args.json, summary)
+        if args.output:
+            plot(args.output / "patch_test_pressure.png", coordinates[:, 0], pressure, summary)
+            print(f"results written to {args.output}/ (patch_test_pressure.png, paraview/*.bp)")
     problem.destroy()
     return summary
+
+
+def plot(path: pathlib.Path, x, pressure, summary: dict) -> None:
+    """The slave nodes' contact pressure against x, with the exact uniform value."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.axhline(PRESSURE, color="k", lw=1.0, label="exact")
+    label = f"mortar ({summary['method']}, {summary['integration']})"
+    ax.plot(x, pressure, "o-", ms=3, label=label)
+    # a fixed scale: round-off must not look like a variation
+    ax.set_ylim(0.0, 1.5 * max(PRESSURE, float(pressure.max())))
+    ax.set_xlabel("x")
+    ax.set_ylabel("contact pressure")
+    ax.set_title(
+        f"patch test {summary['ratio'][0]}:{summary['ratio'][1]}, slave {summary['slave']}: "
+        f"deviation {summary['max_pressure_deviation_rel']:.1e}"
+    )
+    ax.legend()
+    ax.grid(alpha=0.3)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120, bbox_inches="tight")
+    plt.close(fig)
 
 
 if __name__ == "__main__":

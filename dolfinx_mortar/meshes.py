@@ -50,6 +50,9 @@ at refinement 0; level k uses GROWTH / 2**k, so that refining halves the element
 everywhere (a fixed growth rate would leave the elements at a given distance from the
 contact unrefined, and errors would stall: Hertz p_max stayed 1 % off from level 1 to 4)."""
 
+_HERTZ_RADIUS = 8.0
+"""Radius at which :func:`hertz` builds its gmsh model, before scaling to the given radius."""
+
 _HERTZ_HALF_WIDTH = {"A": 0.39, "B": 1.0, "C": 0.7}
 """Contact half-width a of the Hertz cases at radius 8 (it scales with sqrt(radius))."""
 
@@ -361,6 +364,7 @@ def hertz(
     radius: float = 8.0,
     cell_type: str = "triangle",
     comm: MPI.Comm = MPI.COMM_WORLD,
+    half_width: float | None = None,
 ) -> TaggedMesh:
     """Plane-strain Hertz contact: a half-cylinder pressed onto a block or a half-cylinder.
 
@@ -375,11 +379,15 @@ def hertz(
 
     Every body is split by the line x = 0 (tagged ``symmetry_slave`` in the upper body,
     ``symmetry_master`` in the lower one) so a solver can stop rigid horizontal motion
-    there. With a from :func:`hertz_half_width`, the element size is h_contact = a/5
-    (0.078, 0.2, 0.14 for A, B, C at R = 8) on both contact surfaces for |x| < min(3a,
-    R/2), R/8 on the rest of the arcs and the flat faces of the cylinders, at most R/2
-    anywhere, and grows by GROWTH per unit distance; all (sizes and growth) divided by
-    2**refinement.
+    there. With a = ``half_width`` (by default :func:`hertz_half_width`), the element
+    size is h_contact = a/5 (0.078, 0.2, 0.14 for A, B, C at R = 8 by default) on both
+    contact surfaces for |x| < min(3a, R/2), R/8 on the rest of the arcs and the flat
+    faces of the cylinders, at most R/2 anywhere, and grows by GROWTH per unit distance;
+    all (sizes and growth) divided by 2**refinement. Every length of the mesh is a
+    multiple of R or a, and the model is meshed at R = 8 and then scaled, so scaling R
+    and a by s scales the node coordinates by s (to rounding) with the same cells: pass
+    the Hertz a of the actual load and moduli, and the same dimensionless problem gets
+    the same mesh in any unit system.
 
     Args:
         case: "A", "B" or "C".
@@ -387,6 +395,9 @@ def hertz(
         radius: Cylinder radius R.
         cell_type: "triangle" or "quadrilateral" (recombined).
         comm: Communicator of the mesh.
+        half_width: Contact half-width a that sizes the refined zone, e.g. the Hertz a
+            of the load and moduli to be solved; None for :func:`hertz_half_width`
+            (the benchmark loads).
 
     Returns:
         The mesh with cells "cylinder", "block" and facets "contact_slave" (whole arc of
@@ -397,7 +408,15 @@ def hertz(
     level = _check_refinement(refinement)
     quadrilateral = _check_cell_type(cell_type)
     R = _check_positive("radius", radius)
-    a = hertz_half_width(case, R)
+    a = hertz_half_width(case, R)  # also checks case
+    if half_width is not None:
+        a = _check_positive("half_width", half_width)
+    # gmsh's output is not similar under a change of units (absolute tolerances, rounding),
+    # so the model is always built at R = 8 and the coordinates scaled afterwards; a/R is
+    # rounded so that the same ratio in other units gives gmsh identical input
+    unit = R / _HERTZ_RADIUS
+    R = _HERTZ_RADIUS
+    a = float(f"{a / unit:.12g}")
     scale = 0.5**level
     x_zone = min(3.0 * a, 0.5 * R)
     h_contact = a / 5.0 * scale
@@ -475,7 +494,9 @@ def hertz(
         )
 
     data = _build(comm, f"hertz_{case}", construct)
-    return _tagged(data, markers, {}, h_contact)
+    if unit != 1.0:
+        data.mesh.geometry.x[:] *= unit
+    return _tagged(data, markers, {}, h_contact * unit)
 
 
 def patch_test(

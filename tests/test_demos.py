@@ -69,6 +69,65 @@ def test_demo_serial_equals_parallel(name, tmp_path_factory):
         assert_close(serial[key], parallel[key], key)
 
 
+HELP_DEFAULTS = {
+    "hertz": ["(default: B)", "(default: 8.0)", "(default: 2)"],
+    "patch_test": ["(default: 3:2)", "(default: top)", "(default: lagrange)"],
+    "ironing": ["(default: 500)", "(default: quadrilateral)", "(default: 2.0)"],
+    "mesh_tying": ["(default: 5)", "(default: 3:4)", "(default: smooth)"],
+}
+
+
+@pytest.mark.parametrize("name", sorted(CONFIGURATIONS))
+def test_demo_help_shows_defaults_and_the_output_options(name, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        load(name).main(["--help"], comm=MPI.COMM_SELF)
+    assert exit_info.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())
+    for option in ("--output DIR", "--json FILE", *HELP_DEFAULTS[name]):
+        assert option in text, option
+
+
+@pytest.mark.parametrize(
+    "option", [["--load", "-1"], ["--E-block", "0"], ["--radius", "nan"], ["--nu-block", "0.5"]]
+)
+def test_hertz_demo_rejects_bad_physical_input(option, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        load("hertz").main(option, comm=MPI.COMM_SELF)
+    assert exit_info.value.code == 2
+    assert option[0] in capsys.readouterr().err
+
+
+def hertz_in_units(length: float, modulus: float, case: str) -> dict:
+    """The demo's Hertz case with lengths times ``length`` and moduli times ``modulus``:
+    the force per unit thickness scales like modulus x length."""
+    E_block = {"A": 2e12, "B": 200.0, "C": 200.0}[case]
+    load_ = {"A": 3.2032, "B": 10.0, "C": 10.0}[case]
+    return load("hertz").main(
+        [
+            *("--case", case, "--refinement", "0", "--steps", "2"),
+            *("--radius", repr(8.0 * length), "--load", repr(load_ * modulus * length)),
+            *("--E-cylinder", repr(200.0 * modulus), "--E-block", repr(E_block * modulus)),
+        ],
+        comm=MPI.COMM_SELF,
+    )
+
+
+@pytest.mark.parametrize("case", ["B", "C"])
+def test_hertz_demo_is_scale_free(case):
+    """The same dimensionless Hertz problem in two unit systems (lengths x 1e3, moduli
+    x 1e-6, force x 1e-3) gives the same p_max / p0 and a / a_exact (measured: equal to
+    2e-15), and the mesh scales with the lengths: its refined zone follows the Hertz a."""
+    base = hertz_in_units(1.0, 1.0, case)
+    scaled = hertz_in_units(1e3, 1e-6, case)
+    assert scaled["a_exact"] == pytest.approx(1e3 * base["a_exact"], rel=1e-12)
+    assert scaled["h_contact"] == pytest.approx(1e3 * base["h_contact"], rel=1e-12)
+    assert scaled["num_dofs"] == base["num_dofs"]
+    for key, exact in (("p_max", "p0_exact"), ("a_contact", "a_exact")):
+        ratios = [summary[key] / summary[exact] for summary in (base, scaled)]
+        assert ratios[1] == pytest.approx(ratios[0], rel=1e-6, abs=0.0), key
+    assert scaled["newton_iterations"] == base["newton_iterations"]
+
+
 def test_demo_outputs(tmp_path):
     """JSON, PNG and ParaView files where the options say."""
     output = tmp_path / "hertz"
@@ -108,6 +167,31 @@ def test_demo_outputs(tmp_path):
     )
     assert (iron / "ironing_forces.csv").read_text().count("\n") >= 3
     assert (iron / "ironing_forces.png").stat().st_size > 1000
+    assert (iron / "paraview" / "displacement.bp").exists()
+    profile = (output / "hertz_pressure.csv").read_text().splitlines()
+    assert profile[0] == "x,pressure,pressure_hertz"
+    assert len(profile) == 1 + summary["num_slave_nodes"]
+
+    patch = tmp_path / "patch"
+    load("patch_test").main(
+        ["--ratio", "3:7", "--output", str(patch), "--json", str(patch / "patch.json")],
+        comm=MPI.COMM_SELF,
+    )
+    assert "max_pressure_deviation_rel" in json.loads((patch / "patch.json").read_text())
+    assert (patch / "patch_test_pressure.png").stat().st_size > 1000
+    assert (patch / "paraview" / "displacement.bp").exists()
+    assert (patch / "paraview" / "contact_pressure.bp").exists()
+
+    tying = tmp_path / "tying"
+    summary = load("mesh_tying").main(
+        ["--refinements", "2", "--output", str(tying), "--json", str(tying / "tying.json")],
+        comm=MPI.COMM_SELF,
+    )
+    assert json.loads((tying / "tying.json").read_text())["runs"] == summary["runs"]
+    rows = (tying / "mesh_tying_errors.csv").read_text().splitlines()
+    assert rows[0].split(",")[:2] == ["refinement", "h"] and len(rows) == 3
+    assert (tying / "mesh_tying_convergence.png").stat().st_size > 1000
+    assert (tying / "paraview" / "displacement.bp").exists()
 
 
 @pytest.mark.parallel

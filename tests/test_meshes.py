@@ -188,6 +188,40 @@ def test_hertz_radius_scales_the_geometry():
     assert tagged.h_contact == pytest.approx(0.7 * math.sqrt(2 / 8) / 5)
 
 
+def test_hertz_half_width_sizes_the_refined_zone():
+    """half_width replaces the benchmark's a: h_contact = a / 5 over |x| < 3a."""
+    tagged = meshes.hertz("B", half_width=0.5, comm=MPI.COMM_SELF)
+    assert tagged.h_contact == pytest.approx(0.1, rel=1e-12)
+    segments = facet_segments(tagged, "contact_slave")
+    middle = np.abs(segments.mean(axis=1)[:, 0]) < 1.25
+    lengths = np.linalg.norm(segments[:, 1] - segments[:, 0], axis=1)[middle]
+    assert 0.06 < lengths.min() <= lengths.max() < 0.13
+    assert len(lengths) >= 20  # 2.5 a / h_contact = 12.5 on each side
+
+
+@pytest.mark.parametrize("cell_type", meshes.CELL_TYPES)
+@pytest.mark.parametrize("case", ["A", "B", "C"])
+def test_hertz_mesh_scales_with_its_lengths(case, cell_type):
+    """Radius and half-width times 1000: the same cells, coordinates times 1000 (to
+    rounding), so a dimensionless problem does not depend on the unit of length."""
+    a = 0.97 * meshes.hertz_half_width(case)
+    small, large = (
+        meshes.hertz(
+            case, radius=8.0 * s, half_width=a * s, cell_type=cell_type, comm=MPI.COMM_SELF
+        )
+        for s in (1.0, 1e3)
+    )
+    assert large.h_contact == pytest.approx(1e3 * small.h_contact, rel=1e-12)
+    cells = [np.asarray(compat.geometry_dofmap(t.mesh)) for t in (small, large)]
+    np.testing.assert_array_equal(cells[0], cells[1])
+    x_small, x_large = small.mesh.geometry.x, large.mesh.geometry.x
+    assert np.abs(x_large - 1e3 * x_small).max() <= 1e-12 * 1e3 * np.abs(x_small).max()
+    for name in ("contact_slave", "contact_master", "load", "support"):
+        np.testing.assert_array_equal(
+            small.facet_tags.find(small.markers[name]), large.facet_tags.find(large.markers[name])
+        )
+
+
 @pytest.mark.parallel
 @pytest.mark.parametrize("ratio", [(3, 2), (1, 7)])
 @pytest.mark.parametrize("refinement", [0, 1])
@@ -369,6 +403,8 @@ def test_quadrilateral_structured_counts():
         lambda: meshes.hertz(refinement=1.5),
         lambda: meshes.hertz(case="D"),
         lambda: meshes.hertz(radius=0.0),
+        lambda: meshes.hertz(half_width=-1.0),
+        lambda: meshes.hertz(half_width=float("nan")),
         lambda: meshes.hertz(cell_type="tetrahedron"),
         lambda: meshes.patch_test(ratio=(0, 2)),
         lambda: meshes.patch_test(ratio=(1, 2, 3)),

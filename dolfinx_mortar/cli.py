@@ -1,0 +1,146 @@
+"""Command-line helpers shared by the demos and the benchmark scripts.
+
+Every demo builds its parser with :func:`parser`, which gives ``--help`` its
+defaults and the two output options all demos take: ``--output DIR`` (PNG,
+ParaView and CSV files) and ``--json FILE`` (the summary that ``main`` returns).
+The contact demos add the solver options with :func:`add_common_arguments` and
+pass them on with :func:`problem_options`. The package never imports ``demos/``;
+the demos import this module.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+from collections.abc import Mapping
+from typing import Any
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+    """Keeps the module docstring's line breaks and appends "(default: ...)" to options."""
+
+
+def parser(description: str | None) -> argparse.ArgumentParser:
+    """An argument parser with ``--output DIR`` and ``--json FILE`` and defaults in ``--help``.
+
+    Args:
+        description: Shown by ``--help`` as written (usually the demo's docstring).
+    """
+    result = argparse.ArgumentParser(description=description, formatter_class=HelpFormatter)
+    add_output_arguments(result)
+    return result
+
+
+def add_output_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--output DIR`` and ``--json FILE``, the output options every demo takes."""
+    parser.add_argument(
+        "--output",
+        type=pathlib.Path,
+        default=None,
+        metavar="DIR",
+        help="write PNG, ParaView (.bp) and CSV files in this directory",
+    )
+    parser.add_argument(
+        "--json",
+        type=pathlib.Path,
+        default=None,
+        metavar="FILE",
+        help="write the JSON summary here",
+    )
+
+
+def add_common_arguments(
+    parser: argparse.ArgumentParser,
+    normals: str | None = "averaged",
+    normals_help: str = "normals of the contact constraints",
+) -> None:
+    """The solver options every contact demo shares (method, integration, normals, ...).
+
+    Args:
+        parser: Gets the options.
+        normals: Default of ``--normals`` (None lets the demo decide; say how in
+            ``normals_help``).
+        normals_help: Help text of ``--normals``.
+    """
+    parser.add_argument(
+        "--method",
+        choices=("lagrange", "penalty", "augmented"),
+        default="lagrange",
+        help="how the contact constraints are enforced",
+    )
+    parser.add_argument(
+        "--integration",
+        choices=("segment", "element"),
+        default="segment",
+        help="mortar integration: on slave-master segments or per slave facet",
+    )
+    parser.add_argument(
+        "--gauss-points",
+        type=int,
+        default=None,
+        help="per segment / slave facet (None: the library's choice)",
+    )
+    parser.add_argument(
+        "--normals", choices=("averaged", "slave", "master"), default=normals, help=normals_help
+    )
+    parser.add_argument(
+        "--multipliers",
+        choices=("standard", "dual"),
+        default="dual",
+        help="basis of the Lagrange multipliers",
+    )
+    parser.add_argument(
+        "--active-set",
+        choices=("semismooth", "fixed-point"),
+        default="semismooth",
+        help="active-set strategy",
+    )
+    parser.add_argument(
+        "--c-n",
+        type=float,
+        default=None,
+        help="complementarity parameter (None: scaled from E/h by the library)",
+    )
+    parser.add_argument(
+        "--penalty",
+        type=float,
+        default=None,
+        help="penalty parameter eps (None: scaled from E/h by the library)",
+    )
+    parser.add_argument(
+        "--condensation",
+        action="store_true",
+        help="condense the (dual) multipliers: factorize a displacement-sized matrix",
+    )
+    parser.add_argument(
+        "--search-margin",
+        type=float,
+        default=None,
+        help="contact search margin, a length (None: scaled from the facet size)",
+    )
+
+
+def problem_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The keyword arguments of ContactProblem that :func:`add_common_arguments` set."""
+    return {
+        "method": args.method,
+        "integration": args.integration,
+        "num_gauss_points": args.gauss_points,
+        "normals": args.normals,
+        "multipliers": args.multipliers,
+        "active_set": args.active_set,
+        "c_n": args.c_n,
+        "penalty": args.penalty,
+        "condensation": args.condensation,
+        "search_margin": args.search_margin,
+    }
+
+
+def write_summary(path: pathlib.Path | None, summary: Mapping[str, Any]) -> None:
+    """The ``--json`` option: write ``summary`` to ``path`` if given (call on one rank)."""
+    if path:
+        path = pathlib.Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(summary, indent=2))
+
