@@ -134,7 +134,9 @@ def extract_surface(
     if interior:
         raise SurfaceError(
             f"{name}: {interior} facets with tag {marker} are interior facets; "
-            "a contact surface must lie on the boundary of its body"
+            "a contact surface must lie on the boundary of its own body, and two bodies "
+            "in one mesh must not share nodes (build the mesh from one mesh per body "
+            "with dolfinx_mortar.bodies.merge_meshes)"
         )
     cells = f_to_c.array[f_to_c.offsets[facets]]
     c_to_f = mesh.topology.connectivity(tdim, fdim)
