@@ -5,13 +5,17 @@ PYTEST := python3 -m pytest -p no:cacheprovider --color=no
 MPI_TIMEOUT := timeout --signal=INT --kill-after=60 3600
 RESULTS := results
 
-.PHONY: demo test test-serial test-parallel lint format stress benchmark benchmark-quick clean
+.PHONY: demo test test-tools test-serial test-parallel lint format stress benchmark benchmark-quick clean
 
 demo:
 	$(RUN) mpirun -n 2 python3 demos/hertz.py --output $(RESULTS)/hertz --json $(RESULTS)/hertz/summary.json
 	@echo "demo results (JSON, PNG, ParaView files): $(RESULTS)/hertz/"
 
-test: test-serial test-parallel
+test: test-tools test-serial test-parallel
+
+# tools/run itself, checked from the host (in DOLFINX_MORTAR_SUITE like the rest)
+test-tools:
+	tests/tools/test_run.sh
 
 test-serial:
 	$(RUN) $(PYTEST) -q tests
