@@ -32,57 +32,66 @@ UZAWA_NOT_SETTLED = -101
 """SolveReport reason: the augmented Lagrange (Uzawa) updates did not settle."""
 
 _SNES_REASON_WORDS = {
-    2: ("CONVERGED_FNORM_ABS", "the residual norm fell below the absolute tolerance"),
-    3: ("CONVERGED_FNORM_RELATIVE", "the residual norm fell below the relative tolerance"),
-    4: ("CONVERGED_SNORM_RELATIVE", "the Newton step became small relative to the solution"),
-    5: ("CONVERGED_ITS", "the maximum number of iterations was reached (counted as converged)"),
-    -1: ("DIVERGED_FUNCTION_DOMAIN", "the residual could not be evaluated at the iterate"),
-    -2: ("DIVERGED_FUNCTION_COUNT", "too many residual evaluations"),
-    -3: ("DIVERGED_LINEAR_SOLVE", "the linear solver failed"),
-    -4: ("DIVERGED_FNORM_NAN", "the residual is NaN or infinite"),
-    -5: ("DIVERGED_MAX_IT", "no convergence within the maximum number of Newton iterations"),
-    -6: ("DIVERGED_LINE_SEARCH", "the line search failed"),
-    -7: ("DIVERGED_INNER", "an inner solve failed"),
-    -8: ("DIVERGED_LOCAL_MIN", "Newton stalled in a local minimum of the residual norm"),
-    -9: ("DIVERGED_DTOL", "the residual grew beyond the divergence tolerance"),
-    -10: ("DIVERGED_JACOBIAN_DOMAIN", "the Jacobian could not be evaluated at the iterate"),
-    -11: ("DIVERGED_TR_DELTA", "the trust region became too small"),
-    FIXED_POINT_NOT_SETTLED: (
-        "FIXED_POINT_NOT_SETTLED",
-        "the fixed-point active set kept changing (max_outer_iterations reached)",
-    ),
-    UZAWA_NOT_SETTLED: (
-        "UZAWA_NOT_SETTLED",
-        "the augmented Lagrange updates did not settle (max_outer_iterations reached)",
-    ),
+    2: "the residual norm fell below the absolute tolerance",
+    3: "the residual norm fell below the relative tolerance",
+    4: "the Newton step became small relative to the solution",
+    5: "the maximum number of iterations was reached (counted as converged)",
+    -1: "the residual could not be evaluated at the iterate",
+    -2: "too many residual evaluations",
+    -3: "the linear solver failed",
+    -4: "the residual is NaN or infinite",
+    -5: "no convergence within the maximum number of Newton iterations",
+    -6: "the line search failed",
+    -7: "an inner solve failed",
+    -8: "Newton stalled in a local minimum of the residual norm",
+    -9: "the residual grew beyond the divergence tolerance",
+    -10: "the Jacobian could not be evaluated at the iterate",
+    -11: "the trust region became too small",
+    -13: "the objective could not be evaluated at the iterate",
+    -14: "the objective is NaN or infinite",
+    FIXED_POINT_NOT_SETTLED: "the fixed-point active set kept changing "
+    "(max_outer_iterations reached)",
+    UZAWA_NOT_SETTLED: "the augmented Lagrange updates did not settle "
+    "(max_outer_iterations reached)",
 }
+_OUR_REASON_NAMES = {
+    FIXED_POINT_NOT_SETTLED: "FIXED_POINT_NOT_SETTLED",
+    UZAWA_NOT_SETTLED: "UZAWA_NOT_SETTLED",
+}
+
+
+def _enum_name(enum, value: int, prefixes: tuple[str, ...] = ("CONVERGED", "DIVERGED")) -> str:
+    """The name of ``value`` in a petsc4py enum class (names differ between PETSc versions:
+    -4 is DIVERGED_FNORM_NAN in 3.22 and DIVERGED_FUNCTION_NANORINF in 3.25)."""
+    for key in sorted(dir(enum)):
+        if key.startswith(prefixes) and getattr(enum, key) == value:
+            return key
+    return "UNKNOWN"
 
 
 def describe_snes_reason(reason: int) -> str:
     """``"-4 DIVERGED_FNORM_NAN (the residual is NaN or infinite)"`` for a reason code."""
-    name, words = _SNES_REASON_WORDS.get(int(reason), ("UNKNOWN", "no description"))
-    return f"{int(reason)} {name} ({words})"
+    from petsc4py import PETSc
+
+    reason = int(reason)
+    name = _OUR_REASON_NAMES.get(reason) or _enum_name(PETSc.SNES.ConvergedReason, reason)
+    return f"{reason} {name} ({_SNES_REASON_WORDS.get(reason, 'no description')})"
 
 
 def describe_ksp_failure(ksp) -> str:
     """Why the linear solve failed, from the KSP's and its preconditioner's reasons."""
     from petsc4py import PETSc
 
-    def name_of(enum, value) -> str:
-        for key in dir(enum):
-            if not key.startswith("_") and getattr(enum, key) == value:
-                return key
-        return str(value)
-
     reason = ksp.getConvergedReason()
-    text = f"KSP reason {reason} {name_of(PETSc.KSP.ConvergedReason, reason)}"
+    text = f"KSP reason {reason} {_enum_name(PETSc.KSP.ConvergedReason, reason)}"
     try:
         failed = ksp.getPC().getFailedReason()
     except AttributeError:  # pragma: no cover - older petsc4py
         failed = 0
     if failed:
-        text += f", preconditioner failure {name_of(PETSc.PC.FailedReason, failed)}"
-        if "FACTOR" in name_of(PETSc.PC.FailedReason, failed):
+        failure = _enum_name(PETSc.PC.FailedReason, failed, ("FACTOR", "SETUP", "SUBPC"))
+        text += f", preconditioner failure {failure}"
+        if "FACTOR" in failure:
             text += " (the factorization met a zero or tiny pivot: a singular system, e.g. a "
             text += "body with a free rigid-body motion)"
     return text

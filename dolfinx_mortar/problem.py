@@ -65,14 +65,13 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from . import compat, diagnostics, kernels
-from .layout import BlockLayout, MonolithicMatrix, dirichlet_dofs
+from . import compat, diagnostics, enforcement, kernels, solvers
+from .enforcement import ACTIVE_SET_STRATEGIES, METHODS
+from .layout import BlockLayout, dirichlet_dofs
 from .mortar import MortarInterface
+from .system import ContactSystem
 
 logger = logging.getLogger("dolfinx_mortar")
-
-METHODS = ("lagrange", "penalty", "augmented")
-ACTIVE_SET_STRATEGIES = ("semismooth", "fixed-point")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -225,8 +224,6 @@ class ContactProblem:
         self.condensation = bool(condensation)
         self._condenser = None
         self.active_set_strategy = active_set
-        self.augmented_tolerance = augmented_tolerance
-        self.max_outer_iterations = max_outer_iterations
         self.F_form = dolfinx.fem.form(F)
         if J is None:
             J = ufl.derivative(F, u, ufl.TrialFunction(self.V))
@@ -267,8 +264,6 @@ class ContactProblem:
             [i.num_owned_multipliers for i in self.interfaces],
         )
         self.multipliers = [i.create_multiplier_vector() for i in self.interfaces]
-        self._augmented = [np.zeros(i.num_owned_multipliers) for i in self.interfaces]
-        self._frozen_active: list[np.ndarray] | None = None
         self._row_coefficients = [
             {name: i.create_multiplier_vector() for name in ("gap", "area")}
             for i in self.interfaces
@@ -281,8 +276,6 @@ class ContactProblem:
 
         self._b_u = compat.create_vector(self.F_form)
         self._K = compat.create_matrix(self.J_form)
-        self._system: MonolithicMatrix | None = None
-        self._system_versions: tuple = ()
         self.x = self.layout.create_vector()
         self.b = self.layout.create_vector()
         self._read_state_into_x()
@@ -298,6 +291,13 @@ class ContactProblem:
             # eps makes augmented Lagrange converge in far fewer updates
             penalty = self._row_scale * (10.0 if method == "augmented" else 1.0)
         self.penalty = float(penalty)
+        self.enforcement = enforcement.create(
+            method, active_set, enforcement.Scales(self._row_scale, self._slave_length),
+            [i.num_owned_multipliers for i in self.interfaces], c_n=self.c_n,
+            penalty=self.penalty, augmented_tolerance=augmented_tolerance,
+            max_outer_iterations=max_outer_iterations)
+        self.system = ContactSystem(self.V, self.layout, self.interfaces, self._K, self.J_form,
+                                    self.bcs, self._fixed_dofs, self._dirichlet_scale)
         self.timings = {
             "bulk assembly": 0.0,
             "contact search": 0.0,
@@ -427,99 +427,28 @@ class ContactProblem:
         return scales[0][0], scales[0][1], scales[1][0]
 
     def _setup_snes(self, petsc_options: dict, prefix: str) -> None:
-        """SNES with our defaults; ``petsc_options`` and then the options database win.
-
-        Options are put into the database only for setFromOptions and removed
-        again, except the factorization ones (``mat_*``): PETSc reads those at
-        every symbolic factorization, so they stay until :meth:`destroy` (or
-        garbage collection). The default absolute tolerance 1e-11 k h is
-        a force that moves a node by 1e-11 h, in the units of the problem.
-        """
+        """SNES with our defaults (:mod:`dolfinx_mortar.solvers`); ``petsc_options`` and then
+        the options database win. The default absolute tolerance 1e-11 k h is a force that
+        moves a node by 1e-11 h, in the units of the problem."""
         snes = PETSc.SNES().create(self.comm)
-        snes.setOptionsPrefix(prefix)
-        defaults = {
-            "snes_type": "newtonls",
-            "snes_linesearch_type": "basic",
-            "snes_rtol": 1e-10,
-            "snes_stol": 0.0,
-            "snes_max_it": 30,
-            "snes_divergence_tolerance": -1.0,
-            # at least one Newton step per solve: an increment whose residual is below
-            # the absolute tolerance (a 1e-12 push) must still be applied
-            "snes_force_iteration": True,
-            "ksp_type": "preonly",
-            "pc_type": "lu",
-            "pc_factor_mat_solver_type": "mumps",
-            # null pivots (|pivot| <= 1e-8 ||A||): the rigid mode of a body held
-            # only by contact that lost every active node; its step is set to 0
-            "mat_mumps_icntl_24": 1,
-            # relative pivot threshold 0.1 (MUMPS' default 0.01): the LU solve of the
-            # saddle point system (condition ~1e6 on the patch test) was otherwise only
-            # accurate to about eps ||J|| ||dx||, which left the patch test's pressure
-            # 5e-10 off uniform after its one Newton step (now 2e-12)
-            "mat_mumps_cntl_1": 0.1,
-            "mat_mumps_cntl_3": 1e-8,
-        }
-        if self.condensation:
-            # fgmres on [u | z], preconditioned by the condensed solve (a python PC);
-            # its inner solver takes the defaults (and the user's options) under condensed_
-            for key in ("pc_type", "pc_factor_mat_solver_type"):
-                del defaults[key]
-            defaults.update(ksp_type="fgmres", ksp_rtol=1e-12, ksp_atol=1e-50, ksp_max_it=200)
-            defaults.update({f"condensed_{key}": value for key, value in defaults.items()
-                             if key.startswith("mat_mumps")})
-            defaults.update(condensed_ksp_type="preonly", condensed_pc_type="lu",
-                            condensed_pc_factor_mat_solver_type="mumps")
-        defaults.update(petsc_options)
-        options = PETSc.Options()
-        added = []
-        for key, value in defaults.items():
-            name = f"{prefix}{key}"
-            if not options.hasName(name) or name in _OPTIONS_SET_BY_PROBLEMS:
-                options[name] = value
-                added.append(name)
-        user_atol = "snes_atol" in petsc_options or (
-            options.hasName(f"{prefix}snes_atol")
-            and f"{prefix}snes_atol" not in _OPTIONS_SET_BY_PROBLEMS
-        )
         self._residual_history: list[float] = []
-        snes.setFunction(self._residual, self.b)
-        self._assemble_system()  # creates the matrix with its pattern
-        snes.setJacobian(self._jacobian, self._system.mat)
-        snes.setMonitor(lambda _snes, _it, norm: self._residual_history.append(float(norm)))
-        snes.setFromOptions()
-        snes.getKSP().setFromOptions()
-        if not user_atol:
-            snes.setTolerances(atol=1e-11 * self._dirichlet_scale * self._slave_length)
-        if self.condensation:
-            self._setup_condensation(snes.getKSP(), prefix)
-        kept = [name for name in added
-                if name[len(prefix):].removeprefix("condensed_").startswith("mat_")]
-        for name in added:
-            if name not in kept:
-                options.delValue(name)
-        _OPTIONS_SET_BY_PROBLEMS.update(kept)
-        self._options_finalizer = weakref.finalize(self, _delete_options, kept)
+
+        def callbacks() -> None:
+            snes.setFunction(self._residual, self.b)
+            self._assemble_system()  # creates the matrix with its pattern
+            snes.setJacobian(self._jacobian, self.system.mat)
+            snes.setMonitor(lambda _snes, _it, norm: self._residual_history.append(float(norm)))
+
+        def condensation(ksp: PETSc.KSP) -> None:
+            if self.condensation:
+                self._condenser = solvers.condensed_preconditioner(
+                    ksp, self.layout, self.interfaces, self.V.dofmap.index_map_bs, prefix)
+
+        kept = solvers.configure_snes(
+            snes, prefix, petsc_options, self.condensation,
+            1e-11 * self._dirichlet_scale * self._slave_length, callbacks, condensation)
+        self._options_finalizer = weakref.finalize(self, solvers.release_options, kept)
         self.snes = snes
-
-    def _setup_condensation(self, ksp: PETSc.KSP, prefix: str) -> None:
-        """The condensed solve as the (python) preconditioner of the monolithic KSP."""
-        from .condensation import CondensedPreconditioner
-
-        layout = self.layout
-        first = int(layout.offsets[self.comm.rank])
-        u_rows = first + np.arange(layout.owned_u.start, layout.owned_u.stop)
-        z_rows = first + np.arange(layout.owned_z.start, layout.owned_z.stop)
-        bs = self.V.dofmap.index_map_bs
-        node_dofs = np.concatenate(
-            [i.owned_multiplier_blocks[:, None] * bs + np.arange(bs) for i in self.interfaces]
-        ).reshape(-1, bs)
-        self._condenser = CondensedPreconditioner(
-            self.comm, u_rows, z_rows, node_dofs, prefix=f"{prefix}condensed_"
-        )
-        pc = ksp.getPC()
-        pc.setType(PETSc.PC.Type.PYTHON)
-        pc.setPythonContext(self._condenser)
 
     # -- state -------------------------------------------------------------
 
@@ -582,48 +511,15 @@ class ContactProblem:
         return covered, np.where(touching, 0.0, gap)
 
     def _decide_active(self, k: int) -> np.ndarray:
-        """The active set; ties (z - c_n g^ = 0, e.g. touching at zero pressure) are active.
-
-        Counting ties as active is a valid choice of the generalized derivative
-        at the kink of max(0, .), and keeps a body held only by contact attached
-        when it starts exactly touching.
-        """
-        z = self.multipliers[k].getArray(readonly=True)
+        """The active set of pair k's owned slave nodes (the enforcement's rule)."""
         covered, gap = self._nodal_gaps(k)
-        if self.method == "lagrange":
-            if self.active_set_strategy == "fixed-point" and self._frozen_active is not None:
-                return self._frozen_active[k] & covered
-            return covered & (z - self.c_n * gap >= 0.0)
-        return covered & (self._augmented[k] - self.penalty * gap >= 0.0)
+        return self.enforcement.decide_active(
+            k, self.multipliers[k].getArray(readonly=True), covered, gap)
 
-    def _multiplier_rows(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Residual C_j and coefficients (alpha on dg~, beta on dA, delta on dz) of owned rows.
-
-        Rows are scaled to force units (module docstring); the scaling is
-        constant per row, so Newton steps are unchanged by it.
-        """
-        z = self.multipliers[k].getArray(readonly=True)
-        active = self.active[k]
-        gap, area = self.gaps[k], self.areas[k]
-        alpha = np.zeros_like(z)
-        beta = np.zeros_like(z)
-        if self.method == "lagrange":
-            weight = self._slave_length
-            delta = np.full_like(z, weight)
-            residual = weight * z
-            residual[active] = self._row_scale * gap[active]
-            alpha[active] = self._row_scale
-            delta[active] = 0.0
-        else:
-            eps = self.penalty
-            weight = self._slave_length * min(1.0, self._row_scale / eps)
-            delta = np.full_like(z, weight)
-            residual = weight * z
-            safe_area = np.where(active, area, 1.0)
-            residual[active] = weight * (z - self._augmented[k] + eps * gap / safe_area)[active]
-            alpha[active] = (weight * eps / safe_area)[active]
-            beta[active] = (-weight * eps * gap / safe_area**2)[active]
-        return residual, alpha, beta, delta
+    def _multiplier_rows(self, k: int) -> enforcement.Rows:
+        """Residual C_j and coefficients (alpha on dg~, beta on dA, delta on dz) of owned rows."""
+        return self.enforcement.rows(k, self.multipliers[k].getArray(readonly=True),
+                                     self.active[k], self.gaps[k], self.areas[k])
 
     # -- SNES callbacks ----------------------------------------------------
 
@@ -661,141 +557,14 @@ class ContactProblem:
         self._assemble_system()
 
     def _assemble_system(self) -> PETSc.Mat:
-        """The monolithic Jacobian: bulk form assembled in place, contact blocks added.
-
-        The matrix (its pattern: bulk, the candidate pairs' dense blocks, the
-        diagonal) is rebuilt only when a new search changed the pairs.
-        """
-        start = time.perf_counter()
-        self._update_system_pattern()
-        zeroing = time.perf_counter()
-        self._system.mat.zeroEntries()
-        zeroing = time.perf_counter() - zeroing
-        group_values, groups = [], []
-        offset = 0
-        for k in range(len(self.interfaces)):
-            blocks = self._contact_blocks(k)
-            if blocks is not None:
-                group_values.append(blocks[0])
-                groups.append(offset + blocks[1])
-            offset += self._system_pattern[0][k].shape[0]
-        if group_values:
-            group_values = np.concatenate(group_values, axis=2)
-            groups = np.concatenate(groups)
-        else:
-            group_values, groups = np.zeros((10, 14, 0)), np.zeros(0, dtype=np.int64)
-        diagonal = np.concatenate(
-            [np.full(self._system_fixed_rows.size, self._dirichlet_scale)]
-            + [self._multiplier_rows(k)[3] for k in range(len(self.interfaces))])
-        matrix = self._system.mat
-        self._system.add(group_values, groups, diagonal)
-        contact = time.perf_counter() - start - zeroing
-        start = time.perf_counter()
-        compat.add_matrix_local(matrix, self.J_form, self.bcs)
-        matrix.assemble()
-        self.timings["bulk assembly"] += time.perf_counter() - start + zeroing
+        """The monolithic Jacobian (:class:`~dolfinx_mortar.system.ContactSystem`)."""
+        rebuilt, contact, bulk = self.system.assemble(
+            self.multipliers, self._row_coefficients, self._multiplier_rows)
+        if rebuilt and hasattr(self, "snes"):
+            self.snes.setJacobian(self._jacobian, self.system.mat)
+        self.timings["bulk assembly"] += bulk
         self.timings["mortar integration"] += contact
-        return matrix
-
-    def _contact_pattern(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """Monolithic rows (n, 10) and columns (n, 14) of pair k's dense block per candidate pair.
-
-        Rows: the 8 force dofs (slave a, b, master c, d) and the 2 multipliers;
-        columns: the 12 pair dofs and the 2 multipliers; rows of Dirichlet dofs
-        are dropped (-1), they are identity rows.
-        """
-        interface = self.interfaces[k]
-        if interface.quantities is None:
-            return np.zeros((0, 10), dtype=np.int64), np.zeros((0, 14), dtype=np.int64)
-        layout = self.layout
-        force_dofs = layout.u(interface._force_columns())
-        force_dofs[np.isin(force_dofs, self._system_fixed_all)] = -1
-        pair_z = layout.z(interface.pair_multipliers, k + 1)
-        rows = np.concatenate([force_dofs, pair_z], axis=1)
-        cols = np.concatenate([layout.u(interface.pair_dofs), pair_z], axis=1)
-        return rows, cols
-
-    def _update_system_pattern(self) -> None:
-        """(Re)build the monolithic matrix when the pairs' pattern changed (not on every search)."""
-        versions = tuple(i._pattern_version for i in self.interfaces)
-        if self._system is not None and versions == self._system_versions:
-            return
-        layout = self.layout
-        if not hasattr(self, "_system_bulk"):
-            # once: the bulk pattern in monolithic numbering and the local-to-global map
-            indptr, indices, _ = self._K.getValuesCSR()
-            index_map, bs = self.V.dofmap.index_map, self.V.dofmap.index_map_bs
-            blocks = index_map.local_to_global(
-                np.arange(index_map.size_local + index_map.num_ghosts, dtype=np.int32))
-            local_dofs = (blocks[:, None] * bs + np.arange(bs)).reshape(-1)
-            self._system_bulk = ((indptr.astype(np.int64), layout.u(indices)), layout.u(local_dofs))
-            fixed = layout.u(self._fixed_dofs)
-            # (dirichlet_dofs may list a few dofs owned by another rank; their owner has them too)
-            first = int(layout.offsets[self.comm.rank])
-            fixed = fixed[(fixed >= first) & (fixed < first + layout.num_u[self.comm.rank])]
-            self._system_fixed_rows = fixed
-            self._system_fixed_all = np.unique(np.concatenate(self.comm.allgather(fixed)))
-        pattern = tuple(zip(*(self._contact_pattern(k) for k in range(len(self.interfaces))),
-                            strict=True))
-        self._system_versions = versions
-        old = getattr(self, "_system_pattern", None)
-        same = self._system is not None and old is not None and all(
-            np.array_equal(a, b) for a, b in zip(old[0] + old[1], pattern[0] + pattern[1],
-                                                 strict=True))
-        if self.comm.allreduce(same, op=MPI.LAND):
-            return  # a search found the same pairs (or none again): keep the matrix
-        diagonal_rows = np.concatenate(
-            [self._system_fixed_rows]
-            + [layout.z(i.multiplier_offset + np.arange(i.num_owned_multipliers), k + 1)
-               for k, i in enumerate(self.interfaces)])
-        if self._system is not None:
-            self._system.destroy()
-        bulk_pattern, local_to_global = self._system_bulk
-        self._system = MonolithicMatrix(
-            self.comm, (layout.num_owned, layout.num_global), local_to_global, bulk_pattern,
-            np.concatenate(pattern[0]), np.concatenate(pattern[1]), diagonal_rows)
-        self._system_pattern = pattern
-        if hasattr(self, "snes"):
-            self.snes.setJacobian(self._jacobian, self._system.mat)
-
-    def _contact_blocks(self, k: int):
-        """Pair k's dense blocks (10, 14, m) and which candidate pairs they belong to (m,).
-
-        Rows and columns as in :meth:`_contact_pattern`: d(-B^T z)/du (8 x 12),
-        d(-B^T z)/dz = -B^T (8 x 2), d C/du (2 x 12); only the pairs that
-        contribute, from the factorized gradients (no full dual numbers).
-        None before the first evaluation (no pairs yet).
-        """
-        interface = self.interfaces[k]
-        q = interface.quantities
-        if q is None:
-            return None
-        rows = interface._rows(q)
-        z_nodes = interface.node_values(self.multipliers[k])
-        _, alpha, beta, _ = self._multiplier_rows(k)
-        vectors = self._row_coefficients[k]
-        vectors["gap"].getArray()[:] = alpha
-        vectors["area"].getArray()[:] = beta
-        alpha_nodes = interface.node_values(vectors["gap"])
-        beta_nodes = interface.node_values(vectors["area"])
-        if rows.size == 0:
-            return None
-        slave_nodes = interface.pair_nodes[rows, 1:3]
-        z_pair, alpha_pair, beta_pair = (
-            v[slave_nodes] for v in (z_nodes, alpha_nodes, beta_nodes))
-        gradients = kernels.PairGradients
-        dn, mn = gradients.DN, gradients.MN
-        nodes = [(a, c) for a in range(2) for c in range(2)]
-        # -sum_j z_j d(coefficient_jkc)/dx: +Dn for the slave nodes, -Mn for the master nodes
-        terms = [[(dn + 4 * j + 2 * a + c, z_pair[:, j]) for j in range(2)] for a, c in nodes]
-        terms += [[(mn + 4 * j + 2 * a + c, -z_pair[:, j]) for j in range(2)] for a, c in nodes]
-        terms += [[(gradients.GAP + j, alpha_pair[:, j]), (gradients.AREA + j, beta_pair[:, j])]
-                  for j in range(2)]
-        values = np.zeros((10, 14, rows.size))
-        values[:, :12] = interface._combined_gradients(q, rows, terms)
-        coefficients = interface._force_coefficient_values(q, rows)  # (m, j, 4, 2)
-        values[:8, 12:] = -coefficients.reshape(rows.size, 2, 8).transpose(2, 1, 0)
-        return values, rows
+        return self.system.mat
 
     # -- solving -----------------------------------------------------------
 
@@ -808,15 +577,7 @@ class ContactProblem:
         start = time.perf_counter()
         before = dict(self.timings)
         self._read_state_into_x()
-        if self.method == "lagrange" and self.active_set_strategy == "semismooth":
-            report = self._newton()
-        elif self.method == "lagrange":
-            report = self._fixed_point()
-        elif self.method == "penalty":
-            self._augmented = [np.zeros_like(a) for a in self._augmented]
-            report = self._newton()
-        else:
-            report = self._uzawa()
+        report = self.enforcement.solve(self)
         total = time.perf_counter() - start
         spent = {key: self.timings[key] - before[key] for key in self.timings}
         spent["linear solve"] = max(0.0, total - sum(spent.values()))
@@ -846,97 +607,6 @@ class ContactProblem:
             report.linear_solver_failure = diagnostics.describe_ksp_failure(self.snes.getKSP())
         return report
 
-    def _fixed_point(self) -> SolveReport:
-        """Outer loop of the fixed-point active-set strategy (paper, section 5)."""
-        self._frozen_active = None
-        self._write_x_into_state(self.x)
-        self._update_contact()
-        self._frozen_active = []
-        for k, z in enumerate(self.multipliers):
-            covered, gap = self._nodal_gaps(k)
-            self._frozen_active.append(covered & ((z.getArray(readonly=True) > 0) | (gap <= 0)))
-        return self._outer_loop(self._update_frozen_active_sets,
-                                failure_reason=diagnostics.FIXED_POINT_NOT_SETTLED)
-
-    def _update_frozen_active_sets(self) -> bool:
-        """One fixed-point update; True when no node changed on any rank.
-
-        A node leaves the set when its averaged pressure is negative beyond
-        rounding (1e-10 of the largest), and joins it when its nodal gap is
-        negative beyond rounding (as in :meth:`_nodal_gaps`): a node at zero
-        pressure and zero gap must not flip in and out forever.
-        """
-        changed = 0
-        new_sets = []
-        for k in range(len(self.interfaces)):
-            pressure = self._averaged_pressure(k)
-            largest = self.comm.allreduce(float(np.max(np.abs(pressure), initial=0.0)), op=MPI.MAX)
-            covered, gap = self._nodal_gaps(k)
-            frozen = self._frozen_active[k]
-            active = frozen.copy()
-            active[frozen & (pressure < -1e-10 * largest)] = False
-            active[~frozen & (gap < 0.0) & covered] = True
-            changed += int(np.count_nonzero(active != frozen))
-            new_sets.append(active)
-        self._frozen_active = new_sets
-        return self.comm.allreduce(changed, op=MPI.SUM) == 0
-
-    def _outer_loop(self, settled: typing.Callable[[], bool], failure_reason: int) -> SolveReport:
-        """Newton solves until ``settled()`` (called after each converged one) says so."""
-        total_iterations, residuals, linear_iterations = 0, [], 0
-        for outer in range(1, self.max_outer_iterations + 1):
-            report = self._newton()
-            total_iterations += report.iterations
-            residuals += report.residuals
-            linear_iterations += report.linear_iterations
-            report.iterations, report.residuals, report.outer_iterations = (
-                total_iterations, residuals, outer)
-            report.linear_iterations = linear_iterations
-            if not report.converged or settled():
-                return report
-        return SolveReport(converged=False, reason=failure_reason, iterations=total_iterations,
-                           residuals=residuals, active=0,
-                           outer_iterations=self.max_outer_iterations,
-                           linear_iterations=linear_iterations)
-
-    def _averaged_pressure(self, k: int) -> np.ndarray:
-        """p_j = int N_j lambda / int N_j = (D^T z)_j / (D^T 1)_j at owned slave nodes."""
-        interface = self.interfaces[k]
-        D, _ = interface.mortar_matrices()
-        z = self.multipliers[k]
-        ones = z.duplicate()
-        ones.set(1.0)
-        weighted, weights = D.createVecRight(), D.createVecRight()
-        D.multTranspose(z, weighted)
-        D.multTranspose(ones, weights)
-        local = interface.owned_multiplier_blocks - interface.V.dofmap.index_map.local_range[0]
-        numerator = weighted.getArray(readonly=True)[local]
-        denominator = weights.getArray(readonly=True)[local]
-        for vector in (ones, weighted, weights):
-            vector.destroy()
-        return np.where(
-            np.abs(denominator) > 0, numerator / np.where(denominator != 0, denominator, 1), 0.0
-        )
-
-    def _uzawa(self) -> SolveReport:
-        """Augmented Lagrange: Newton at fixed lam, then lam <- z, until lam settles."""
-        return self._outer_loop(self._update_augmented_multipliers,
-                                failure_reason=diagnostics.UZAWA_NOT_SETTLED)
-
-    def _update_augmented_multipliers(self) -> bool:
-        """lam <- z; True when max|change| <= augmented_tolerance max|lam| on all ranks."""
-        change, size = 0.0, 0.0
-        for k, z in enumerate(self.multipliers):
-            new = z.getArray(readonly=True).copy()
-            change = max(change, float(np.max(np.abs(new - self._augmented[k]), initial=0.0)))
-            size = max(size, float(np.max(np.abs(new), initial=0.0)))
-            self._augmented[k] = new
-        change = self.comm.allreduce(change, op=MPI.MAX)
-        size = self.comm.allreduce(size, op=MPI.MAX)
-        # floor: pressures of 1e-4 E (k ~ E) are "zero" for the relative test, so
-        # rounding noise in z at zero load does not keep Uzawa going forever
-        return change <= self.augmented_tolerance * max(size, 1e-4 * self._dirichlet_scale)
-
     # -- state for load stepping --------------------------------------------
 
     def save_state(self) -> dict:
@@ -944,7 +614,7 @@ class ContactProblem:
         return {
             "u": self.u.x.array.copy(),
             "z": [z.getArray(readonly=True).copy() for z in self.multipliers],
-            "augmented": [a.copy() for a in self._augmented],
+            "enforcement": self.enforcement.save_state(),
         }
 
     def restore_state(self, state: dict) -> None:
@@ -952,7 +622,7 @@ class ContactProblem:
         self.u.x.array[:] = state["u"]
         for z, values in zip(self.multipliers, state["z"], strict=True):
             z.getArray()[:] = values
-        self._augmented = [a.copy() for a in state["augmented"]]
+        self.enforcement.restore_state(state["enforcement"])
         self._read_state_into_x()
 
     # -- results -----------------------------------------------------------
@@ -1038,26 +708,13 @@ class ContactProblem:
         self.snes.destroy()
         if self._condenser is not None:
             self._condenser.destroy()
-        if self._system is not None:
-            self._system.destroy()
+        self.system.destroy()
         self._K.destroy()
         self._b_u.destroy()
         self.x.destroy()
         self.b.destroy()
         for interface in self.interfaces:
             interface.destroy()
-
-
-_OPTIONS_SET_BY_PROBLEMS: set[str] = set()
-"""Options-database names holding a ContactProblem's defaults (not the user's)."""
-
-
-def _delete_options(names: list[str]) -> None:
-    options = PETSc.Options()
-    for name in names:
-        if name in _OPTIONS_SET_BY_PROBLEMS:
-            options.delValue(name)
-            _OPTIONS_SET_BY_PROBLEMS.discard(name)
 
 
 class ContactWarning(UserWarning):

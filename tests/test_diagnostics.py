@@ -134,6 +134,7 @@ def test_every_snes_reason_has_a_name_and_words():
         if name.startswith(("CONVERGED", "DIVERGED")) and name != "CONVERGED_ITERATING":
             text = diagnostics.describe_snes_reason(getattr(reasons, name))
             assert text.startswith(f"{getattr(reasons, name)} {name} (")
+            assert "no description" not in text
     assert "UZAWA" in diagnostics.describe_snes_reason(diagnostics.UZAWA_NOT_SETTLED)
 
 

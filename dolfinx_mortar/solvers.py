@@ -1,0 +1,143 @@
+"""SNES and linear solver set-up: our defaults, the user's options the PETSc way.
+
+Defaults are Newton with full steps and MUMPS LU on the monolithic [u | z]
+system, or, with condensation, fgmres on it preconditioned by a condensed
+displacement-only solve (:mod:`dolfinx_mortar.condensation`). ``petsc_options``
+given to the problem override the defaults, and the user's options database
+under the problem's prefix overrides both.
+
+Defaults are put into the options database only for ``setFromOptions`` and
+removed again, except the factorization ones (``mat_*``): PETSc reads those at
+every symbolic factorization, so they stay until the problem is destroyed (or
+garbage collected). A database entry that a problem put there is not taken
+for the user's own by the next problem with the same prefix.
+"""
+
+from __future__ import annotations
+
+import typing
+
+import numpy as np
+from petsc4py import PETSc
+
+DEFAULT_OPTIONS = {
+    "snes_type": "newtonls",
+    "snes_linesearch_type": "basic",
+    "snes_rtol": 1e-10,
+    "snes_stol": 0.0,
+    "snes_max_it": 30,
+    "snes_divergence_tolerance": -1.0,
+    # at least one Newton step per solve: an increment whose residual is below
+    # the absolute tolerance (a 1e-12 push) must still be applied
+    "snes_force_iteration": True,
+    "ksp_type": "preonly",
+    "pc_type": "lu",
+    "pc_factor_mat_solver_type": "mumps",
+    # null pivots (|pivot| <= 1e-8 ||A||): the rigid mode of a body held
+    # only by contact that lost every active node; its step is set to 0
+    "mat_mumps_icntl_24": 1,
+    # relative pivot threshold 0.1 (MUMPS' default 0.01): the LU solve of the
+    # saddle point system (condition ~1e6 on the patch test) was otherwise only
+    # accurate to about eps ||J|| ||dx||, which left the patch test's pressure
+    # 5e-10 off uniform after its one Newton step (now 2e-12)
+    "mat_mumps_cntl_1": 0.1,
+    "mat_mumps_cntl_3": 1e-8,
+}
+
+_OPTIONS_SET_BY_PROBLEMS: set[str] = set()
+"""Options-database names holding a problem's defaults (not the user's)."""
+
+
+def default_options(condensation: bool) -> dict:
+    """Our defaults (see :data:`DEFAULT_OPTIONS`), for the monolithic or the condensed solve."""
+    defaults = dict(DEFAULT_OPTIONS)
+    if condensation:
+        # fgmres on [u | z], preconditioned by the condensed solve (a python PC);
+        # its inner solver takes the defaults (and the user's options) under condensed_
+        for key in ("pc_type", "pc_factor_mat_solver_type"):
+            del defaults[key]
+        defaults.update(ksp_type="fgmres", ksp_rtol=1e-12, ksp_atol=1e-50, ksp_max_it=200)
+        defaults.update({f"condensed_{key}": value for key, value in defaults.items()
+                         if key.startswith("mat_mumps")})
+        defaults.update(condensed_ksp_type="preonly", condensed_pc_type="lu",
+                        condensed_pc_factor_mat_solver_type="mumps")
+    return defaults
+
+
+def configure_snes(
+    snes: PETSc.SNES,
+    prefix: str,
+    petsc_options: dict,
+    condensation: bool,
+    default_atol: float,
+    before_options: typing.Callable[[], None],
+    after_options: typing.Callable[[PETSc.KSP], None],
+) -> list[str]:
+    """Set ``snes`` up from our defaults, ``petsc_options`` and the options database.
+
+    ``before_options`` runs with the options in the database and before
+    ``setFromOptions`` (set the function, Jacobian and monitor there);
+    ``after_options`` runs after it, still with the options in the database
+    (a python preconditioner that reads its own options). The absolute
+    tolerance is ``default_atol`` unless the user gave one.
+
+    Returns:
+        The database names left set (the factorization options); pass them to
+        :func:`release_options` when the problem is destroyed.
+    """
+    snes.setOptionsPrefix(prefix)
+    defaults = default_options(condensation)
+    defaults.update(petsc_options)
+    options = PETSc.Options()
+    added = []
+    for key, value in defaults.items():
+        name = f"{prefix}{key}"
+        if not options.hasName(name) or name in _OPTIONS_SET_BY_PROBLEMS:
+            options[name] = value
+            added.append(name)
+    user_atol = "snes_atol" in petsc_options or (
+        options.hasName(f"{prefix}snes_atol")
+        and f"{prefix}snes_atol" not in _OPTIONS_SET_BY_PROBLEMS
+    )
+    before_options()
+    snes.setFromOptions()
+    snes.getKSP().setFromOptions()
+    if not user_atol:
+        snes.setTolerances(atol=default_atol)
+    after_options(snes.getKSP())
+    kept = [name for name in added
+            if name[len(prefix):].removeprefix("condensed_").startswith("mat_")]
+    for name in added:
+        if name not in kept:
+            options.delValue(name)
+    _OPTIONS_SET_BY_PROBLEMS.update(kept)
+    return kept
+
+
+def release_options(names: list[str]) -> None:
+    """Remove the factorization options a problem left in the database."""
+    options = PETSc.Options()
+    for name in names:
+        if name in _OPTIONS_SET_BY_PROBLEMS:
+            options.delValue(name)
+            _OPTIONS_SET_BY_PROBLEMS.discard(name)
+
+
+def condensed_preconditioner(ksp: PETSc.KSP, layout, interfaces, block_size: int, prefix: str):
+    """Make the condensed solve the (python) preconditioner of the monolithic KSP."""
+    from .condensation import CondensedPreconditioner
+
+    comm = layout.comm
+    first = int(layout.offsets[comm.rank])
+    u_rows = first + np.arange(layout.owned_u.start, layout.owned_u.stop)
+    z_rows = first + np.arange(layout.owned_z.start, layout.owned_z.stop)
+    node_dofs = np.concatenate(
+        [i.owned_multiplier_blocks[:, None] * block_size + np.arange(block_size)
+         for i in interfaces]
+    ).reshape(-1, block_size)
+    condenser = CondensedPreconditioner(comm, u_rows, z_rows, node_dofs,
+                                        prefix=f"{prefix}condensed_")
+    pc = ksp.getPC()
+    pc.setType(PETSc.PC.Type.PYTHON)
+    pc.setPythonContext(condenser)
+    return condenser

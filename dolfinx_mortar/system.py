@@ -1,0 +1,197 @@
+"""The monolithic Newton matrix of a contact problem, [u | z_1 | z_2 ...] per rank.
+
+The bulk Jacobian form is assembled in place; each candidate pair adds one
+dense block (10 x 14 in 2D): rows are the 8 force dofs (slave a, b, master c, d)
+and the 2 slave multipliers, columns the 12 pair dofs and the 2 multipliers.
+Dirichlet rows and the multiplier rows' own diagonal (delta of the
+enforcement) go on the diagonal. The matrix and its pattern are rebuilt only
+when a new search changed the pairs, not on every search.
+"""
+
+from __future__ import annotations
+
+import time
+import typing
+
+import dolfinx
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from . import compat, kernels
+from .layout import BlockLayout, MonolithicMatrix
+
+if typing.TYPE_CHECKING:
+    from .enforcement import Rows
+    from .mortar import MortarInterface
+
+
+class ContactSystem:
+    """Pattern, assembly and lifetime of the monolithic matrix (see the module docstring).
+
+    Args:
+        V: the displacement space.
+        layout: the monolithic numbering.
+        interfaces: one per contact pair; field k + 1 of the layout.
+        K: a matrix of the bulk Jacobian's pattern (its CSR structure is read once).
+        J_form, bcs: the bulk Jacobian form and Dirichlet conditions.
+        fixed_dofs: the local Dirichlet dofs (may include a few owned elsewhere).
+        dirichlet_scale: the diagonal of Dirichlet rows (force units, module
+            docstring of :mod:`dolfinx_mortar.enforcement`).
+    """
+
+    def __init__(self, V: dolfinx.fem.FunctionSpace, layout: BlockLayout,
+                 interfaces: list[MortarInterface], K: PETSc.Mat, J_form, bcs: list,
+                 fixed_dofs: np.ndarray, dirichlet_scale: float):
+        self.comm = layout.comm
+        self.layout = layout
+        self.interfaces = interfaces
+        self.J_form = J_form
+        self.bcs = bcs
+        self.dirichlet_scale = dirichlet_scale
+        self.matrix: MonolithicMatrix | None = None
+        self._versions: tuple = ()
+        self._pattern = None
+        indptr, indices, _ = K.getValuesCSR()
+        index_map, bs = V.dofmap.index_map, V.dofmap.index_map_bs
+        blocks = index_map.local_to_global(
+            np.arange(index_map.size_local + index_map.num_ghosts, dtype=np.int32))
+        local_dofs = (blocks[:, None] * bs + np.arange(bs)).reshape(-1)
+        self._bulk = ((indptr.astype(np.int64), layout.u(indices)), layout.u(local_dofs))
+        fixed = layout.u(fixed_dofs)
+        # (dirichlet_dofs may list a few dofs owned by another rank; their owner has them too)
+        first = int(layout.offsets[self.comm.rank])
+        fixed = fixed[(fixed >= first) & (fixed < first + layout.num_u[self.comm.rank])]
+        self.fixed_rows = fixed
+        self._fixed_all = np.unique(np.concatenate(self.comm.allgather(fixed)))
+
+    @property
+    def mat(self) -> PETSc.Mat:
+        return self.matrix.mat
+
+    def assemble(self, multipliers: list[PETSc.Vec], coefficient_vectors: list[dict],
+                 rows: typing.Callable[[int], Rows]) -> tuple[bool, float, float]:
+        """Assemble the matrix at the current contact state.
+
+        Args:
+            multipliers: the multiplier vectors, one per pair.
+            coefficient_vectors: per pair, ghosted multiplier vectors "gap" and "area"
+                to scatter the row coefficients to ghost slave nodes.
+            rows: pair k -> the enforcement's rows (residual, alpha, beta, delta).
+
+        Returns:
+            (whether the matrix was rebuilt, seconds on contact, seconds on the bulk).
+        """
+        start = time.perf_counter()
+        rebuilt = self._update_pattern()
+        zeroing = time.perf_counter()
+        self.matrix.mat.zeroEntries()
+        zeroing = time.perf_counter() - zeroing
+        group_values, groups = [], []
+        offset = 0
+        row_values = [rows(k) for k in range(len(self.interfaces))]
+        for k in range(len(self.interfaces)):
+            blocks = self._contact_blocks(k, multipliers[k], coefficient_vectors[k],
+                                          row_values[k])
+            if blocks is not None:
+                group_values.append(blocks[0])
+                groups.append(offset + blocks[1])
+            offset += self._pattern[0][k].shape[0]
+        if group_values:
+            group_values = np.concatenate(group_values, axis=2)
+            groups = np.concatenate(groups)
+        else:
+            group_values, groups = np.zeros((10, 14, 0)), np.zeros(0, dtype=np.int64)
+        diagonal = np.concatenate(
+            [np.full(self.fixed_rows.size, self.dirichlet_scale)] + [r[3] for r in row_values])
+        matrix = self.matrix.mat
+        self.matrix.add(group_values, groups, diagonal)
+        contact = time.perf_counter() - start - zeroing
+        start = time.perf_counter()
+        compat.add_matrix_local(matrix, self.J_form, self.bcs)
+        matrix.assemble()
+        return rebuilt, contact, time.perf_counter() - start + zeroing
+
+    def _contact_pattern(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Monolithic rows (n, 10) and columns (n, 14) of pair k's dense block per candidate
+        pair; rows of Dirichlet dofs are dropped (-1), they are identity rows."""
+        interface = self.interfaces[k]
+        if interface.quantities is None:
+            return np.zeros((0, 10), dtype=np.int64), np.zeros((0, 14), dtype=np.int64)
+        layout = self.layout
+        force_dofs = layout.u(interface._force_columns())
+        force_dofs[np.isin(force_dofs, self._fixed_all)] = -1
+        pair_z = layout.z(interface.pair_multipliers, k + 1)
+        rows = np.concatenate([force_dofs, pair_z], axis=1)
+        cols = np.concatenate([layout.u(interface.pair_dofs), pair_z], axis=1)
+        return rows, cols
+
+    def _update_pattern(self) -> bool:
+        """(Re)build the matrix when the pairs' pattern changed; True if it was rebuilt."""
+        versions = tuple(i._pattern_version for i in self.interfaces)
+        if self.matrix is not None and versions == self._versions:
+            return False
+        layout = self.layout
+        pattern = tuple(zip(*(self._contact_pattern(k) for k in range(len(self.interfaces))),
+                            strict=True))
+        self._versions = versions
+        old = self._pattern
+        same = self.matrix is not None and old is not None and all(
+            np.array_equal(a, b) for a, b in zip(old[0] + old[1], pattern[0] + pattern[1],
+                                                 strict=True))
+        if self.comm.allreduce(same, op=MPI.LAND):
+            return False  # a search found the same pairs (or none again): keep the matrix
+        diagonal_rows = np.concatenate(
+            [self.fixed_rows]
+            + [layout.z(i.multiplier_offset + np.arange(i.num_owned_multipliers), k + 1)
+               for k, i in enumerate(self.interfaces)])
+        if self.matrix is not None:
+            self.matrix.destroy()
+        bulk_pattern, local_to_global = self._bulk
+        self.matrix = MonolithicMatrix(
+            self.comm, (layout.num_owned, layout.num_global), local_to_global, bulk_pattern,
+            np.concatenate(pattern[0]), np.concatenate(pattern[1]), diagonal_rows)
+        self._pattern = pattern
+        return True
+
+    def _contact_blocks(self, k: int, z: PETSc.Vec, vectors: dict, rows: Rows):
+        """Pair k's dense blocks (10, 14, m) and which candidate pairs they belong to (m,).
+
+        d(-B^T z)/du (8 x 12), d(-B^T z)/dz = -B^T (8 x 2), d C/du (2 x 12); only the
+        pairs that contribute, from the factorized gradients (no full dual numbers).
+        None before the first evaluation (no pairs yet).
+        """
+        interface = self.interfaces[k]
+        q = interface.quantities
+        if q is None:
+            return None
+        contributing = interface._rows(q)
+        z_nodes = interface.node_values(z)
+        _, alpha, beta, _ = rows
+        vectors["gap"].getArray()[:] = alpha
+        vectors["area"].getArray()[:] = beta
+        alpha_nodes = interface.node_values(vectors["gap"])
+        beta_nodes = interface.node_values(vectors["area"])
+        if contributing.size == 0:
+            return None
+        slave_nodes = interface.pair_nodes[contributing, 1:3]
+        z_pair, alpha_pair, beta_pair = (
+            v[slave_nodes] for v in (z_nodes, alpha_nodes, beta_nodes))
+        gradients = kernels.PairGradients
+        dn, mn = gradients.DN, gradients.MN
+        nodes = [(a, c) for a in range(2) for c in range(2)]
+        # -sum_j z_j d(coefficient_jkc)/dx: +Dn for the slave nodes, -Mn for the master nodes
+        terms = [[(dn + 4 * j + 2 * a + c, z_pair[:, j]) for j in range(2)] for a, c in nodes]
+        terms += [[(mn + 4 * j + 2 * a + c, -z_pair[:, j]) for j in range(2)] for a, c in nodes]
+        terms += [[(gradients.GAP + j, alpha_pair[:, j]), (gradients.AREA + j, beta_pair[:, j])]
+                  for j in range(2)]
+        values = np.zeros((10, 14, contributing.size))
+        values[:, :12] = interface._combined_gradients(q, contributing, terms)
+        coefficients = interface._force_coefficient_values(q, contributing)  # (m, j, 4, 2)
+        values[:8, 12:] = -coefficients.reshape(contributing.size, 2, 8).transpose(2, 1, 0)
+        return values, contributing
+
+    def destroy(self) -> None:
+        if self.matrix is not None:
+            self.matrix.destroy()
+            self.matrix = None
