@@ -178,3 +178,53 @@ def test_inversion_check_counts_and_locates_the_inverted_cells(comm, cell_type):
     ratio, where = check.worst(u.x.array)
     assert check(u.x.array).count == 0
     assert ratio == pytest.approx(0.5, rel=1e-12) and where[0] < 0.25
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("slave_face", ["contact", "top"])
+def test_user_punch_from_two_rectangles_pressed_and_slid(comm, slave_face):
+    """The scene of the user's report: a Neo-Hookean punch on a wider block, both from
+    create_rectangle, pressed 0.05 and slid 0.1 by its top. Tagged right, it presses on
+    the block with balanced forces and no warning; with the slave tagged on the punch's
+    top (it looks away from the block) the user is told at set-up and after every step."""
+    from dolfinx_mortar.bodies import merge_meshes
+
+    punch = dolfinx.mesh.create_rectangle(comm, [[-0.5, 1.0], [0.5, 1.5]], [6, 3])
+    block = dolfinx.mesh.create_rectangle(comm, [[-1.0, 0.0], [1.0, 1.0]], [12, 6])
+    tagged = merge_meshes({
+        "punch": (punch, {"contact": lambda x: np.isclose(x[1], 1.0),
+                          "top": lambda x: np.isclose(x[1], 1.5)}),
+        "block": (block, {"contact": lambda x: np.isclose(x[1], 1.0),
+                          "bottom": lambda x: np.isclose(x[1], 0.0)})})
+    mesh, markers = tagged.mesh, tagged.markers
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    u = dolfinx.fem.Function(V)
+    F = internal_work(u, ufl.TestFunction(V), {0: Material(100.0, 0.3, "neo-hookean")})
+    top = dolfinx.fem.Function(V)
+    facets = tagged.facet_tags
+    bcs = [dolfinx.fem.dirichletbc(top, dolfinx.fem.locate_dofs_topological(
+               V, 1, facets.find(markers["punch_top"]))),
+           dolfinx.fem.dirichletbc(np.zeros(2), dolfinx.fem.locate_dofs_topological(
+               V, 1, facets.find(markers["block_bottom"])), V)]
+    pair = ContactPair(facets, markers[f"punch_{slave_face}"], markers["block_contact"],
+                       name="punch-block")
+
+    def apply_load(t):  # press to 0.05 in the first half, then slide by 0.1
+        top.x.array.reshape(-1, 2)[:] = (0.2 * max(t - 0.5, 0.0), -0.1 * min(t, 0.5))
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ContactWarning)
+        problem = ContactProblem(F, u, bcs, [pair])
+        solve_load_steps(problem, apply_load, 4)
+    messages = [str(w.message) for w in caught if issubclass(w.category, ContactWarning)]
+    slave_force, master_force = problem.contact_forces()
+    if slave_face == "contact":
+        assert messages == []
+        assert slave_force[1] > 1.0 and problem.num_active() > 0
+        assert np.linalg.norm(slave_force + master_force) <= 1e-9 * np.linalg.norm(slave_force)
+    else:
+        assert "looks away from its master" in messages[0] and "wrong face" in messages[0]
+        assert len(messages) == 1 + 4  # set-up, then every accepted step
+        assert all("ended the step behind the slave surface" in m for m in messages[1:])
+        assert problem.num_active() == 0
+    problem.destroy()
