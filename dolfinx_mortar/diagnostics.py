@@ -262,8 +262,8 @@ class Penetration:
 
 
 def penetration_report(comm: MPI.Intracomm, threshold: float,
-                       slave_points: np.ndarray, slave_x: np.ndarray, slave_facets: np.ndarray,
-                       master_points: np.ndarray, master_x: np.ndarray,
+                       slave_ids: np.ndarray, slave_x: np.ndarray, slave_facets: np.ndarray,
+                       master_ids: np.ndarray, master_x: np.ndarray,
                        master_facets: np.ndarray) -> Penetration:
     """Collective: nodes of either surface that lie behind the other by > threshold x facet length.
 
@@ -275,15 +275,16 @@ def penetration_report(comm: MPI.Intracomm, threshold: float,
     ``threshold`` facet lengths means contact was not enforced there.
 
     Args:
-        slave_points, master_points: this rank's owned nodes of each surface.
+        slave_ids, master_ids: global numbers of this rank's surface nodes (the rows of
+            ``slave_x`` and ``master_x``); a node seen by several ranks counts once.
         slave_x, slave_facets, master_x, master_facets: this rank's facets.
     """
     worst = Penetration()
-    for side, points, x, facets in (
-        ("slave", slave_points, master_x, master_facets),
-        ("master", master_points, slave_x, slave_facets),
+    for side, ids, points, x, facets in (
+        ("slave", slave_ids, slave_x, master_x, master_facets),
+        ("master", master_ids, master_x, slave_x, slave_facets),
     ):
-        found = _behind(comm, points, x, facets, threshold)
+        found = _behind(comm, ids, points, x, facets, threshold)
         if found.count:
             found.side = side
             if found.depth > worst.depth:
@@ -294,12 +295,12 @@ def penetration_report(comm: MPI.Intracomm, threshold: float,
     return worst
 
 
-def _behind(comm, points, x, facets, threshold) -> Penetration:
+def _behind(comm, ids, points, x, facets, threshold) -> Penetration:
     # every facet of the other surface: a node may be behind one at any depth
     start = np.vstack(comm.allgather(x[facets[:, 0]]))
     end = np.vstack(comm.allgather(x[facets[:, 1]]))
-    depth = np.zeros(0)
-    deep = np.zeros(0, dtype=bool)
+    depth = np.zeros(points.shape[0])
+    deep = np.zeros(points.shape[0], dtype=bool)
     if start.shape[0] and points.shape[0]:
         tangent = end - start
         length = np.linalg.norm(tangent, axis=1)
@@ -317,7 +318,8 @@ def _behind(comm, points, x, facets, threshold) -> Penetration:
         t_best = t[rows, best]
         depth = -np.einsum("nc,nc->n", relative[rows, best], normal[facet]) / length[facet]
         deep = (t_best >= 0.0) & (t_best <= 1.0) & (depth > threshold)
-    count = comm.allreduce(int(np.count_nonzero(deep)), op=MPI.SUM)
+    # a node on facets of several ranks is seen (and found deep) by each of them
+    count = np.unique(np.concatenate(comm.allgather(np.asarray(ids)[deep]))).size
     local = (0.0, None)
     if deep.any():
         i = int(np.argmax(np.where(deep, depth, -np.inf)))
@@ -326,4 +328,4 @@ def _behind(comm, points, x, facets, threshold) -> Penetration:
     if not count:
         return Penetration()
     depth_max, where = max(gathered, key=lambda g: g[0])
-    return Penetration(count=count, depth=depth_max, where=where)
+    return Penetration(count=int(count), depth=depth_max, where=where)

@@ -373,8 +373,8 @@ class ContactProblem:
             slave_x = slave.current_coordinates(self.u)
             master_x = master.current_coordinates(self.u)
             report = diagnostics.penetration_report(
-                self.comm, threshold, slave_x[slave.node_owned], slave_x, slave.facets,
-                master_x[master.node_owned], master_x, master.facets)
+                self.comm, threshold, slave.node_global_blocks, slave_x, slave.facets,
+                master.node_global_blocks, master_x, master.facets)
             reports.append(report)
             if report.count:
                 other = "master" if report.side == "slave" else "slave"
