@@ -116,12 +116,13 @@ class Inversion:
 
 
 class InversionCheck:
-    """Counts cells with a non-positive Jacobian determinant at x = X + u (2D, P1).
+    """Counts cells with a non-positive Jacobian determinant at x = X + u (P1, 2D and 3D).
 
-    At each corner (a; b, c) the determinant is the cross product of the
-    current edges X_b - X_a + u_b - u_a and X_c - X_a + u_c - u_a; the
-    reference edges, the sign of their determinant and the dofs are kept,
-    since this runs in every residual evaluation, over all cells.
+    At each corner of a cell (every vertex of a quadrilateral or hexahedron,
+    the first of a simplex) the determinant of the current edges to its
+    neighbours, X_b - X_a + u_b - u_a, is divided by its reference value; the
+    reference edges and the dofs are kept, since this runs in every residual
+    evaluation, over all cells.
     """
 
     def __init__(self, V):
@@ -129,33 +130,34 @@ class InversionCheck:
 
         mesh = V.mesh
         self.comm = mesh.comm
+        tdim = mesh.topology.dim
+        self.gdim = mesh.geometry.dim
+        if self.gdim != tdim:
+            raise ValueError(f"cells of dimension {tdim} in {self.gdim}D are not supported")
         geometry = compat.geometry_dofmap(mesh)
-        num_cells = mesh.topology.index_map(mesh.topology.dim).size_local
-        X = mesh.geometry.x[:, :2][geometry[:num_cells]]
+        num_cells = mesh.topology.index_map(tdim).size_local
+        X = mesh.geometry.x[:, : self.gdim][geometry[:num_cells]]
         self._midpoints = X.mean(axis=1)
         blocks = np.asarray(V.dofmap.list[:num_cells], dtype=np.int64)
-        if geometry.shape[1] == 3:
-            corners = [(0, 1, 2)]
-        else:
-            corners = [(0, 1, 2), (1, 3, 0), (3, 2, 1), (2, 0, 3)]
+        num_vertices = geometry.shape[1]
+        if num_vertices == tdim + 1:
+            corners = [tuple(range(tdim + 1))]
+        else:  # tensor-product cells: the neighbours of vertex i are i ^ 1, i ^ 2 (, i ^ 4)
+            corners = [(i, *(i ^ (1 << k) for k in range(tdim))) for i in range(num_vertices)]
         self._corners = []
-        for a, b, c in corners:
-            first, second = X[:, b] - X[:, a], X[:, c] - X[:, a]
-            determinant = _cross(first, second)
-            sign = np.sign(determinant)
-            # relative to the reference determinant: the worst cell is the relatively worst
-            self._corners.append((blocks[:, a], blocks[:, b], blocks[:, c], first * sign[:, None],
-                                  second, sign, np.abs(determinant)))
+        for a, *others in corners:
+            edges = [X[:, b] - X[:, a] for b in others]
+            self._corners.append(
+                (blocks[:, a], [blocks[:, b] for b in others], edges, 1.0 / _det(edges)))
 
     def local_ratios(self, u: np.ndarray) -> np.ndarray:
-        """Per owned cell: min over corners of det(current) / |det(reference)|."""
-        u = u.reshape(-1, 2)
+        """Per owned cell: min over corners of det(current) / det(reference)."""
+        u = u.reshape(-1, self.gdim)
         worst = np.full(self._midpoints.shape[0], np.inf)
-        for a, b, c, first, second, sign, scale in self._corners:
+        for a, others, edges, inverse in self._corners:
             ua = u[a]
-            # sign * det(first + du_b, second + du_c), with first already times sign
-            current = _cross(first + sign[:, None] * (u[b] - ua), second + (u[c] - ua))
-            np.minimum(worst, current / scale, out=worst)
+            current = _det([edge + (u[b] - ua) for b, edge in zip(others, edges, strict=True)])
+            np.minimum(worst, current * inverse, out=worst)
         return worst
 
     def worst(self, u: np.ndarray) -> tuple[float, tuple[float, ...] | None]:
@@ -184,8 +186,13 @@ class InversionCheck:
         return Inversion(count=count, where=min(candidates, key=lambda w: w[0])[1])
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+def _det(columns: list[np.ndarray]) -> np.ndarray:
+    """Determinants of the (cells, d) column vectors, d = 2 or 3 (explicit: no stacking)."""
+    if len(columns) == 2:
+        (ax, ay), (bx, by) = columns[0].T, columns[1].T
+        return ax * by - ay * bx
+    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = (c.T for c in columns)
+    return ax * (by * cz - bz * cy) - ay * (bx * cz - bz * cx) + az * (bx * cy - by * cx)
 
 
 def _facet_geometry(x: np.ndarray, facets: np.ndarray):

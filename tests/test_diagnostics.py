@@ -159,25 +159,39 @@ def test_a_singular_factorization_is_described():
 
 
 @pytest.mark.parallel
-@pytest.mark.parametrize("cell_type", ["triangle", "quadrilateral"])
+@pytest.mark.parametrize(
+    "cell_type", ["triangle", "quadrilateral", "tetrahedron", "hexahedron"])
 def test_inversion_check_counts_and_locates_the_inverted_cells(comm, cell_type):
-    """u = (0, -2 y) on [0, 1]^2 maps y -> -y: every cell is inverted (det F = -1); u = 0
-    leaves det F = 1; squashing the cells with x < 0.25 to det F = 0.5 locates the worst."""
-    mesh = dolfinx.mesh.create_unit_square(comm, 4, 4, getattr(dolfinx.mesh.CellType, cell_type))
-    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    """u = -2 y e_y maps y -> -y: every cell is inverted (det F = -1); u = 0 leaves
+    det F = 1; squashing x < 0.25 to det F = 0.5 locates the worst; a shear keeps det F = 1."""
+    kind = getattr(dolfinx.mesh.CellType, cell_type)
+    if cell_type in ("triangle", "quadrilateral"):
+        mesh = dolfinx.mesh.create_unit_square(comm, 4, 4, kind)
+    else:
+        mesh = dolfinx.mesh.create_unit_cube(comm, 4, 4, 4, kind)
+    gdim = mesh.geometry.dim
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (gdim,)))
     check = diagnostics.InversionCheck(V)
     u = dolfinx.fem.Function(V)
     assert check(u.x.array).count == 0
     assert check.worst(u.x.array)[0] == pytest.approx(1.0, rel=1e-12)
-    u.interpolate(lambda x: np.stack([np.zeros_like(x[0]), -2.0 * x[1]]))
-    num_cells = mesh.topology.index_map(2).size_global
+
+    def field(component):
+        return lambda x: np.stack([component(x) if i == 1 else np.zeros_like(x[0])
+                                   for i in range(gdim)])
+
+    u.interpolate(field(lambda x: -2.0 * x[1]))
+    num_cells = mesh.topology.index_map(gdim).size_global
     inversion = check(u.x.array)
     assert inversion.count == num_cells
     assert "inverted element" in inversion.describe()
-    u.interpolate(lambda x: np.stack([-0.5 * np.minimum(x[0], 0.25), np.zeros_like(x[0])]))
+    u.interpolate(lambda x: np.stack([-0.5 * np.minimum(x[0], 0.25)]
+                                     + [np.zeros_like(x[0])] * (gdim - 1)))
     ratio, where = check.worst(u.x.array)
     assert check(u.x.array).count == 0
     assert ratio == pytest.approx(0.5, rel=1e-12) and where[0] < 0.25
+    u.interpolate(field(lambda x: 3.0 * x[0]))  # a shear: det F = 1 everywhere
+    assert check.worst(u.x.array)[0] == pytest.approx(1.0, rel=1e-12)
 
 
 @pytest.mark.parallel
