@@ -11,25 +11,12 @@ method in PETSc SNES with our own residual and Jacobian callbacks:
 
 B_j = d g~_j / dx at frozen integrals (-Dn on slave dofs, +Mn on master dofs)
 pushes the slave along -n and the master along +n. The multiplier rows C
-depend on the enforcement:
-
-* ``lagrange`` + ``semismooth``: C_j = z_j - max(0, z_j - c_n g^_j) with the
-  nodal gap g^_j = g~_j / A_j (A_j = int Phi_j), so z_j and c_n g^_j are both
-  pressures and the decision does not depend on the unit system; the active
-  set {j: z_j - c_n g^_j >= 0} is re-decided in every Newton iteration, and the
-  Jacobian is the exact (generalized) derivative, so Newton converges
-  quadratically once the set has settled and the solution does not depend on
-  c_n.
-* ``lagrange`` + ``fixed-point``: the active set is frozen during a full
-  Newton solve (rows g~_j = 0 if active, z_j = 0 if not), then updated from
-  the averaged nodal pressure and weighted gap; repeated until it stops
-  changing.
-* ``penalty``: z_j = max(0, -eps g~_j / A_j) (A_j = int Phi_j, so that a
-  uniform penetration d gives the pressure eps d), written as the row
-  z_j - max(0, -eps g~_j/A_j) and linearized exactly.
-* ``augmented``: z_j = max(0, lam_j - eps g~_j / A_j) with Uzawa updates
-  lam <- z after each Newton solve, until lam stops changing: the limit is the
-  Lagrange solution at any fixed eps.
+depend on the enforcement, one strategy per method in
+:mod:`dolfinx_mortar.enforcement`: Lagrange multipliers with a semismooth
+(C_j = z_j - max(0, z_j - c_n g^_j), g^_j = g~_j / A_j) or a fixed-point active
+set, penalty, or augmented Lagrange. The Newton matrix is assembled by
+:class:`~dolfinx_mortar.system.ContactSystem`; SNES and the linear solver are set up
+by :mod:`dolfinx_mortar.solvers`.
 
 Slave nodes that no master facet covers cannot become active and stay
 inactive (z_j = 0) without any mortar work. With no active node the z-rows
@@ -39,14 +26,12 @@ mode, which MUMPS' null-pivot detection (ICNTL(24) with CNTL(3) = 1e-8, on
 by default) sets to a zero step instead of an arbitrary huge one; the residual
 test stays exact, so this can only slow Newton down, never change a solution.
 
-Every residual row is a force (unit E x length in plane strain), whatever
-the enforcement: active Lagrange rows are s g~_j, inactive rows h z_j, the
-penalty rows w (z_j - lam_j + eps g^_j) and the Dirichlet rows k (u - u_D),
-with s ~ E/h and k ~ E the bulk stiffness scale, h the mean slave facet
-length and w = h min(1, s/eps). Scaling a row changes neither the Newton step
-nor the solution; it makes SNES' norms and tolerances independent of units,
-of c_n and of eps (an unscaled c_n g~ row at c_n = 1e3 E/h has a rounding
-floor above any sensible absolute tolerance).
+Every residual row is a force (unit E x length in plane strain), whatever the
+enforcement (:mod:`dolfinx_mortar.enforcement`); the Dirichlet rows are k (u - u_D)
+with k ~ E the bulk stiffness scale. Scaling a row changes neither the Newton step nor
+the solution; it makes SNES' norms and tolerances independent of units, of c_n and of
+eps (an unscaled c_n g~ row at c_n = 1e3 E/h has a rounding floor above any sensible
+absolute tolerance).
 """
 
 from __future__ import annotations
