@@ -161,6 +161,7 @@ class MortarInterface:
         self._matrices: dict[str, tuple[int, PETSc.Mat]] = {}
         self.quantities: kernels.PairQuantities | None = None
         self._crosspoint_blocks = np.zeros(0, dtype=np.int64)
+        self._pair_dofs: np.ndarray | None = None
 
     # -- multipliers -------------------------------------------------------
 
@@ -464,31 +465,34 @@ class MortarInterface:
             self._node_x, slave.facets, self._node_x, all_master_facets, self.reuse.margin,
             slave_previous=node_origin, master_previous=node_origin,
         )
-        a = slave.facets[pairs[:, 0], 0]
-        b = slave.facets[pairs[:, 0], 1]
         # neighbours: p is the start of the slave facet ending at a, q the end
-        # of the one starting at b (matched by global block, across ranks)
+        # of the one starting at b (matched by global block, across ranks);
+        # looked up once per local slave facet, then gathered per pair
         starts = self._node_blocks[all_slave_facets[:, 0]]
         ends = self._node_blocks[all_slave_facets[:, 1]]
-        p, has_p = self._lookup(ends, all_slave_facets[:, 0], self._node_blocks[a])
-        q, has_q = self._lookup(starts, all_slave_facets[:, 1], self._node_blocks[b])
-        p = np.where(has_p, p, a)
-        q = np.where(has_q, q, b)
+        facet_a, facet_b = slave.facets[:, 0], slave.facets[:, 1]
+        facet_p, facet_has_p = self._lookup(ends, all_slave_facets[:, 0],
+                                            self._node_blocks[facet_a])
+        facet_q, facet_has_q = self._lookup(starts, all_slave_facets[:, 1],
+                                            self._node_blocks[facet_b])
+        facet_p = np.where(facet_has_p, facet_p, facet_a)
+        facet_q = np.where(facet_has_q, facet_q, facet_b)
+        facet = pairs[:, 0]
+        a, b, p, q = facet_a[facet], facet_b[facet], facet_p[facet], facet_q[facet]
+        has_p, has_q = facet_has_p[facet], facet_has_q[facet]
         c = all_master_facets[pairs[:, 1], 0]
         d = all_master_facets[pairs[:, 1], 1]
         self.pair_nodes = np.stack([p, a, b, q, c, d], axis=1)
         self.pair_has_neighbour = np.stack([has_p, has_q], axis=1)
         self.pair_slave_facets = pairs[:, 0]
-        self.pair_multipliers = self.node_multipliers[np.stack([a, b], axis=1)]
-        self.pair_crosspoint = np.isin(self._node_blocks[np.stack([a, b], axis=1)],
-                                       self._crosspoint_blocks)
+        self.pair_multipliers = self.node_multipliers[self.pair_nodes[:, 1:3]]
+        if self._crosspoint_blocks.size:
+            self.pair_crosspoint = np.isin(self._node_blocks[self.pair_nodes[:, 1:3]],
+                                           self._crosspoint_blocks)
+        else:
+            self.pair_crosspoint = np.zeros((pairs.shape[0], 2), dtype=bool)
         self.pair_node_blocks = self._node_blocks[self.pair_nodes]
-        dofs = np.empty(self.pair_node_blocks.shape + (2,), dtype=np.int64)
-        for component in range(2):  # (not a broadcast over a last axis of 2: slow in numpy)
-            dofs[:, :, component] = self.pair_node_blocks * self.block_size + component
-        dofs[~has_p, 0, :] = -1
-        dofs[~has_q, 3, :] = -1
-        self.pair_dofs = dofs.reshape(-1, 12)
+        self._pair_dofs = None
         # for the kernels (coordinates gathered variable-major) and the block
         # patterns of the matrices (node blocks, -1 where p or q is absent)
         self._pair_nodes_T = np.ascontiguousarray(self.pair_nodes.T)
@@ -499,6 +503,21 @@ class MortarInterface:
         self._num_remote = (nrm, nrs)
         self._pattern_version += 1
         self.statistics.pairs = int(pairs.shape[0])
+
+    @property
+    def pair_dofs(self) -> np.ndarray:
+        """(n, 12) displacement dofs of each pair's nodes p, a, b, q, c, d (-1: p or q absent).
+
+        Built on first use after a search (only the monolithic system needs them).
+        """
+        if self._pair_dofs is None:
+            blocks = self._pair_col_blocks
+            dofs = np.empty(blocks.shape + (2,), dtype=np.int64)
+            for component in range(2):  # (not a broadcast over a last axis of 2: slow in numpy)
+                dofs[:, :, component] = blocks * self.block_size + component
+            dofs[blocks < 0] = -1
+            self._pair_dofs = dofs.reshape(-1, 12)
+        return self._pair_dofs
 
     @staticmethod
     def _lookup(keys: np.ndarray, values: np.ndarray, queries: np.ndarray):

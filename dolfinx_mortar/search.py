@@ -141,36 +141,48 @@ def candidate_pairs(
     slave, master = slave[keep], master[keep]
     if slave_previous is not None or master_previous is not None:
         keep = _near_now_or_crossed(
-            slave_coordinates, slave_facets[slave], master_coordinates, master_facets[master],
+            slave_coordinates, slave_facets, slave, master_coordinates, master_facets, master,
             margin,
         )
         slave, master = slave[keep], master[keep]
-    order = np.lexsort((master, slave))
+    # sorted by (slave, master): one sort of a combined key (the pairs are distinct)
+    order = np.argsort(slave * master_facets.shape[0] + master)
     return np.stack([slave[order], master[order]], axis=1)
 
 
 def _near_now_or_crossed(
     slave_coordinates: np.ndarray,
     slave_facets: np.ndarray,
+    slave: np.ndarray,
     master_coordinates: np.ndarray,
     master_facets: np.ndarray,
+    master: np.ndarray,
     margin: float,
 ) -> np.ndarray:
-    """Of swept candidates (one row per pair): those a search at the current positions
-    also finds, and those whose slave facet has a node behind the master facet's line
-    now (it crossed). The other swept pairs only lie on the path of a body moving away:
-    kept, they would make far-apart surfaces cost mortar work until the next search."""
+    """Of swept candidates (slave facet ``slave[i]``, master facet ``master[i]``): those a
+    search at the current positions also finds, and those whose slave facet has a node
+    behind the master facet's line now (it crossed). The other swept pairs only lie on
+    the path of a body moving away: kept, they would make far-apart surfaces cost mortar
+    work until the next search."""
     lower_s, upper_s = facet_boxes(slave_coordinates, slave_facets)
     lower_m, upper_m = facet_boxes(master_coordinates, master_facets)
-    near = boxes_overlap(lower_s, upper_s, lower_m, upper_m, margin)
-    start = master_coordinates[master_facets[:, 0]]
-    tangent = master_coordinates[master_facets[:, 1]] - start
+    near = np.ones(slave.size, dtype=bool)
+    for k in range(lower_s.shape[1]):  # boxes_overlap, per facet then per pair
+        near &= (lower_s[:, k] - margin)[slave] <= (upper_m[:, k] + margin)[master]
+        near &= (lower_m[:, k] - margin)[master] <= (upper_s[:, k] + margin)[slave]
+    far = np.flatnonzero(~near)
+    if far.size == 0:
+        return near
+    slave_far, master_far = slave_facets[slave[far]], master_facets[master[far]]
+    start = master_coordinates[master_far[:, 0]]
+    tangent = master_coordinates[master_far[:, 1]] - start
     outward = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
-    behind = np.zeros(near.shape, dtype=bool)
-    for k in range(slave_facets.shape[1]):
-        offset = slave_coordinates[slave_facets[:, k]] - start
+    behind = np.zeros(far.size, dtype=bool)
+    for k in range(slave_far.shape[1]):
+        offset = slave_coordinates[slave_far[:, k]] - start
         behind |= np.einsum("ij,ij->i", offset, outward) < 0.0
-    return near | behind
+    near[far] = behind
+    return near
 
 
 @dataclasses.dataclass
