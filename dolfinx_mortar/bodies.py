@@ -77,7 +77,7 @@ def merge_meshes(bodies: Mapping[str, object], comm: MPI.Comm | None = None) -> 
             of that body whose vertices all satisfy it) or a facet MeshTags
             (groups named ``str(value)``, or by an optional third element,
             a dict name -> value); the ``(mesh, cell_tags, facet_tags)`` result of
-            gmsh's ``model_to_mesh`` (or the MeshData object of dolfinx >= 0.10);
+            gmsh's ``model_to_mesh`` (a tuple or a ``MeshData``, by dolfinx version);
             or the ``gmsh.model`` module after meshing (the model on rank 0, as
             for ``model_to_mesh``, whose value on other ranks is ignored; groups
             are its physical facet groups, named by their physical names where
@@ -127,8 +127,8 @@ def _mesh_of(value) -> dolfinx.mesh.Mesh | None:
         return value
     if isinstance(value, tuple) and value and isinstance(value[0], dolfinx.mesh.Mesh):
         return value[0]
-    mesh = getattr(value, "mesh", None)
-    return mesh if isinstance(mesh, dolfinx.mesh.Mesh) else None
+    mesh_data = compat.gmsh_mesh_data(value)
+    return mesh_data[0] if mesh_data is not None else None
 
 
 def _is_gmsh_model(value) -> bool:
@@ -174,17 +174,14 @@ def _parse_body(name: str, value, comm: MPI.Comm) -> _Body:
             f"body {name!r}: facets must be a dict name -> locator or a facet MeshTags, "
             f"got {type(facets).__name__}"
         )
-    mesh_data = _mesh_of(value)
-    if mesh_data is not None and isinstance(
-        getattr(value, "facet_tags", None), dolfinx.mesh.MeshTags
-    ):
-        # dolfinx >= 0.10 MeshData
-        _check_comm(name, mesh_data, comm)
-        groups = getattr(value, "physical_groups", None) or {}
+    mesh_data = compat.gmsh_mesh_data(value)
+    if mesh_data is not None:
+        mesh, facet_tags, groups = mesh_data
+        _check_comm(name, mesh, comm)
         names = {group: int(tag) for group, (dim, tag) in groups.items()
-                 if group and dim == mesh_data.topology.dim - 1}
-        return _Body(name, mesh_data, _tag_groups(name, mesh_data, value.facet_tags, names, comm,
-                                                  partial_names=True))
+                 if group and dim == mesh.topology.dim - 1}
+        return _Body(name, mesh, _tag_groups(name, mesh, facet_tags, names, comm,
+                                             partial_names=True))
     raise ValueError(
         f"body {name!r}: expected a dolfinx Mesh, a tuple (mesh, facets), the result of "
         f"model_to_mesh or a gmsh model, got {type(value).__name__}"

@@ -49,6 +49,14 @@ def model_to_mesh(model, comm, rank: int, gdim: int) -> MeshWithTags:
     return MeshWithTags(mesh, cell_tags, facet_tags)
 
 
+def gmsh_mesh_data(value):
+    """(mesh, facet tags, {physical name: (dim, tag)}) if ``value`` is the ``MeshData`` that
+    dolfinx 0.10 onwards returns from ``model_to_mesh``, else None (0.9 returns a tuple)."""
+    if DOLFINX_VERSION >= (0, 10) and isinstance(value, _gmshio.MeshData):
+        return value.mesh, value.facet_tags, dict(value.physical_groups or {})
+    return None
+
+
 def geometry_dofmap(mesh: dolfinx.mesh.Mesh):
     """The (num_cells, nodes_per_cell) array of geometry node indices.
 
