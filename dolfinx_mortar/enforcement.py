@@ -31,9 +31,7 @@ import numpy as np
 from mpi4py import MPI
 
 from . import diagnostics
-
-if typing.TYPE_CHECKING:
-    from .problem import ContactProblem, SolveReport
+from .solvers import SolveReport
 
 METHODS = ("lagrange", "penalty", "augmented")
 ACTIVE_SET_STRATEGIES = ("semismooth", "fixed-point")
@@ -52,6 +50,27 @@ class Scales:
     def dirichlet(self) -> float:
         """k = s h: the scale of Dirichlet rows, about E."""
         return self.row * self.length
+
+
+class Solver(typing.Protocol):
+    """What a strategy uses of the problem it solves (a ContactProblem)."""
+
+    comm: MPI.Intracomm
+    interfaces: list
+    multipliers: list
+    x: typing.Any
+
+    def _newton(self) -> SolveReport:
+        """One SNES solve from the state in x."""
+
+    def _nodal_gaps(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """(covered, g^) of pair k's owned slave nodes."""
+
+    def _update_contact(self) -> None:
+        """Gaps, areas and active sets at the current state."""
+
+    def _write_x_into_state(self, x) -> None:
+        """u and the multipliers from x."""
 
 
 Rows = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
@@ -76,7 +95,7 @@ class Enforcement:
              area: np.ndarray) -> Rows:
         raise NotImplementedError
 
-    def solve(self, problem: ContactProblem) -> SolveReport:
+    def solve(self, problem: Solver) -> SolveReport:
         return problem._newton()
 
     def save_state(self) -> list[np.ndarray]:
@@ -132,7 +151,7 @@ class FixedPointLagrange(SemismoothLagrange):
             return super().decide_active(k, z, covered, gap)
         return self.frozen[k] & covered
 
-    def solve(self, problem: ContactProblem) -> SolveReport:
+    def solve(self, problem: Solver) -> SolveReport:
         self.frozen = None
         problem._write_x_into_state(problem.x)
         problem._update_contact()
@@ -143,7 +162,7 @@ class FixedPointLagrange(SemismoothLagrange):
         return outer_loop(problem, lambda: self._update(problem), self.max_outer_iterations,
                           diagnostics.FIXED_POINT_NOT_SETTLED)
 
-    def _update(self, problem: ContactProblem) -> bool:
+    def _update(self, problem: Solver) -> bool:
         """One fixed-point update; True when no node changed on any rank.
 
         A node leaves the set when its averaged pressure is negative beyond
@@ -196,7 +215,7 @@ class Penalty(Enforcement):
         beta[active] = (-weight * eps * gap / safe_area**2)[active]
         return residual, alpha, beta, delta
 
-    def solve(self, problem: ContactProblem) -> SolveReport:
+    def solve(self, problem: Solver) -> SolveReport:
         self.lam = [np.zeros(n) for n in self.num_multipliers]
         return problem._newton()
 
@@ -220,11 +239,11 @@ class AugmentedLagrange(Penalty):
         self.tolerance = tolerance
         self.max_outer_iterations = max_outer_iterations
 
-    def solve(self, problem: ContactProblem) -> SolveReport:
+    def solve(self, problem: Solver) -> SolveReport:
         return outer_loop(problem, lambda: self._update(problem), self.max_outer_iterations,
                           diagnostics.UZAWA_NOT_SETTLED)
 
-    def _update(self, problem: ContactProblem) -> bool:
+    def _update(self, problem: Solver) -> bool:
         change, size = 0.0, 0.0
         for k, z in enumerate(problem.multipliers):
             new = z.getArray(readonly=True).copy()
@@ -251,11 +270,9 @@ def create(method: str, active_set: str, scales: Scales, num_multipliers, *, c_n
                              max_outer_iterations)
 
 
-def outer_loop(problem: ContactProblem, settled: typing.Callable[[], bool],
+def outer_loop(problem: Solver, settled: typing.Callable[[], bool],
                max_outer_iterations: int, failure_reason: int) -> SolveReport:
     """Newton solves until ``settled()`` (called after each converged one) says so."""
-    from .problem import SolveReport
-
     total_iterations, residuals, linear_iterations = 0, [], 0
     for outer in range(1, max_outer_iterations + 1):
         report = problem._newton()

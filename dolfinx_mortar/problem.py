@@ -54,6 +54,7 @@ from . import compat, diagnostics, enforcement, kernels, solvers
 from .enforcement import ACTIVE_SET_STRATEGIES, METHODS
 from .layout import BlockLayout, dirichlet_dofs
 from .mortar import MortarInterface
+from .solvers import SolveReport
 from .system import ContactSystem
 
 logger = logging.getLogger("dolfinx_mortar")
@@ -74,35 +75,6 @@ class ContactPair:
     slave: int
     master: int
     name: str = ""
-
-
-@dataclasses.dataclass
-class SolveReport:
-    """What one call of :meth:`ContactProblem.solve` did."""
-
-    converged: bool
-    reason: int
-    iterations: int
-    residuals: list[float]
-    active: int
-    outer_iterations: int = 1
-    linear_iterations: int = 0
-    timings: dict[str, float] = dataclasses.field(default_factory=dict)
-    inversion: diagnostics.Inversion = dataclasses.field(default_factory=diagnostics.Inversion)
-    """Inverted cells of the Newton iterate that stopped a failed solve (count 0 otherwise)."""
-    linear_solver_failure: str = ""
-    """Why the linear solver failed (reason DIVERGED_LINEAR_SOLVE), in PETSc's words."""
-
-    def cause(self) -> str:
-        """Why the solve failed, in words ("converged" if it did not fail)."""
-        if self.converged:
-            return "converged"
-        parts = [f"SNES reason {diagnostics.describe_snes_reason(self.reason)}"]
-        if self.inversion.count:
-            parts.append(f"{self.inversion.describe()} in a Newton iterate")
-        if self.linear_solver_failure:
-            parts.append(self.linear_solver_failure)
-        return "; ".join(parts)
 
 
 class ContactProblem:

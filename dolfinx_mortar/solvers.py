@@ -15,10 +15,13 @@ for the user's own by the next problem with the same prefix.
 
 from __future__ import annotations
 
+import dataclasses
 import typing
 
 import numpy as np
 from petsc4py import PETSc
+
+from . import diagnostics
 
 DEFAULT_OPTIONS = {
     "snes_type": "newtonls",
@@ -43,6 +46,36 @@ DEFAULT_OPTIONS = {
     "mat_mumps_cntl_1": 0.1,
     "mat_mumps_cntl_3": 1e-8,
 }
+
+@dataclasses.dataclass
+class SolveReport:
+    """What one call of :meth:`~dolfinx_mortar.problem.ContactProblem.solve` did."""
+
+    converged: bool
+    reason: int
+    iterations: int
+    residuals: list[float]
+    active: int
+    outer_iterations: int = 1
+    linear_iterations: int = 0
+    timings: dict[str, float] = dataclasses.field(default_factory=dict)
+    inversion: diagnostics.Inversion = dataclasses.field(default_factory=diagnostics.Inversion)
+    """Inverted cells of the Newton iterate that stopped a failed solve (count 0 otherwise)."""
+    linear_solver_failure: str = ""
+    """Why the linear solver failed (reason DIVERGED_LINEAR_SOLVE), in PETSc's words."""
+
+    def cause(self) -> str:
+        """Why the solve failed, in words ("converged" if it did not fail)."""
+        if self.converged:
+            return "converged"
+        parts = [f"SNES reason {diagnostics.describe_snes_reason(self.reason)}"]
+        if self.inversion.count:
+            parts.append(f"{self.inversion.describe()} in a Newton iterate")
+        if self.linear_solver_failure:
+            parts.append(self.linear_solver_failure)
+        return "; ".join(parts)
+
+
 
 _OPTIONS_SET_BY_PROBLEMS: set[str] = set()
 """Options-database names holding a problem's defaults (not the user's)."""
