@@ -195,14 +195,13 @@ def _det(columns: list[np.ndarray]) -> np.ndarray:
     return ax * (by * cz - bz * cy) - ay * (bx * cz - bz * cx) + az * (bx * cy - by * cx)
 
 
-def _facet_geometry(x: np.ndarray, facets: np.ndarray):
-    """Centres, outward unit normals and lengths of 2D facets (start -> end, normal (t_y, -t_x))."""
-    start, end = x[facets[:, 0]], x[facets[:, 1]]
+def _facet_geometry(start: np.ndarray, end: np.ndarray):
+    """Centres, outward unit normals and lengths of 2D facets start -> end (normal (t_y, -t_x),
+    outward as :func:`~dolfinx_mortar.surface.extract_surface` orients them)."""
     tangent = end - start
     length = np.linalg.norm(tangent, axis=1)
-    normal = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1) / np.where(length > 0, length, 1)[
-        :, None
-    ]
+    normal = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
+    normal /= np.where(length > 0, length, 1.0)[:, None]
     return 0.5 * (start + end), normal, length
 
 
@@ -234,8 +233,10 @@ def facing_report(comm: MPI.Intracomm, slave_x: np.ndarray, slave_facets: np.nda
     can then never become active, and the bodies pass through each other.
     Surfaces in contact at an angle (cosine near 0) are not flagged.
     """
-    s_centre, s_normal, s_length = _facet_geometry(slave_x, slave_facets)
-    m_centre, m_normal, _ = _facet_geometry(master_x, master_facets)
+    s_centre, s_normal, s_length = _facet_geometry(slave_x[slave_facets[:, 0]],
+                                                   slave_x[slave_facets[:, 1]])
+    m_centre, m_normal, _ = _facet_geometry(master_x[master_facets[:, 0]],
+                                            master_x[master_facets[:, 1]])
     m_centre = np.vstack(comm.allgather(m_centre))
     m_normal = np.vstack(comm.allgather(m_normal))
     total_length = comm.allreduce(np.array([s_length.sum(), s_length.size]), op=MPI.SUM)
@@ -310,10 +311,9 @@ def _behind(comm, ids, points, x, facets, threshold) -> Penetration:
     deep = np.zeros(points.shape[0], dtype=bool)
     if start.shape[0] and points.shape[0]:
         tangent = end - start
-        length = np.linalg.norm(tangent, axis=1)
-        normal = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1) / length[:, None]
+        centre, normal, length = _facet_geometry(start, end)
         k = min(8, start.shape[0])
-        _, candidates = cKDTree(0.5 * (start + end)).query(points, k=k)
+        _, candidates = cKDTree(centre).query(points, k=k)
         candidates = candidates.reshape(points.shape[0], k)
         relative = points[:, None, :] - start[candidates]
         t = np.einsum("nkc,nkc->nk", relative, tangent[candidates]) / length[candidates] ** 2
