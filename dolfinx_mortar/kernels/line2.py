@@ -31,8 +31,8 @@ import typing
 
 import numpy as np
 
-from . import dual
-from .dual import Dual, RowSubsetDual
+from .. import dual
+from ..dual import Dual, RowSubsetDual
 
 NODE_ORDER = ("p", "a", "b", "q", "c", "d")
 NUM_PAIR_VARIABLES = 12
