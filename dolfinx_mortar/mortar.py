@@ -8,10 +8,15 @@ past the search margin, evaluates all pairs in one batched kernel call and
 assembles the results into PETSc objects whose sparsity is fixed between
 searches (COO preallocation: no allocation inside a Newton loop).
 
+The interface is dimension-free: the kernel of the facets' dimension and
+the nodes each pair depends on are a :mod:`stencils` object (2D:
+:class:`~dolfinx_mortar.stencils.Line2Stencil`, 3D:
+:class:`~dolfinx_mortar.stencils.Surface3Stencil`).
+
 Layouts: rows of D, M, the weighted gap and its Jacobian are multipliers
 (one per slave node, owned by the rank owning the node's dofs); columns of D
 and M are global dof blocks (nodes) of the displacement space; columns of
-Jacobians are global displacement dofs (block * 2 + component).
+Jacobians are global displacement dofs (block * gdim + component).
 """
 
 from __future__ import annotations
@@ -24,7 +29,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from . import kernels, search, surface
+from . import kernels, search, stencils, surface
 from .dual import RowSubsetDual
 from .kernels import BasisOption, IntegrationOption, NormalOption
 from .layout import CooMatrix
@@ -86,7 +91,8 @@ class MortarInterface:
     """One slave/master pair of surfaces and its mortar quantities.
 
     Args:
-        V: P1 vector displacement space on a 2D mesh.
+        V: P1 vector displacement space on a 2D (triangles, quadrilaterals) or
+            3D (tetrahedra, hexahedra) mesh.
         facet_tags: facet meshtags naming the surfaces.
         slave_marker, master_marker: tag values of the slave (non-mortar) and
             master (mortar) surfaces.
@@ -95,7 +101,7 @@ class MortarInterface:
         basis: multiplier basis, ``standard`` (default) or ``dual``.
         num_gauss_points: per segment (or per slave facet for ``element``).
         search_margin: boxes are grown by this much; default twice the mean
-            slave facet length.
+            slave facet edge length.
         configuration: ``current`` (default): everything on x = X + u, for
             large deformations; ``reference``: integrals and normals on the
             undeformed surfaces, computed once, gap linear in u (small strain,
@@ -139,10 +145,13 @@ class MortarInterface:
         self.slave = surface.extract_surface(V, facet_tags, slave_marker, "slave")
         self.master = surface.extract_surface(V, facet_tags, master_marker, "master")
         surface.check_disjoint(self.slave, self.master, self.comm)
+        self.gdim = self.slave.reference_coordinates.shape[1]
         if search_margin is None:
-            lengths = np.linalg.norm(
-                np.diff(self.slave.reference_coordinates[self.slave.facets], axis=1)[:, 0], axis=1
-            )
+            corners = self.slave.reference_coordinates[self.slave.facets]
+            if corners.shape[1] == 2:
+                lengths = np.linalg.norm(corners[:, 1] - corners[:, 0], axis=1)
+            else:
+                lengths = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2).ravel()
             total = self.comm.allreduce(np.array([lengths.sum(), lengths.size]), op=MPI.SUM)
             search_margin = 2.0 * total[0] / total[1]
         if not search_margin > 0.0:
@@ -162,6 +171,7 @@ class MortarInterface:
         self.quantities: kernels.PairQuantities | None = None
         self._crosspoint_blocks = np.zeros(0, dtype=np.int64)
         self._pair_dofs: np.ndarray | None = None
+        self.stencil: stencils.PairStencil | None = None
 
     # -- multipliers -------------------------------------------------------
 
@@ -182,7 +192,7 @@ class MortarInterface:
                              slave.reference_coordinates[ghosts & (owners == r)].view(np.int64)])
             for r in range(comm.size)
         ]
-        received, sources = _alltoallv(comm, requests, np.int64, 3)
+        received, sources = _alltoallv(comm, requests, np.int64, 1 + self.gdim)
         own_blocks = np.concatenate([slave.node_global_blocks[slave.node_owned], received[:, 0]])
         own_coordinates = np.concatenate(
             [slave.reference_coordinates[slave.node_owned], received[:, 1:].copy().view(np.float64)]
@@ -325,47 +335,37 @@ class MortarInterface:
         return self.quantities
 
     def _evaluate(self, node_x: np.ndarray) -> kernels.PairQuantities:
-        # the pairs' coordinates (12, n), variable-major: x of p, y of p, x of a, ...
-        X = np.empty((kernels.NUM_PAIR_VARIABLES, self._pair_nodes_T.shape[1]))
-        for component in range(2):
-            X[component::2] = np.ascontiguousarray(node_x[:, component])[self._pair_nodes_T]
-        return kernels._pair_quantities(
-            X,
-            self.pair_has_neighbour,
-            normals=self.normals,
-            integration=self.integration,
-            basis=self.basis,
-            num_gauss_points=self.num_gauss_points,
-            crosspoint=self.pair_crosspoint,
-            slave_facet=self.pair_slave_facets,
-        )
+        return self.stencil.evaluate(
+            node_x, normals=self.normals, integration=self.integration, basis=self.basis,
+            num_gauss_points=self.num_gauss_points, crosspoint=self.pair_crosspoint)
 
     def _with_current_gap(self, reference: kernels.PairQuantities) -> kernels.PairQuantities:
         """Reference integrals, constant in u; the gap linear in the current positions."""
         from .dual import Dual
 
-        x = self._node_x[self.pair_nodes]  # (n, 6, 2)
+        stencil = self.stencil
         Dn, Mn = reference.Dn.value, reference.Mn.value  # (n, j, k, c)
-        gap = (np.einsum("njlc,nlc->nj", Mn, x[:, 4:6]) - np.einsum("njkc,nkc->nj", Dn, x[:, 1:3]))
+        gap = (np.einsum("njlc,nlc->nj", Mn, self._node_x[stencil.master_nodes])
+               - np.einsum("njkc,nkc->nj", Dn, self._node_x[stencil.slave_nodes]))
+        nv, ns = stencil.num_variables, stencil.ns
         rows = _contributing_rows(reference)
         if rows is None:
-            grad = np.zeros(gap.shape + (kernels.NUM_PAIR_VARIABLES,))
-            grad[:, :, 2:6] = -Dn.reshape(-1, 2, 4)
-            grad[:, :, 8:12] = Mn.reshape(-1, 2, 4)
+            grad = np.zeros(gap.shape + (nv,))
+            grad[:, :, stencil.slave_variables] = -Dn.reshape(-1, ns, ns * self.gdim)
+            grad[:, :, stencil.master_variables] = Mn.reshape(-1, ns, stencil.nm * self.gdim)
 
             def constant(value: np.ndarray) -> Dual:
-                zero = np.broadcast_to(0.0, value.shape + (kernels.NUM_PAIR_VARIABLES,))
-                return Dual(value, zero)
+                return Dual(value, np.broadcast_to(0.0, value.shape + (nv,)))
 
             return dataclasses.replace(reference, Dn=constant(Dn), Mn=constant(Mn),
                                        area=constant(reference.area.value), gap=Dual(gap, grad))
         # every quantity is zero outside the pairs that contribute: keep them apart
-        grad = np.zeros((rows.size, 2, kernels.NUM_PAIR_VARIABLES))
-        grad[:, :, 2:6] = -Dn[rows].reshape(-1, 2, 4)
-        grad[:, :, 8:12] = Mn[rows].reshape(-1, 2, 4)
+        grad = np.zeros((rows.size, ns, nv))
+        grad[:, :, stencil.slave_variables] = -Dn[rows].reshape(-1, ns, ns * self.gdim)
+        grad[:, :, stencil.master_variables] = Mn[rows].reshape(-1, ns, stencil.nm * self.gdim)
 
         def constant(value: np.ndarray) -> Dual:
-            shape = (rows.size,) + value.shape[1:] + (kernels.NUM_PAIR_VARIABLES,)
+            shape = (rows.size,) + value.shape[1:] + (nv,)
             return RowSubsetDual(value, rows, np.broadcast_to(0.0, shape))
 
         return dataclasses.replace(reference, Dn=constant(Dn), Mn=constant(Mn),
@@ -380,10 +380,11 @@ class MortarInterface:
         comm = self.comm
         margin = self.reuse.margin
         slave_lower, slave_upper = search.facet_boxes(slave_x, self.slave.facets, slave_origin)
+        gdim = self.gdim
         if self.slave.num_facets:
             my_box = np.concatenate([slave_lower.min(axis=0), slave_upper.max(axis=0)])
         else:
-            my_box = np.array([np.inf, np.inf, -np.inf, -np.inf])
+            my_box = np.concatenate([np.full(gdim, np.inf), np.full(gdim, -np.inf)])
         boxes = np.array(comm.allgather(my_box))
         master_lower, master_upper = search.facet_boxes(master_x, self.master.facets, master_origin)
         self._send_master = []
@@ -393,25 +394,28 @@ class MortarInterface:
                 self._send_master.append(np.zeros(0, dtype=np.int64))
                 self._send_slave.append(np.zeros(0, dtype=np.int64))
                 continue
-            lower, upper = boxes[r, :2], boxes[r, 2:]
+            lower, upper = boxes[r, :gdim], boxes[r, gdim:]
             self._send_master.append(np.flatnonzero(
                 search.boxes_overlap(master_lower, master_upper, lower, upper, margin)))
             self._send_slave.append(np.flatnonzero(
                 search.boxes_overlap(slave_lower, slave_upper, lower, upper, margin)))
 
     def _receive(self, owned: surface.ContactSurface, plan: list[np.ndarray], *states: np.ndarray):
-        """Global blocks (k, 2) and, per state of the nodes in ``states``, the
-        coordinates (k, 2, 2) of the facets others send."""
+        """Global blocks (m, k) and, per state of the nodes in ``states``, the
+        coordinates (m, k, gdim) of the m facets of k nodes others send."""
+        k, gdim = owned.facets.shape[1], self.gdim
         chunks = []
         for facets in plan:
             nodes = owned.facets[facets]
             chunks.append(np.column_stack(
                 [np.ascontiguousarray(owned.node_global_blocks[nodes]).view(np.float64)]
-                + [x[nodes].reshape(-1, 4) for x in states]
+                + [x[nodes].reshape(-1, k * gdim) for x in states]
             ))
-        data, _ = _alltoallv(self.comm, chunks, np.float64, 2 + 4 * len(states))
-        blocks = data[:, :2].copy().view(np.int64)
-        coordinates = (data[:, 2 + 4 * i:6 + 4 * i].reshape(-1, 2, 2) for i in range(len(states)))
+        width = k * gdim
+        data, _ = _alltoallv(self.comm, chunks, np.float64, k + width * len(states))
+        blocks = data[:, :k].copy().view(np.int64)
+        coordinates = (data[:, k + width * i:k + width * (i + 1)].reshape(-1, k, gdim)
+                       for i in range(len(states)))
         return (blocks, *coordinates)
 
     def _search(self, slave_x: np.ndarray, master_x: np.ndarray,
@@ -432,102 +436,94 @@ class MortarInterface:
             remote_slave_blocks, remote_slave_x, remote_slave_origin = self._receive(
                 slave, self._send_slave, slave_x, slave_origin)
         else:
-            remote_master_blocks = remote_slave_blocks = np.zeros((0, 2), dtype=np.int64)
-            remote_master_x = remote_slave_x = np.zeros((0, 2, 2))
-            remote_master_origin = remote_slave_origin = remote_master_x
+            gdim, km, ks = self.gdim, master.facets.shape[1], slave.facets.shape[1]
+            remote_master_blocks = np.zeros((0, km), dtype=np.int64)
+            remote_slave_blocks = np.zeros((0, ks), dtype=np.int64)
+            remote_master_x = remote_master_origin = np.zeros((0, km, gdim))
+            remote_slave_x = remote_slave_origin = np.zeros((0, ks, gdim))
         self.statistics.time_exchange += time.perf_counter() - start
 
         # node table: local slave nodes, local master nodes, remote master
         # facet ends, remote slave facet ends
+        gdim = self.gdim
         ns, nm = slave.num_nodes, master.num_nodes
+        km, ks = master.facets.shape[1], slave.facets.shape[1]
         nrm, nrs = remote_master_blocks.shape[0], remote_slave_blocks.shape[0]
         self._node_blocks = np.concatenate([
             slave.node_global_blocks, master.node_global_blocks,
             remote_master_blocks.reshape(-1), remote_slave_blocks.reshape(-1),
         ])
         self._node_x = np.concatenate([
-            slave_x, master_x, remote_master_x.reshape(-1, 2), remote_slave_x.reshape(-1, 2)
+            slave_x, master_x, remote_master_x.reshape(-1, gdim), remote_slave_x.reshape(-1, gdim)
         ])
         all_master_facets = np.concatenate([
-            master.facets + ns, ns + nm + np.arange(2 * nrm).reshape(-1, 2)
+            master.facets + ns, ns + nm + np.arange(km * nrm).reshape(-1, km)
         ]).astype(np.int64)
         all_slave_facets = np.concatenate([
-            slave.facets, ns + nm + 2 * nrm + np.arange(2 * nrs).reshape(-1, 2)
+            slave.facets, ns + nm + km * nrm + np.arange(ks * nrs).reshape(-1, ks)
         ]).astype(np.int64)
 
         node_origin = None
         if swept:
             node_origin = np.concatenate([
                 slave_origin, master_origin,
-                remote_master_origin.reshape(-1, 2), remote_slave_origin.reshape(-1, 2),
+                remote_master_origin.reshape(-1, gdim), remote_slave_origin.reshape(-1, gdim),
             ])
         pairs = search.candidate_pairs(
             self._node_x, slave.facets, self._node_x, all_master_facets, self.reuse.margin,
             slave_previous=node_origin, master_previous=node_origin,
         )
-        # neighbours: p is the start of the slave facet ending at a, q the end
-        # of the one starting at b (matched by global block, across ranks);
-        # looked up once per local slave facet, then gathered per pair
-        starts = self._node_blocks[all_slave_facets[:, 0]]
-        ends = self._node_blocks[all_slave_facets[:, 1]]
-        facet_a, facet_b = slave.facets[:, 0], slave.facets[:, 1]
-        facet_p, facet_has_p = self._lookup(ends, all_slave_facets[:, 0],
-                                            self._node_blocks[facet_a])
-        facet_q, facet_has_q = self._lookup(starts, all_slave_facets[:, 1],
-                                            self._node_blocks[facet_b])
-        facet_p = np.where(facet_has_p, facet_p, facet_a)
-        facet_q = np.where(facet_has_q, facet_q, facet_b)
-        facet = pairs[:, 0]
-        a, b, p, q = facet_a[facet], facet_b[facet], facet_p[facet], facet_q[facet]
-        has_p, has_q = facet_has_p[facet], facet_has_q[facet]
-        c = all_master_facets[pairs[:, 1], 0]
-        d = all_master_facets[pairs[:, 1], 1]
-        self.pair_nodes = np.stack([p, a, b, q, c, d], axis=1)
-        self.pair_has_neighbour = np.stack([has_p, has_q], axis=1)
-        self.pair_slave_facets = pairs[:, 0]
-        self.pair_multipliers = self.node_multipliers[self.pair_nodes[:, 1:3]]
-        if self._crosspoint_blocks.size:
-            self.pair_crosspoint = np.isin(self._node_blocks[self.pair_nodes[:, 1:3]],
-                                           self._crosspoint_blocks)
+        local_slave_facets = slave.facets.astype(np.int64)
+        if gdim == 2:
+            stencil = stencils.Line2Stencil.build(
+                self._node_blocks, all_slave_facets, local_slave_facets, all_master_facets, pairs)
         else:
-            self.pair_crosspoint = np.zeros((pairs.shape[0], 2), dtype=bool)
-        self.pair_node_blocks = self._node_blocks[self.pair_nodes]
+            stencil = stencils.Surface3Stencil.build(
+                self._node_blocks, self._node_x, all_slave_facets, local_slave_facets,
+                all_master_facets, pairs, self.normals)
+        self.stencil = stencil
+        self.pair_slave_facets = stencil.slave_facets
+        self.pair_multipliers = self.node_multipliers[stencil.slave_nodes]
+        slave_blocks = self._node_blocks[stencil.slave_nodes]
+        if self._crosspoint_blocks.size:
+            self.pair_crosspoint = np.isin(slave_blocks, self._crosspoint_blocks)
+        else:
+            self.pair_crosspoint = np.zeros(slave_blocks.shape, dtype=bool)
+        self.pair_node_blocks = self._node_blocks[stencil.nodes]
         self._pair_dofs = None
-        # for the kernels (coordinates gathered variable-major) and the block
-        # patterns of the matrices (node blocks, -1 where p or q is absent)
-        self._pair_nodes_T = np.ascontiguousarray(self.pair_nodes.T)
-        self._pair_col_blocks = self.pair_node_blocks.copy()
-        self._pair_col_blocks[~has_p, 0] = -1
-        self._pair_col_blocks[~has_q, 3] = -1
-        self._pair_force_blocks = np.ascontiguousarray(self.pair_node_blocks[:, [1, 2, 4, 5]])
+        # the block patterns of the matrices (node blocks, -1 where a slot is absent)
+        self._pair_col_blocks = np.where(stencil.present, self.pair_node_blocks, -1)
+        self._pair_force_blocks = np.ascontiguousarray(self.pair_node_blocks[
+            :, np.concatenate([stencil.slave_slots, stencil.master_slots])])
         self._num_remote = (nrm, nrs)
         self._pattern_version += 1
         self.statistics.pairs = int(pairs.shape[0])
 
     @property
+    def pair_nodes(self) -> np.ndarray:
+        """(n, width) node-table indices of each pair's stencil (2D: p, a, b, q, c, d)."""
+        return self.stencil.nodes
+
+    @property
+    def pair_slave_nodes(self) -> np.ndarray:
+        """(n, nodes per slave facet) node-table indices of each pair's slave facet nodes."""
+        return self.stencil.slave_nodes
+
+    @property
     def pair_dofs(self) -> np.ndarray:
-        """(n, 12) displacement dofs of each pair's nodes p, a, b, q, c, d (-1: p or q absent).
+        """(n, width * gdim) displacement dofs of each pair's stencil nodes (-1: absent).
 
         Built on first use after a search (only the monolithic system needs them).
         """
         if self._pair_dofs is None:
             blocks = self._pair_col_blocks
-            dofs = np.empty(blocks.shape + (2,), dtype=np.int64)
-            for component in range(2):  # (not a broadcast over a last axis of 2: slow in numpy)
+            gdim = self.gdim
+            dofs = np.empty(blocks.shape + (gdim,), dtype=np.int64)
+            for component in range(gdim):  # (not a broadcast over a short last axis: slow)
                 dofs[:, :, component] = blocks * self.block_size + component
             dofs[blocks < 0] = -1
-            self._pair_dofs = dofs.reshape(-1, 12)
+            self._pair_dofs = dofs.reshape(blocks.shape[0], blocks.shape[1] * gdim)
         return self._pair_dofs
-
-    @staticmethod
-    def _lookup(keys: np.ndarray, values: np.ndarray, queries: np.ndarray):
-        order = np.argsort(keys, kind="stable")
-        sorted_keys = keys[order]
-        position = np.clip(np.searchsorted(sorted_keys, queries), 0, max(keys.size - 1, 0))
-        if keys.size == 0:
-            return np.zeros_like(queries), np.zeros(queries.shape, dtype=bool)
-        found = sorted_keys[position] == queries
-        return values[order[position]], found
 
     def _refresh_coordinates(self, slave_x: np.ndarray, master_x: np.ndarray) -> None:
         ns, nm = self.slave.num_nodes, self.master.num_nodes
@@ -538,7 +534,7 @@ class MortarInterface:
             _, remote_master_x = self._receive(self.master, self._send_master, master_x)
             _, remote_slave_x = self._receive(self.slave, self._send_slave, slave_x)
             self._node_x[ns + nm:] = np.concatenate(
-                [remote_master_x.reshape(-1, 2), remote_slave_x.reshape(-1, 2)]
+                [remote_master_x.reshape(-1, self.gdim), remote_slave_x.reshape(-1, self.gdim)]
             )
             self.statistics.time_exchange += time.perf_counter() - start
 
@@ -589,28 +585,10 @@ class MortarInterface:
         return np.arange(q.D.shape[0]) if rows is None else rows
 
     def _combined_gradients(self, q: kernels.PairQuantities, rows: np.ndarray, terms) -> np.ndarray:
-        """(len(terms), 12, len(rows)): per row of ``terms``, the sum of weight * d output / d x.
-
-        Outputs are numbered as in :class:`kernels.PairGradients` (Dn 0-7,
-        Mn 8-15, area 16-17, gap 18-19); a weight is a number or one per row.
-        """
-        factors = [getattr(item, "factors", None) for item in (q.Dn, q.Mn, q.area, q.gap)]
-        gradients = factors[0][0] if factors[0] is not None else None
-        if (gradients is not None and all(f is not None and f[0] is gradients for f in factors)
-                and q.gap.rows is rows and gradients.num_pairs == rows.size):
-            return gradients.combine(terms)
-        parts = []
-        for item in (q.Dn, q.Mn, q.area, q.gap):
-            if isinstance(item, RowSubsetDual) and item.rows is rows:
-                parts.append(item.grad_rows.reshape(rows.size, -1, kernels.NUM_PAIR_VARIABLES))
-            else:
-                parts.append(item.grad[rows].reshape(rows.size, -1, kernels.NUM_PAIR_VARIABLES))
-        flat = np.concatenate(parts, axis=1)  # (rows, 20, 12)
-        result = np.zeros((len(terms), kernels.NUM_PAIR_VARIABLES, rows.size))
-        for p, row in enumerate(terms):
-            for o, weight in row:
-                result[p] += (flat[:, o, :] * np.reshape(weight, (-1, 1))).T
-        return result
+        """(len(terms), width * gdim, len(rows)): per row of ``terms``, the sum of
+        weight * d output / d x over the pair's stencil (:mod:`stencils` numbers the
+        outputs); a weight is a number or one per row."""
+        return self.stencil.combined_gradients(q, rows, terms)
 
     def mortar_matrices(self) -> tuple[PETSc.Mat, PETSc.Mat]:
         """D (multipliers x slave nodes) and M (multipliers x master nodes).
@@ -620,7 +598,9 @@ class MortarInterface:
         q = self._require()
         rows = self._rows(q)
         sizes = (self._multiplier_sizes, self._block_sizes)
-        slave, master = self.pair_node_blocks[:, 1:3], self.pair_node_blocks[:, 4:6]
+        stencil = self.stencil
+        slave = self.pair_node_blocks[:, stencil.slave_slots]
+        master = self.pair_node_blocks[:, stencil.master_slots]
         D = self._block_matrix("D", self.pair_multipliers, slave, (1, 1), *sizes)
         M = self._block_matrix("M", self.pair_multipliers, master, (1, 1), *sizes)
         return (D.assemble_groups(q.D[rows].transpose(1, 2, 0), rows),
@@ -645,25 +625,24 @@ class MortarInterface:
         """d g~ / d u (multipliers x displacement dofs), exact."""
         q = self._require()
         rows = self._rows(q)
-        gap = kernels.PairGradients.GAP
-        values = self._combined_gradients(q, rows, [[(gap, 1.0)], [(gap + 1, 1.0)]])  # (j, 12, n)
-        matrix = self._block_matrix("G", self.pair_multipliers, self._pair_col_blocks, (1, 2),
+        gap = self.stencil.GAP
+        terms = [[(gap + j, 1.0)] for j in range(self.stencil.ns)]
+        values = self._combined_gradients(q, rows, terms)  # (j, width * gdim, n)
+        matrix = self._block_matrix("G", self.pair_multipliers, self._pair_col_blocks,
+                                    (1, self.gdim),
                                     self._multiplier_sizes, self._dof_sizes)
         return matrix.assemble_groups(values, rows)
 
     def _force_columns(self) -> np.ndarray:
-        """(n, 8) dofs of the slave nodes a, b and master nodes c, d."""
-        return self.pair_dofs.reshape(-1, 6, 2)[:, [1, 2, 4, 5], :].reshape(-1, 8)
-
-    def _force_coefficients(self, q: kernels.PairQuantities):
-        """(n, j, 4 nodes, 2 comps) Dual: -Dn for slave nodes, +Mn for master nodes."""
-        from . import dual
-
-        return dual.stack([-q.Dn[:, :, 0], -q.Dn[:, :, 1], q.Mn[:, :, 0], q.Mn[:, :, 1]], axis=2)
+        """(n, (ns + nm) * gdim) dofs of the slave and master facet nodes."""
+        stencil = self.stencil
+        slots = np.concatenate([stencil.slave_slots, stencil.master_slots])
+        return self.pair_dofs.reshape(-1, stencil.width, self.gdim)[:, slots, :].reshape(
+            stencil.num_pairs, slots.size * self.gdim)
 
     @staticmethod
     def _force_coefficient_values(q: kernels.PairQuantities, rows: np.ndarray) -> np.ndarray:
-        """(rows, j, 4 nodes, 2 comps): the values of :meth:`_force_coefficients`."""
+        """(rows, j, ns + nm nodes, gdim): -Dn for slave nodes, +Mn for master nodes."""
         return np.concatenate([-q.Dn.value[rows], q.Mn.value[rows]], axis=2)
 
     def constraint_matrix(self) -> PETSc.Mat:
@@ -674,8 +653,9 @@ class MortarInterface:
         """
         q = self._require()
         rows = self._rows(q)
-        values = self._force_coefficient_values(q, rows).transpose(1, 2, 3, 0)  # (j, 4, 2, n)
-        matrix = self._block_matrix("B", self.pair_multipliers, self._pair_force_blocks, (1, 2),
+        values = self._force_coefficient_values(q, rows).transpose(1, 2, 3, 0)  # (j, k, c, n)
+        matrix = self._block_matrix("B", self.pair_multipliers, self._pair_force_blocks,
+                                    (1, self.gdim),
                                     self._multiplier_sizes, self._dof_sizes)
         return matrix.assemble_groups(values, rows)
 
@@ -683,14 +663,17 @@ class MortarInterface:
         """d(-B(u)^T z)/du at fixed z (displacement dofs x displacement dofs)."""
         q = self._require()
         rows = self._rows(q)
-        z_pair = self.node_values(z)[self._pair_slave_nodes()[rows]]  # (n, 2)
+        stencil, gdim = self.stencil, self.gdim
+        z_pair = self.node_values(z)[stencil.slave_nodes[rows]]  # (n, ns)
         # -sum_j z_j d(coefficient_jkc): +Dn for the slave nodes, -Mn for the master nodes
-        dn, mn = kernels.PairGradients.DN, kernels.PairGradients.MN
-        nodes = [(k, c) for k in range(2) for c in range(2)]
-        terms = [[(dn + 4 * j + 2 * k + c, z_pair[:, j]) for j in range(2)] for k, c in nodes]
-        terms += [[(mn + 4 * j + 2 * k + c, -z_pair[:, j]) for j in range(2)] for k, c in nodes]
-        values = self._combined_gradients(q, rows, terms)  # (4 nodes x 2, 12, n)
-        matrix = self._block_matrix("K", self._pair_force_blocks, self._pair_col_blocks, (2, 2),
+        js = range(stencil.ns)
+        terms = [[(stencil.dn(j, k, c), z_pair[:, j]) for j in js]
+                 for k in range(stencil.ns) for c in range(gdim)]
+        terms += [[(stencil.mn(j, k, c), -z_pair[:, j]) for j in js]
+                  for k in range(stencil.nm) for c in range(gdim)]
+        values = self._combined_gradients(q, rows, terms)  # ((ns + nm) gdim, width gdim, n)
+        matrix = self._block_matrix("K", self._pair_force_blocks, self._pair_col_blocks,
+                                    (gdim, gdim),
                                     self._dof_sizes, self._dof_sizes)
         return matrix.assemble_groups(values, rows)
 
@@ -698,15 +681,12 @@ class MortarInterface:
         """Add -B^T z to ``vector`` (displacement layout), without forming B."""
         q = self._require()
         rows = self._rows(q)
-        z_pair = self.node_values(z)[self._pair_slave_nodes()[rows]]
+        z_pair = self.node_values(z)[self.pair_slave_nodes[rows]]
         force = -np.einsum("nj,njkc->nkc", z_pair, self._force_coefficient_values(q, rows))
         vector.setValues(self._force_columns()[rows].reshape(-1).astype(PETSc.IntType),
                          force.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
         vector.assemble()
         return vector
-
-    def _pair_slave_nodes(self) -> np.ndarray:
-        return self.pair_nodes[:, 1:3]
 
     def destroy(self) -> None:
         for _, matrix in self._matrices.values():

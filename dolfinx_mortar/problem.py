@@ -616,10 +616,11 @@ class ContactProblem:
         if q is None:
             return np.zeros(2), np.zeros(2)
         rows = interface._rows(q)
-        z_pair = interface.node_values(self.multipliers[k])[interface.pair_nodes[rows, 1:3]]
+        z_pair = interface.node_values(self.multipliers[k])[interface.pair_slave_nodes[rows]]
         coefficients = interface._force_coefficient_values(q, rows)  # -Dn (slave), Mn (master)
-        slave = np.einsum("nj,njkc->c", z_pair, coefficients[:, :, :2])
-        master = np.einsum("nj,njlc->c", z_pair, coefficients[:, :, 2:])
+        ns = interface.stencil.ns
+        slave = np.einsum("nj,njkc->c", z_pair, coefficients[:, :, :ns])
+        master = np.einsum("nj,njlc->c", z_pair, coefficients[:, :, ns:])
         return (self.comm.allreduce(slave, op=MPI.SUM), self.comm.allreduce(master, op=MPI.SUM))
 
     def pressure_function(self, k: int = 0, function: dolfinx.fem.Function | None = None):

@@ -18,7 +18,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from . import compat, kernels
+from . import compat
 from .layout import BlockLayout, MonolithicMatrix
 
 if typing.TYPE_CHECKING:
@@ -94,14 +94,20 @@ class ContactSystem:
             blocks = self._contact_blocks(k, multipliers[k], coefficient_vectors[k],
                                           row_values[k])
             if blocks is not None:
-                group_values.append(blocks[0])
+                values = blocks[0]
+                if values.shape[:2] != self._block_shape:
+                    padded = np.zeros(self._block_shape + values.shape[2:])
+                    padded[:values.shape[0], :values.shape[1]] = values
+                    values = padded
+                group_values.append(values)
                 groups.append(offset + blocks[1])
             offset += self._pattern[0][k].shape[0]
         if group_values:
             group_values = np.concatenate(group_values, axis=2)
             groups = np.concatenate(groups)
         else:
-            group_values, groups = np.zeros((10, 14, 0)), np.zeros(0, dtype=np.int64)
+            group_values = np.zeros(self._block_shape + (0,))
+            groups = np.zeros(0, dtype=np.int64)
         diagonal = np.concatenate(
             [np.full(self.fixed_rows.size, self.dirichlet_scale)] + [r[3] for r in row_values])
         matrix = self.matrix.mat
@@ -113,11 +119,12 @@ class ContactSystem:
         return rebuilt, contact, time.perf_counter() - start + zeroing
 
     def _contact_pattern(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """Monolithic rows (n, 10) and columns (n, 14) of pair k's dense block per candidate
-        pair; rows of Dirichlet dofs are dropped (-1), they are identity rows."""
+        """Monolithic rows (n, (ns + nm) gdim + ns) and columns (n, width gdim + ns) of pair
+        k's dense block per candidate pair (2D: 10 x 14); rows of Dirichlet dofs are dropped
+        (-1), they are identity rows."""
         interface = self.interfaces[k]
         if interface.quantities is None:
-            return np.zeros((0, 10), dtype=np.int64), np.zeros((0, 14), dtype=np.int64)
+            return np.zeros((0, 0), dtype=np.int64), np.zeros((0, 0), dtype=np.int64)
         layout = self.layout
         force_dofs = layout.u(interface._force_columns())
         force_dofs[np.isin(force_dofs, self._fixed_all)] = -1
@@ -132,8 +139,11 @@ class ContactSystem:
         if self.matrix is not None and versions == self._versions:
             return False
         layout = self.layout
-        pattern = tuple(zip(*(self._contact_pattern(k) for k in range(len(self.interfaces))),
-                            strict=True))
+        pattern = [self._contact_pattern(k) for k in range(len(self.interfaces))]
+        # pairs of different interfaces may have blocks of different shapes: pad with -1
+        self._block_shape = tuple(max([p[i].shape[1] for p in pattern] + [0]) for i in range(2))
+        pattern = tuple(zip(*([_pad(p[i], self._block_shape[i]) for i in range(2)]
+                              for p in pattern), strict=True))
         self._versions = versions
         old = self._pattern
         same = self.matrix is not None and old is not None and all(
@@ -155,9 +165,9 @@ class ContactSystem:
         return True
 
     def _contact_blocks(self, k: int, z: PETSc.Vec, vectors: dict, rows: Rows):
-        """Pair k's dense blocks (10, 14, m) and which candidate pairs they belong to (m,).
+        """Pair k's dense blocks and which candidate pairs they belong to (m,).
 
-        d(-B^T z)/du (8 x 12), d(-B^T z)/dz = -B^T (8 x 2), d C/du (2 x 12); only the
+        d(-B^T z)/du, d(-B^T z)/dz = -B^T, d C/du (2D: 8 x 12, 8 x 2, 2 x 12); only the
         pairs that contribute, from the factorized gradients (no full dual numbers).
         None before the first evaluation (no pairs yet).
         """
@@ -174,24 +184,37 @@ class ContactSystem:
         beta_nodes = interface.node_values(vectors["area"])
         if contributing.size == 0:
             return None
-        slave_nodes = interface.pair_nodes[contributing, 1:3]
+        stencil, gdim = interface.stencil, interface.gdim
+        ns, nm = stencil.ns, stencil.nm
+        slave_nodes = stencil.slave_nodes[contributing]
         z_pair, alpha_pair, beta_pair = (
             v[slave_nodes] for v in (z_nodes, alpha_nodes, beta_nodes))
-        gradients = kernels.PairGradients
-        dn, mn = gradients.DN, gradients.MN
-        nodes = [(a, c) for a in range(2) for c in range(2)]
+        js = range(ns)
         # -sum_j z_j d(coefficient_jkc)/dx: +Dn for the slave nodes, -Mn for the master nodes
-        terms = [[(dn + 4 * j + 2 * a + c, z_pair[:, j]) for j in range(2)] for a, c in nodes]
-        terms += [[(mn + 4 * j + 2 * a + c, -z_pair[:, j]) for j in range(2)] for a, c in nodes]
-        terms += [[(gradients.GAP + j, alpha_pair[:, j]), (gradients.AREA + j, beta_pair[:, j])]
-                  for j in range(2)]
-        values = np.zeros((10, 14, contributing.size))
-        values[:, :12] = interface._combined_gradients(q, contributing, terms)
-        coefficients = interface._force_coefficient_values(q, contributing)  # (m, j, 4, 2)
-        values[:8, 12:] = -coefficients.reshape(contributing.size, 2, 8).transpose(2, 1, 0)
+        terms = [[(stencil.dn(j, a, c), z_pair[:, j]) for j in js]
+                 for a in range(ns) for c in range(gdim)]
+        terms += [[(stencil.mn(j, a, c), -z_pair[:, j]) for j in js]
+                  for a in range(nm) for c in range(gdim)]
+        terms += [[(stencil.GAP + j, alpha_pair[:, j]), (stencil.AREA + j, beta_pair[:, j])]
+                  for j in js]
+        forces, columns = (ns + nm) * gdim, stencil.width * gdim
+        values = np.zeros((forces + ns, columns + ns, contributing.size))
+        values[:, :columns] = interface._combined_gradients(q, contributing, terms)
+        coefficients = interface._force_coefficient_values(q, contributing)  # (m, j, k, c)
+        values[:forces, columns:] = -coefficients.reshape(
+            contributing.size, ns, forces).transpose(2, 1, 0)
         return values, contributing
 
     def destroy(self) -> None:
         if self.matrix is not None:
             self.matrix.destroy()
             self.matrix = None
+
+
+def _pad(indices: np.ndarray, width: int) -> np.ndarray:
+    """(n, width) indices: ``indices`` with columns of -1 (dropped entries) appended."""
+    if indices.shape[1] == width:
+        return indices
+    padded = np.full((indices.shape[0], width), -1, dtype=np.int64)
+    padded[:, :indices.shape[1]] = indices
+    return padded
