@@ -173,6 +173,11 @@ class ContactProblem:
             if value is not None and not value > 0:
                 raise ValueError(f"{name} must be positive, got {value}")
 
+        if u.function_space.mesh.geometry.dim != 2:
+            raise NotImplementedError(
+                "3D contact problems are not yet supported by ContactProblem (2D meshes "
+                "only); the 3D mortar quantities are available through MortarInterface, "
+                "and MeshTying ties 3D meshes")
         self.u = u
         self.V = u.function_space
         self.comm: MPI.Intracomm = self.V.mesh.comm
