@@ -28,6 +28,11 @@ search), then, ``--repeats`` times (medians reported):
 * (c') the same assembly again, with the patterns reused;
 * total = (a) + (c), one full evaluation after a search.
 
+With ``--dim 3`` the bodies are two slabs of tetrahedra one cell thick,
+[0, 1]^2 x [-w, 0] (master, ``round(n / 1.37)`` cells per side) and
+[0, 1]^2 x [0, w] (slave, n cells per side, N = 2 n^2 triangle facets), bent
+in x and y alike, the upper one pushed 0.1 w down and slid 0.3 w.
+
 Prints a markdown table, the log-log slope of the total against N (least
 squares over all N) and the total at the largest N. The goal is linear
 growth (slope <= 1.1) and under a second for 1e5 slave facets.
@@ -35,6 +40,7 @@ growth (slope <= 1.1) and under a second for 1e5 slave facets.
     tools/run python3 benchmarks/mortar_scaling.py
     tools/run python3 benchmarks/mortar_scaling.py --sizes 1000 10000 --repeats 3 \\
         --json scratch/scaling.json --png scratch/scaling.png
+    tools/run python3 benchmarks/mortar_scaling.py --dim 3 --repeats 3
 """
 
 from __future__ import annotations
@@ -98,21 +104,72 @@ def two_strips(num_slave: int, comm: MPI.Intracomm = MPI.COMM_WORLD):
     domain = ufl.Mesh(basix.ufl.element("Lagrange", "quadrilateral", 1, shape=(2,)))
     # keywords: dolfinx 0.9 takes (comm, cells, x, e), 0.10 onwards (comm, cells, e, x)
     mesh = dolfinx.mesh.create_mesh(comm, cells=cells, x=x, e=domain)
+    return _tag_interface(mesh, width, axis=1)
+
+
+def _slab(cells_per_side: int, z0: float, z1: float, first_node: int):
+    """Nodes and tetrahedra (six per cube, dolfinx's create_box split) of a slab one cell thick."""
+    box = dolfinx.mesh.create_box(MPI.COMM_SELF, [[0.0, 0.0, z0], [1.0, 1.0, z1]],
+                                  [cells_per_side, cells_per_side, 1],
+                                  dolfinx.mesh.CellType.tetrahedron)
+    from dolfinx_mortar import compat
+
+    return box.geometry.x.copy(), first_node + compat.geometry_dofmap(box).astype(np.int64)
+
+
+def two_slabs(num_slave: int, comm: MPI.Intracomm = MPI.COMM_WORLD):
+    """Mesh, facet tags and cell masks (upper, lower) of two slabs of tetrahedra; the slave
+    surface has about ``num_slave`` triangles (2 n^2)."""
+    n = max(1, round(np.sqrt(num_slave / 2.0)))
+    n_master = max(1, round(n / RATIO))
+    width = 1.0 / n
+    if comm.rank == 0:
+        lower_x, lower_cells = _slab(n_master, -width, 0.0, 0)
+        upper_x, upper_cells = _slab(n, 0.0, width, lower_x.shape[0])
+        x = np.vstack([lower_x, upper_x])
+        cells = np.vstack([lower_cells, upper_cells])
+    else:
+        x = np.zeros((0, 3))
+        cells = np.zeros((0, 4), dtype=np.int64)
+    domain = ufl.Mesh(basix.ufl.element("Lagrange", "tetrahedron", 1, shape=(3,)))
+    mesh = dolfinx.mesh.create_mesh(comm, cells=cells, x=x, e=domain)
+    return _tag_interface(mesh, width, axis=2)
+
+
+def _tag_interface(mesh, width: float, axis: int):
     tdim, fdim = mesh.topology.dim, mesh.topology.dim - 1
     mesh.topology.create_connectivity(fdim, tdim)
     facets = dolfinx.mesh.exterior_facet_indices(mesh.topology)
     midpoints = dolfinx.mesh.compute_midpoints(mesh, fdim, facets)
-    on_interface = facets[np.abs(midpoints[:, 1]) < 0.25 * width]
+    on_interface = facets[np.abs(midpoints[:, axis]) < 0.25 * width]
     f_to_c = mesh.topology.connectivity(fdim, tdim)
     facet_cells = f_to_c.array[f_to_c.offsets[on_interface]]
-    centroid_y = dolfinx.mesh.compute_midpoints(mesh, tdim, facet_cells)[:, 1]
-    values = np.where(centroid_y > 0.0, SLAVE_TAG, MASTER_TAG).astype(np.int32)
+    centroid = dolfinx.mesh.compute_midpoints(mesh, tdim, facet_cells)[:, axis]
+    values = np.where(centroid > 0.0, SLAVE_TAG, MASTER_TAG).astype(np.int32)
     order = np.argsort(on_interface)
     tags = dolfinx.mesh.meshtags(mesh, fdim, on_interface[order].astype(np.int32), values[order])
     cell_map = mesh.topology.index_map(tdim)
     all_cells = np.arange(cell_map.size_local + cell_map.num_ghosts, dtype=np.int32)
-    cell_y = dolfinx.mesh.compute_midpoints(mesh, tdim, all_cells)[:, 1]
-    return mesh, tags, all_cells[cell_y > 0.0], all_cells[cell_y < 0.0], width
+    cell_position = dolfinx.mesh.compute_midpoints(mesh, tdim, all_cells)[:, axis]
+    return mesh, tags, all_cells[cell_position > 0.0], all_cells[cell_position < 0.0], width
+
+
+def displacement3d(V, upper, lower, width: float) -> dolfinx.fem.Function:
+    """As :func:`displacement`, bent in x and y."""
+    u = dolfinx.fem.Function(V)
+    amplitude = 0.01
+
+    def bend(x):
+        return amplitude * (np.sin(2.0 * np.pi * x[0]) * np.cos(np.pi * x[1])
+                            + 0.3 * np.cos(5.0 * x[0] + 2.0 * x[1]))
+
+    u.interpolate(lambda x: np.vstack([np.full(x.shape[1], 0.3 * width),
+                                       np.full(x.shape[1], 0.1 * width),
+                                       bend(x) - 0.1 * width]), upper)
+    u.interpolate(lambda x: np.vstack([np.zeros(x.shape[1]), np.zeros(x.shape[1]), bend(x)]),
+                  lower)
+    u.x.scatter_forward()
+    return u
 
 
 def displacement(V, upper, lower, width: float) -> dolfinx.fem.Function:
@@ -138,11 +195,16 @@ def _assemble(interface: MortarInterface, z) -> None:
     interface.force_jacobian(z)
 
 
-def measure(num_slave: int, repeats: int, normals: str, integration: str) -> dict:
+def measure(num_slave: int, repeats: int, normals: str, integration: str, dim: int = 2) -> dict:
     """Median times (seconds) of each phase at one size, and counters."""
-    mesh, tags, upper, lower, width = two_strips(num_slave)
-    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
-    u = displacement(V, upper, lower, width)
+    if dim == 3:
+        mesh, tags, upper, lower, width = two_slabs(num_slave)
+        V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (3,)))
+        u = displacement3d(V, upper, lower, width)
+    else:
+        mesh, tags, upper, lower, width = two_strips(num_slave)
+        V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+        u = displacement(V, upper, lower, width)
     interface = MortarInterface(V, tags, SLAVE_TAG, MASTER_TAG, normals=normals,
                                 integration=integration)
     interface.update(u)  # first search (and warm-up)
@@ -182,7 +244,7 @@ def measure(num_slave: int, repeats: int, normals: str, integration: str) -> dic
     u.x.array[:] = states[0]
     interface.update(u)
     result.update(
-        N=num_slave,
+        N=interface.slave.num_facets,
         master_facets=interface.master.num_facets,
         pairs=stats.pairs,
         segments=stats.segments,
@@ -245,20 +307,24 @@ def main(argv=None) -> int:
     parser.add_argument("--png", help="write a log-log plot of the phases to this file")
     parser.add_argument("--normals", default="averaged", choices=kernels.NORMAL_OPTIONS)
     parser.add_argument("--integration", default="segment", choices=kernels.INTEGRATION_OPTIONS)
+    parser.add_argument("--dim", type=int, default=2, choices=(2, 3),
+                        help="2: strips of quadrilaterals; 3: slabs of tetrahedra (default 2)")
     args = parser.parse_args(argv)
     if MPI.COMM_WORLD.size != 1:
         parser.error("the benchmark is serial; run it without mpirun")
     sizes = [int(round(n)) for n in args.sizes]
     results = []
+    print(f"dimension {args.dim}", file=sys.stderr)
     for n in sizes:
-        result = measure(n, args.repeats, args.normals, args.integration)
+        result = measure(n, args.repeats, args.normals, args.integration, args.dim)
         results.append(result)
         print(f"N={n}: total {1e3 * result['total']:.1f} ms "
               f"(search {1e3 * result['search']:.1f}, "
               f"integration {1e3 * result['integration']:.1f}, "
               f"assembly {1e3 * result['assembly']:.1f}); {result['pairs']} pairs",
               file=sys.stderr, flush=True)
-    print(f"\nmedian times in ms, {args.repeats} repeats, normals={args.normals}, "
+    sizes = [r["N"] for r in results]
+    print(f"\n{args.dim}D, median times in ms, {args.repeats} repeats, normals={args.normals}, "
           f"integration={args.integration}, dolfinx {dolfinx.__version__}\n")
     print(markdown_table(results))
     summary = {}
@@ -271,7 +337,8 @@ def main(argv=None) -> int:
     print(f"total at N = {sizes[-1]}: {results[-1]['total']:.3f} s")
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"options": {"normals": args.normals, "integration": args.integration,
+            json.dump({"options": {"dim": args.dim, "normals": args.normals,
+                                   "integration": args.integration,
                                    "repeats": args.repeats, "dolfinx": dolfinx.__version__,
                                    "numpy": np.__version__, "python": platform.python_version()},
                        "summary": summary, "results": results}, f, indent=1)
