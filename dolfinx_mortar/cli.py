@@ -114,6 +114,13 @@ def add_common_arguments(
         help="condense the (dual) multipliers: factorize a displacement-sized matrix",
     )
     parser.add_argument(
+        "--linear-solver",
+        choices=("direct", "iterative"),
+        default="direct",
+        help="direct: MUMPS LU; iterative: condensed system, GMRES + GAMG with rigid-body "
+        "modes (dual multipliers)",
+    )
+    parser.add_argument(
         "--search-margin",
         type=float,
         default=None,
@@ -133,6 +140,7 @@ def problem_options(args: argparse.Namespace) -> dict[str, Any]:
         "c_n": args.c_n,
         "penalty": args.penalty,
         "condensation": args.condensation,
+        "linear_solver": args.linear_solver,
         "search_margin": args.search_margin,
     }
 

@@ -45,19 +45,27 @@ class CondensedPreconditioner:
         comm: communicator.
         u_rows: this rank's monolithic rows of the displacements (global indices).
         z_rows: this rank's monolithic rows of all multipliers (global indices).
-        z_node_dofs: (len(z_rows), 2) global displacement dofs of the slave
+        z_node_dofs: (len(z_rows), gdim) global displacement dofs of the slave
             node of each owned multiplier (owned by this rank too).
         prefix: options prefix of the inner solver of K_c (ContactProblem puts
-            its defaults, MUMPS LU, into the options database).
+            its defaults, MUMPS LU or GMRES + AMG, into the options database).
+        near_nullspace: this rank's part (owned displacement dofs, in order) of
+            the vectors K_c is given as near-nullspace (the rigid-body modes of
+            each body, for algebraic multigrid); orthonormal.
     """
 
-    def __init__(self, comm: MPI.Intracomm, u_rows, z_rows, z_node_dofs, prefix: str):
+    def __init__(self, comm: MPI.Intracomm, u_rows, z_rows, z_node_dofs, prefix: str,
+                 near_nullspace: list[np.ndarray] | None = None):
         self.comm = comm
         self.is_u = PETSc.IS().createGeneral(np.asarray(u_rows, dtype=PETSc.IntType), comm=comm)
         self.is_z = PETSc.IS().createGeneral(np.asarray(z_rows, dtype=PETSc.IntType), comm=comm)
         self.num_u = len(u_rows)
         self.num_z = len(z_rows)
-        self.z_node_dofs = np.asarray(z_node_dofs, dtype=np.int64).reshape(self.num_z, 2)
+        z_node_dofs = np.asarray(z_node_dofs, dtype=np.int64)
+        self.block_size = z_node_dofs.shape[1] if z_node_dofs.ndim == 2 else 2
+        self.z_node_dofs = z_node_dofs.reshape(self.num_z, self.block_size)
+        self.near_nullspace = near_nullspace
+        self.inner_iterations: list[int] = []
         self.ksp = PETSc.KSP().create(comm)
         self.ksp.setOptionsPrefix(prefix)
         self.ksp.setFromOptions()
@@ -127,6 +135,18 @@ class CondensedPreconditioner:
             if self._K_c is not None:
                 self._K_c.destroy()
             self._K_c = K_c
+            K_c.setBlockSize(self.block_size)
+            if self.near_nullspace:
+                vectors = []
+                for values in self.near_nullspace:
+                    vector = K_c.createVecRight()
+                    vector.getArray()[:] = values
+                    vectors.append(vector)
+                nullspace = PETSc.NullSpace().create(vectors=vectors, comm=self.comm)
+                K_c.setNearNullSpace(nullspace)
+                nullspace.destroy()
+                for vector in vectors:
+                    vector.destroy()
             self.ksp.setOperators(K_c)
         self.ksp.setUp()
 
@@ -149,6 +169,7 @@ class CondensedPreconditioner:
         m["T"].multTranspose(v["tz"], v["tu"])
         v["rc"].axpy(-1.0, v["tu"])
         self.ksp.solve(v["rc"], v["du"])
+        self.inner_iterations.append(self.ksp.getIterationNumber())
         reason = self.ksp.getConvergedReason()
         if reason < 0 and reason != PETSc.KSP.ConvergedReason.DIVERGED_MAX_IT:
             # a breakdown: a NaN makes the outer Krylov method, and the Newton step, fail
@@ -176,7 +197,8 @@ class CondensedPreconditioner:
     # -- pieces ------------------------------------------------------------
 
     def _normals(self, G: PETSc.Mat, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Unit normals (n_z, 2) and |G[node j dofs, j]| of the active multipliers (0 elsewhere)."""
+        """Unit normals (n_z, gdim) and |G[node j dofs, j]| of the active multipliers (0
+        elsewhere)."""
         first_row = G.getOwnershipRange()[0]
         first_col = G.getOwnershipRangeColumn()[0]
         num_cols = G.getSize()[1]
@@ -184,7 +206,7 @@ class CondensedPreconditioner:
         # AIJ rows are sorted by column: the keys row * num_cols + col are sorted
         keys = np.repeat(np.arange(self.num_u, dtype=np.int64), np.diff(indptr)) * num_cols
         keys += indices
-        normals = np.zeros((self.num_z, 2))
+        normals = np.zeros((self.num_z, self.block_size))
         selected = np.flatnonzero(active)
         wanted = (self.z_node_dofs[selected] - first_row) * num_cols
         wanted += (first_col + selected)[:, None]
@@ -199,7 +221,8 @@ class CondensedPreconditioner:
 
     def _normal_matrix(self, normals: np.ndarray, A: PETSc.Mat) -> PETSc.Mat:
         """T: row j holds n_j^T on the dofs of slave node j (zeros when j is not active)."""
-        indptr = np.arange(0, 2 * self.num_z + 1, 2, dtype=PETSc.IntType)
+        bs = self.block_size
+        indptr = np.arange(0, bs * self.num_z + 1, bs, dtype=PETSc.IntType)
         T = PETSc.Mat().createAIJ(
             size=((self.num_z, PETSc.DETERMINE), A.getSizes()[1]),
             csr=(indptr, self.z_node_dofs.reshape(-1).astype(PETSc.IntType), normals.reshape(-1)),

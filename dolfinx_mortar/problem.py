@@ -126,6 +126,12 @@ class ContactProblem:
             MUMPS LU) and preconditions fgmres on the monolithic system
             (``<prefix>ksp_``, default rtol 1e-12), so the solution is the
             uncondensed one (:mod:`dolfinx_mortar.condensation`).
+        linear_solver: ``direct`` (default: MUMPS LU, of the monolithic
+            system, or of the condensed one with ``condensation``) or
+            ``iterative``: condensation (dual multipliers only) with GMRES and
+            PETSc's GAMG on the condensed matrix, its block size set and the
+            rigid-body modes of each body as near-nullspace (options under
+            ``<prefix>condensed_``, e.g. ``pc_type: hypre`` for BoomerAMG).
         petsc_options: SNES/KSP options (defaults: newtonls, full steps,
             MUMPS LU); the user's options database with the prefix wins.
         petsc_options_prefix: prefix of those options.
@@ -152,6 +158,7 @@ class ContactProblem:
         search_margin: float | None = None,
         configuration: str = "current",
         condensation: bool = False,
+        linear_solver: str = "direct",
         petsc_options: dict | None = None,
         petsc_options_prefix: str = "dolfinx_mortar_",
     ):
@@ -160,6 +167,14 @@ class ContactProblem:
         _check_choice("integration", integration, kernels.INTEGRATION_OPTIONS)
         _check_choice("normals", normals, kernels.NORMAL_OPTIONS)
         _check_choice("multipliers", multipliers, kernels.BASIS_OPTIONS)
+        _check_choice("linear_solver", linear_solver, solvers.LINEAR_SOLVERS)
+        if linear_solver == "iterative":
+            if multipliers != "dual":
+                raise ValueError(
+                    "linear_solver='iterative' solves the condensed displacement system, "
+                    "which needs multipliers='dual'; got multipliers="
+                    f"{multipliers!r}")
+            condensation = True
         if condensation and multipliers != "dual":
             raise ValueError(
                 "condensation=True needs multipliers='dual' (with the standard basis the "
@@ -184,6 +199,7 @@ class ContactProblem:
         self.bcs = list(bcs)
         self.method = method
         self.condensation = bool(condensation)
+        self.linear_solver = linear_solver
         self._condenser = None
         self.active_set_strategy = active_set
         self.F_form = dolfinx.fem.form(F)
@@ -403,12 +419,16 @@ class ContactProblem:
 
         def condensation(ksp: PETSc.KSP) -> None:
             if self.condensation:
+                near_nullspace = (solvers.rigid_body_modes(self.V)
+                                  if self.linear_solver == "iterative" else None)
                 self._condenser = solvers.condensed_preconditioner(
-                    ksp, self.layout, self.interfaces, self.V.dofmap.index_map_bs, prefix)
+                    ksp, self.layout, self.interfaces, self.V.dofmap.index_map_bs, prefix,
+                    near_nullspace)
 
         kept = solvers.configure_snes(
             snes, prefix, petsc_options, self.condensation,
-            1e-11 * self._dirichlet_scale * self._slave_length, callbacks, condensation)
+            1e-11 * self._dirichlet_scale * self._slave_length, callbacks, condensation,
+            self.linear_solver)
         self._options_finalizer = weakref.finalize(self, solvers.release_options, kept)
         self.snes = snes
 

@@ -2,7 +2,10 @@
 
 Defaults are Newton with full steps and MUMPS LU on the monolithic [u | z]
 system, or, with condensation, fgmres on it preconditioned by a condensed
-displacement-only solve (:mod:`dolfinx_mortar.condensation`). ``petsc_options``
+displacement-only solve (:mod:`dolfinx_mortar.condensation`): MUMPS LU
+(``linear_solver="direct"``) or GMRES with algebraic multigrid whose
+near-nullspace is the rigid-body modes of each body
+(``linear_solver="iterative"``). ``petsc_options``
 given to the problem override the defaults, and the user's options database
 under the problem's prefix overrides both.
 
@@ -47,6 +50,22 @@ DEFAULT_OPTIONS = {
     "mat_mumps_cntl_3": 1e-8,
 }
 
+LINEAR_SOLVERS = ("direct", "iterative")
+
+ITERATIVE_OPTIONS = {
+    # the inner solve only preconditions fgmres on [u | z] (which makes the Newton
+    # step exact to its rtol), so a loose inner tolerance is enough
+    "condensed_ksp_type": "gmres",
+    "condensed_ksp_rtol": 1e-3,
+    "condensed_ksp_max_it": 200,
+    "condensed_ksp_gmres_restart": 100,
+    "condensed_pc_type": "gamg",
+    "condensed_pc_gamg_threshold": 0.01,
+    "condensed_mg_levels_ksp_type": "chebyshev",
+    "condensed_mg_levels_pc_type": "jacobi",
+}
+
+
 @dataclasses.dataclass
 class SolveReport:
     """What one call of :meth:`~dolfinx_mortar.problem.ContactProblem.solve` did."""
@@ -81,7 +100,7 @@ _OPTIONS_SET_BY_PROBLEMS: set[str] = set()
 """Options-database names holding a problem's defaults (not the user's)."""
 
 
-def default_options(condensation: bool) -> dict:
+def default_options(condensation: bool, linear_solver: str = "direct") -> dict:
     """Our defaults (see :data:`DEFAULT_OPTIONS`), for the monolithic or the condensed solve."""
     defaults = dict(DEFAULT_OPTIONS)
     if condensation:
@@ -92,8 +111,11 @@ def default_options(condensation: bool) -> dict:
         defaults.update(ksp_type="fgmres", ksp_rtol=1e-12, ksp_atol=1e-50, ksp_max_it=200)
         defaults.update({f"condensed_{key}": value for key, value in defaults.items()
                          if key.startswith("mat_mumps")})
-        defaults.update(condensed_ksp_type="preonly", condensed_pc_type="lu",
-                        condensed_pc_factor_mat_solver_type="mumps")
+        if linear_solver == "iterative":
+            defaults.update(ITERATIVE_OPTIONS)
+        else:
+            defaults.update(condensed_ksp_type="preonly", condensed_pc_type="lu",
+                            condensed_pc_factor_mat_solver_type="mumps")
     return defaults
 
 
@@ -105,6 +127,7 @@ def configure_snes(
     default_atol: float,
     before_options: typing.Callable[[], None],
     after_options: typing.Callable[[PETSc.KSP], None],
+    linear_solver: str = "direct",
 ) -> list[str]:
     """Set ``snes`` up from our defaults, ``petsc_options`` and the options database.
 
@@ -119,7 +142,7 @@ def configure_snes(
         :func:`release_options` when the problem is destroyed.
     """
     snes.setOptionsPrefix(prefix)
-    defaults = default_options(condensation)
+    defaults = default_options(condensation, linear_solver)
     defaults.update(petsc_options)
     options = PETSc.Options()
     added = []
@@ -156,7 +179,64 @@ def release_options(names: list[str]) -> None:
             _OPTIONS_SET_BY_PROBLEMS.discard(name)
 
 
-def condensed_preconditioner(ksp: PETSc.KSP, layout, interfaces, block_size: int, prefix: str):
+def rigid_body_modes(V) -> list[np.ndarray]:
+    """Rigid-body modes of each body (connected set of cells) of ``V``'s mesh, orthonormal.
+
+    Translations and rotations (1 in 2D, 3 in 3D) about the body's centre,
+    restricted to the body's dofs, as arrays over this rank's owned dofs (in
+    ``V``'s order, the order of the displacement rows of the condensed
+    matrix). They are the near-nullspace algebraic multigrid needs for
+    elasticity; per body, because a body held only by contact may move
+    rigidly without straining its neighbours. Collective.
+    """
+    from mpi4py import MPI
+
+    from .surface import body_labels
+
+    mesh = V.mesh
+    comm = mesh.comm
+    gdim = mesh.geometry.dim
+    bs = V.dofmap.index_map_bs
+    index_map = V.dofmap.index_map
+    owned = index_map.size_local
+    x = V.tabulate_dof_coordinates()[:owned, :gdim]
+    labels = body_labels(mesh)
+    node_label = np.full(index_map.size_local + index_map.num_ghosts, -1, dtype=np.int64)
+    cell_dofs = V.dofmap.list
+    node_label[cell_dofs.reshape(-1)] = np.repeat(labels, cell_dofs.shape[1])
+    node_label = node_label[:owned]
+    bodies = np.unique(np.concatenate(comm.allgather(np.unique(node_label))))
+    modes = []
+    for body in bodies:
+        mask = node_label == body
+        count = comm.allreduce(int(mask.sum()), op=MPI.SUM)
+        centre = comm.allreduce(x[mask].sum(axis=0), op=MPI.SUM) / max(count, 1)
+        r = x - centre
+        fields = [np.eye(gdim)[c][None, :].repeat(owned, axis=0) for c in range(gdim)]
+        if gdim == 2:
+            fields.append(np.column_stack([-r[:, 1], r[:, 0]]))
+        else:
+            zero = np.zeros(owned)
+            fields += [np.column_stack([-r[:, 1], r[:, 0], zero]),
+                       np.column_stack([zero, -r[:, 2], r[:, 1]]),
+                       np.column_stack([r[:, 2], zero, -r[:, 0]])]
+        for field in fields:
+            values = np.zeros((owned, bs))
+            values[mask, :gdim] = field[mask]
+            modes.append(values.reshape(-1))
+    # modified Gram-Schmidt with global dot products
+    basis: list[np.ndarray] = []
+    for mode in modes:
+        for other in basis:
+            mode = mode - comm.allreduce(float(mode @ other), op=MPI.SUM) * other
+        norm = np.sqrt(comm.allreduce(float(mode @ mode), op=MPI.SUM))
+        if norm > 1e-10:
+            basis.append(mode / norm)
+    return basis
+
+
+def condensed_preconditioner(ksp: PETSc.KSP, layout, interfaces, block_size: int, prefix: str,
+                             near_nullspace: list[np.ndarray] | None = None):
     """Make the condensed solve the (python) preconditioner of the monolithic KSP."""
     from .condensation import CondensedPreconditioner
 
@@ -169,7 +249,8 @@ def condensed_preconditioner(ksp: PETSc.KSP, layout, interfaces, block_size: int
          for i in interfaces]
     ).reshape(-1, block_size)
     condenser = CondensedPreconditioner(comm, u_rows, z_rows, node_dofs,
-                                        prefix=f"{prefix}condensed_")
+                                        prefix=f"{prefix}condensed_",
+                                        near_nullspace=near_nullspace)
     pc = ksp.getPC()
     pc.setType(PETSc.PC.Type.PYTHON)
     pc.setPythonContext(condenser)

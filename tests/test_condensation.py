@@ -198,3 +198,68 @@ def test_inner_solver_options_take_the_condensed_prefix():
     pressure = setup.problem.gathered_pressure()[1]
     assert np.max(np.abs(pressure - 10.0)) <= 1e-10 * 10.0
     setup.destroy()
+
+
+@pytest.mark.parallel
+@pytest.mark.timeout(600)
+def test_iterative_linear_solver_gives_the_direct_answer():
+    """GMRES + GAMG on the condensed system (rigid-body near-nullspace) preconditions the
+    same Newton steps: the same iterations and the direct answer to 1e-8."""
+    outcomes, solutions = {}, {}
+    for linear_solver in ("direct", "iterative"):
+        setup = hertz(refinement=0, linear_solver=linear_solver)
+        outcomes[linear_solver] = setup.steps(2)
+        assert outcomes[linear_solver].converged
+        solutions[linear_solver] = solution(setup.problem, setup.tagged.cell_tags)
+        if linear_solver == "iterative":
+            inner = setup.problem._condenser.ksp
+            assert inner.getType() == "gmres" and inner.getPC().getType() == "gamg"
+            K_c = inner.getOperators()[0]
+            assert K_c.getBlockSize() == 2
+            assert K_c.getNearNullSpace().getVecs().__len__() == 6  # 3 modes x 2 bodies
+        setup.destroy()
+    assert outcomes["iterative"].iterations == outcomes["direct"].iterations
+    assert_same_solution(solutions["iterative"], solutions["direct"], tolerance=1e-8)
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("cell", ["triangle", "tetrahedron"])
+def test_rigid_body_modes_are_the_kernel_of_elasticity(cell):
+    """The modes of each body are orthonormal and K m = 0 for the free elastic bodies."""
+    from dolfinx.fem.petsc import assemble_matrix
+
+    from dolfinx_mortar.bodies import merge_meshes
+    from dolfinx_mortar.solvers import rigid_body_modes
+
+    comm = MPI.COMM_WORLD
+    if cell == "triangle":
+        lower = dolfinx.mesh.create_rectangle(comm, [[0, 0], [1, 0.5]], [4, 2])
+        upper = dolfinx.mesh.create_rectangle(comm, [[0.2, 0.5], [0.8, 1.0]], [3, 3])
+    else:
+        cube = dolfinx.mesh.create_box
+        lower = cube(comm, [[0, 0, 0], [1, 1, 0.5]], [3, 3, 2])
+        upper = cube(comm, [[0.2, 0.2, 0.5], [0.8, 0.8, 1.0]], [2, 2, 2])
+    tagged = merge_meshes({"lower": lower, "upper": upper}, comm)
+    gdim = tagged.mesh.geometry.dim
+    V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (gdim,)))
+    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+    strain = ufl.sym(ufl.grad(u))
+    stress = 2.0 * strain + ufl.tr(strain) * ufl.Identity(gdim)
+    K = assemble_matrix(dolfinx.fem.form(ufl.inner(stress, ufl.sym(ufl.grad(v))) * ufl.dx))
+    K.assemble()
+    modes = rigid_body_modes(V)
+    expected = 2 * (3 if gdim == 2 else 6)
+    assert len(modes) == expected
+    gram = np.array([[comm.allreduce(float(a @ b), op=MPI.SUM) for b in modes] for a in modes])
+    assert np.abs(gram - np.eye(expected)).max() < 1e-12
+    mode, product = K.createVecRight(), K.createVecLeft()
+    scale = K.norm()
+    for values in modes:
+        mode.getArray()[:] = values
+        K.mult(mode, product)
+        assert product.norm() < 1e-12 * scale
+
+
+def test_iterative_linear_solver_needs_dual_multipliers():
+    with pytest.raises(ValueError, match="multipliers='dual'"):
+        hertz(refinement=0, linear_solver="iterative", multipliers="standard")
