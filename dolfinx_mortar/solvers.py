@@ -59,10 +59,21 @@ ITERATIVE_OPTIONS = {
     "condensed_ksp_rtol": 1e-3,
     "condensed_ksp_max_it": 200,
     "condensed_ksp_gmres_restart": 100,
-    "condensed_pc_type": "gamg",
+    # hypre's BoomerAMG: on the condensed Hertz systems it kept 6-8 inner steps
+    # from 5e3 to 2e4 dofs where GAMG (even with SOR smoothing and a symmetrized
+    # graph, K_c not being symmetric) grew from 6 to 155 (docs/benchmarks.md)
+    "condensed_pc_type": "hypre",
+    "condensed_pc_hypre_type": "boomeramg",
+}
+
+GAMG_OPTIONS = {
+    # selectable with petsc_options={"condensed_pc_type": "gamg"}: the near-nullspace
+    # (rigid-body modes) is set on K_c for it; SOR smoothing needs no eigenvalue
+    # estimate on the non-symmetric K_c
     "condensed_pc_gamg_threshold": 0.01,
-    "condensed_mg_levels_ksp_type": "chebyshev",
-    "condensed_mg_levels_pc_type": "jacobi",
+    "condensed_pc_gamg_sym_graph": True,
+    "condensed_mg_levels_ksp_type": "richardson",
+    "condensed_mg_levels_pc_type": "sor",
 }
 
 
@@ -113,6 +124,7 @@ def default_options(condensation: bool, linear_solver: str = "direct") -> dict:
                          if key.startswith("mat_mumps")})
         if linear_solver == "iterative":
             defaults.update(ITERATIVE_OPTIONS)
+            defaults.update(GAMG_OPTIONS)
         else:
             defaults.update(condensed_ksp_type="preonly", condensed_pc_type="lu",
                             condensed_pc_factor_mat_solver_type="mumps")
