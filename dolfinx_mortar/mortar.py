@@ -146,6 +146,14 @@ class MortarInterface:
         self.master = surface.extract_surface(V, facet_tags, master_marker, "master")
         surface.check_disjoint(self.slave, self.master, self.comm)
         self.gdim = self.slave.reference_coordinates.shape[1]
+        if self.gdim == 3:
+            from .kernels import surface3
+
+            if integration not in surface3.INTEGRATION_OPTIONS:
+                raise NotImplementedError(
+                    f"integration={integration!r} is not available in 3D yet; "
+                    f"use one of {surface3.INTEGRATION_OPTIONS}")
+            self.num_gauss_points = num_gauss_points or surface3.DEFAULT_GAUSS_POINTS
         if search_margin is None:
             corners = self.slave.reference_coordinates[self.slave.facets]
             if corners.shape[1] == 2:

@@ -45,18 +45,27 @@ from scipy.spatial import cKDTree
 def facet_boxes(
     coordinates: np.ndarray, facets: np.ndarray, previous_coordinates: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(lower, upper) corners, each (num_facets, 2), of the facets' boxes.
+    """(lower, upper) corners, each (num_facets, gdim), of the boxes of facets of k nodes.
 
     With ``previous_coordinates`` (the same nodes at an earlier state): the
     swept boxes, the union of the boxes at both states.
     """
+    lower, upper = _corner_box(coordinates, facets)
+    if previous_coordinates is not None:
+        before_lower, before_upper = _corner_box(previous_coordinates, facets)
+        # fmin/fmax: a NaN state (a diverged iterate) does not erase the other one
+        lower = np.fmin(lower, before_lower)
+        upper = np.fmax(upper, before_upper)
+    return lower, upper
+
+
+def _corner_box(coordinates: np.ndarray, facets: np.ndarray):
     start, end = coordinates[facets[:, 0]], coordinates[facets[:, 1]]
     lower, upper = np.minimum(start, end), np.maximum(start, end)
-    if previous_coordinates is not None:
-        start, end = previous_coordinates[facets[:, 0]], previous_coordinates[facets[:, 1]]
-        # fmin/fmax: a NaN state (a diverged iterate) does not erase the other one
-        lower = np.fmin(lower, np.minimum(start, end))
-        upper = np.fmax(upper, np.maximum(start, end))
+    for k in range(2, facets.shape[1]):
+        corner = coordinates[facets[:, k]]
+        np.minimum(lower, corner, out=lower)
+        np.maximum(upper, corner, out=upper)
     return lower, upper
 
 
@@ -161,7 +170,7 @@ def _near_now_or_crossed(
 ) -> np.ndarray:
     """Of swept candidates (slave facet ``slave[i]``, master facet ``master[i]``): those a
     search at the current positions also finds, and those whose slave facet has a node
-    behind the master facet's line now (it crossed). The other swept pairs only lie on
+    behind the master facet's line (3D: plane) now (it crossed). The other swept pairs only lie on
     the path of a body moving away: kept, they would make far-apart surfaces cost mortar
     work until the next search."""
     lower_s, upper_s = facet_boxes(slave_coordinates, slave_facets)
@@ -175,8 +184,12 @@ def _near_now_or_crossed(
         return near
     slave_far, master_far = slave_facets[slave[far]], master_facets[master[far]]
     start = master_coordinates[master_far[:, 0]]
-    tangent = master_coordinates[master_far[:, 1]] - start
-    outward = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
+    if start.shape[1] == 2:
+        tangent = master_coordinates[master_far[:, 1]] - start
+        outward = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
+    else:  # the plane of the master facet through its first node
+        outward = np.cross(master_coordinates[master_far[:, 1]] - start,
+                           master_coordinates[master_far[:, -1]] - start)
     behind = np.zeros(far.size, dtype=bool)
     for k in range(slave_far.shape[1]):
         offset = slave_coordinates[slave_far[:, k]] - start

@@ -124,10 +124,11 @@ class PairStencil:
         nv = self.num_variables
         parts = []
         for item in (q.Dn, q.Mn, q.area, q.gap):
+            size = int(np.prod(item.value.shape[1:]))
             if isinstance(item, RowSubsetDual) and item.rows is rows:
-                parts.append(item.grad_rows.reshape(rows.size, -1, nv))
+                parts.append(item.grad_rows.reshape(rows.size, size, nv))
             else:
-                parts.append(item.grad[rows].reshape(rows.size, -1, nv))
+                parts.append(item.grad[rows].reshape(rows.size, size, nv))
         flat = np.concatenate(parts, axis=1)
         result = np.zeros((len(terms), nv, rows.size))
         for p, row in enumerate(terms):
@@ -306,5 +307,5 @@ class Surface3Stencil(PairStencil):
             by_normal = kernel[:, direct:].reshape(len(terms), self.ns, 3, rows.size)
             J = self._normal_jacobian[rows]  # (rows, ns, 3 (a), s, 3 (b))
             chained = np.einsum("tjar,rjasb->tjsbr", by_normal, J, optimize=True)
-            result[:, direct:] = chained.reshape(len(terms), -1, rows.size)
+            result[:, direct:] = chained.reshape(len(terms), 3 * self.ns * self.max_star, rows.size)
         return result

@@ -29,13 +29,16 @@ class ContactSurface:
     Attributes:
         name: for messages (``"slave"``, ``"master"``, a tag name).
         marker: the facet tag value.
-        facets: (num_facets, 2) local node indices, oriented start -> end so
-            that (t_y, -t_x), t = end - start, points out of the body.
+        facets: (num_facets, k) local node indices. 2D (k = 2): start -> end
+            so that (t_y, -t_x), t = end - start, points out of the body. 3D
+            (k = 3 triangles, 4 quadrilaterals): cyclic around the facet,
+            counter-clockwise seen from outside, so that
+            (x_1 - x_0) x (x_{k-1} - x_0) points out of the body.
         facet_entities: (num_facets,) dolfinx facet indices on this rank.
         node_blocks: (num_nodes,) local dof block of each node in ``V``.
         node_global_blocks: (num_nodes,) global dof block (the node's identity).
         node_owned: (num_nodes,) whether this rank owns the node's dofs.
-        reference_coordinates: (num_nodes, 2) undeformed coordinates.
+        reference_coordinates: (num_nodes, gdim) undeformed coordinates.
         cells: (num_facets,) the cell of each facet (for body checks).
     """
 
@@ -58,8 +61,16 @@ class ContactSurface:
     def num_nodes(self) -> int:
         return self.node_blocks.shape[0]
 
+    @property
+    def gdim(self) -> int:
+        return self.reference_coordinates.shape[1]
+
+    @property
+    def nodes_per_facet(self) -> int:
+        return self.facets.shape[1]
+
     def node_dofs(self) -> np.ndarray:
-        """(num_nodes, 2) global PETSc indices of the x and y displacement dofs."""
+        """(num_nodes, gdim) global PETSc indices of the displacement dofs."""
         return self.node_global_blocks[:, None] * self.block_size + np.arange(self.block_size)
 
     def current_coordinates(self, u: dolfinx.fem.Function | None) -> np.ndarray:
@@ -67,23 +78,28 @@ class ContactSurface:
         if u is None:
             return self.reference_coordinates.copy()
         values = u.x.array.reshape(-1, self.block_size)
-        return self.reference_coordinates + values[self.node_blocks, :2]
+        return self.reference_coordinates + values[self.node_blocks, : self.gdim]
+
+
+CELL_TYPES = {2: ("triangle", "quadrilateral"), 3: ("tetrahedron", "hexahedron")}
 
 
 def check_space(V: dolfinx.fem.FunctionSpace) -> None:
-    """Raise a clear error for a space the 2D mortar method does not support."""
+    """Raise a clear error for a space the mortar method does not support."""
     mesh = V.mesh
     tdim = mesh.topology.dim
     gdim = mesh.geometry.dim
-    if tdim == 3 or gdim == 3:
+    if tdim not in CELL_TYPES:
+        raise SurfaceError(f"contact needs a 2D or 3D mesh; got topological dimension {tdim}")
+    if gdim != tdim:
         raise NotImplementedError(
-            "3D contact is not yet supported by dolfinx_mortar (2D meshes only)"
-        )
-    if tdim != 2:
-        raise SurfaceError(f"contact needs a 2D mesh; got topological dimension {tdim}")
+            f"a {tdim}D mesh in {gdim}D space (a surface or plate) is not supported; "
+            "contact needs a mesh of the dimension of its space")
     cell_name = mesh.topology.cell_name()
-    if cell_name not in ("triangle", "quadrilateral"):
-        raise SurfaceError(f"unsupported cell type {cell_name!r}; use triangles or quadrilaterals")
+    if cell_name not in CELL_TYPES[tdim]:
+        raise SurfaceError(
+            f"unsupported cell type {cell_name!r}; use {' or '.join(CELL_TYPES[tdim])} "
+            "(prisms, pyramids and mixed meshes are not supported)")
     if compat.coordinate_element_degree(mesh) != 1:
         raise SurfaceError("only meshes with linear (P1/Q1) geometry are supported")
     block_size = V.dofmap.index_map_bs
@@ -153,17 +169,27 @@ def extract_surface(
 
     geometry_dofmap = compat.geometry_dofmap(mesh)
     facet_geometry = np.take_along_axis(geometry_dofmap[cells], closure[local_facet], axis=1)
-    X = mesh.geometry.x[:, :2]
-    start, end = X[facet_geometry[:, 0]], X[facet_geometry[:, 1]]
+    if facet_geometry.shape[1] == 4:
+        # dolfinx numbers quadrilateral vertices as a tensor product: make them cyclic
+        facet_blocks = facet_blocks[:, [0, 1, 3, 2]]
+        facet_geometry = facet_geometry[:, [0, 1, 3, 2]]
+    gdim = mesh.geometry.dim
+    X = mesh.geometry.x[:, :gdim]
+    corners = X[facet_geometry]
     cell_midpoints = X[geometry_dofmap[cells]].mean(axis=1)
-    tangent = end - start
-    outward = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
-    flip = np.einsum("ij,ij->i", outward, 0.5 * (start + end) - cell_midpoints) < 0.0
+    if gdim == 2:
+        tangent = corners[:, 1] - corners[:, 0]
+        outward = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
+    elif corners.shape[1] == 4:
+        outward = np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1])
+    else:
+        outward = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    flip = np.einsum("ij,ij->i", outward, corners.mean(axis=1) - cell_midpoints) < 0.0
     facet_blocks[flip] = facet_blocks[flip, ::-1]
     facet_geometry[flip] = facet_geometry[flip, ::-1]
 
     node_blocks, inverse = np.unique(facet_blocks.ravel(), return_inverse=True)
-    node_facets = inverse.reshape(-1, 2).astype(np.int32)
+    node_facets = inverse.reshape(facet_blocks.shape).astype(np.int32)
     geometry_of_node = np.empty(node_blocks.size, dtype=np.int64)
     geometry_of_node[inverse] = facet_geometry.ravel()
     dof_map = V.dofmap.index_map

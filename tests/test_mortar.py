@@ -243,5 +243,9 @@ def test_bad_input():
     tags3 = dolfinx.mesh.meshtags(
         mesh3d, 2, np.zeros(0, dtype=np.int32), np.zeros(0, dtype=np.int32)
     )
-    with pytest.raises(NotImplementedError, match="3D contact is not yet supported"):
+    with pytest.raises(SurfaceError, match="marks no facet"):
         MortarInterface(V3, tags3, 1, 2)
+    prisms = dolfinx.mesh.create_unit_cube(MPI.COMM_WORLD, 1, 1, 1, dolfinx.mesh.CellType.prism)
+    V_prism = dolfinx.fem.functionspace(prisms, ("Lagrange", 1, (3,)))
+    with pytest.raises(SurfaceError, match="prisms"):
+        MortarInterface(V_prism, tags3, 1, 2)

@@ -1,0 +1,540 @@
+"""3D mortar kernel: triangle and quadrilateral facets, segment-based integration.
+
+Per candidate pair (Puso and Laursen 2004; Popp, Gee and Wall 2009):
+
+1. an auxiliary plane through the slave facet centre x0 with the unit normal
+   n0 of the normal field there;
+2. slave and master nodes projected onto it along n0, in plane coordinates
+   (e1, e2) with e1 x e2 = n0 (slave polygon counter-clockwise);
+3. the two convex polygons clipped (Sutherland-Hodgman; quadrilaterals as
+   quadrilaterals); each clip vertex is labelled as a slave node, a master
+   node or the intersection of a slave edge with a master edge;
+4. the clip polygon split into triangles around its vertex mean (the fan
+   keeps every cell inside a convex polygon however its vertices are
+   spaced); Gauss points of each triangle mapped back onto the slave and
+   the master facet along n0 (closed form for triangles, Newton for
+   bilinear quadrilaterals);
+5. D, M, Dn, Mn, the nodal areas and the weighted gaps integrated with the
+   cell areas in the plane as weights.
+
+Derivatives are exact: the clip topology (the labels) is decided on values;
+then every position is recomputed from the labels in forward-mode dual
+arithmetic (:mod:`dolfinx_mortar.dual`), and the inverse maps of the
+quadrilaterals get their derivatives from one Newton step in dual arithmetic
+at the converged point (implicit function theorem).
+
+The variables of a pair, in this order: slave node coordinates (ns x 3),
+master node coordinates (nm x 3), slave nodal normals (ns x 3). The normal
+field is n(xi) = sum_j N_j(xi) n_j (not renormalized, as the paper): with
+``normals="averaged"`` the n_j are the given nodal normals; with ``"slave"``
+the slave facet's unit normals at its corners; with ``"master"`` minus the
+master facet's unit normal at its centre, at every slave node.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .. import dual
+from ..dual import Dual
+
+NORMAL_OPTIONS = ("averaged", "slave", "master")
+INTEGRATION_OPTIONS = ("segment",)
+BASIS_OPTIONS = ("standard", "dual")
+
+_FACING_TOLERANCE = 1e-8
+_AREA_TOLERANCE = 1e-14
+_MAX_VERTICES = 8
+_CHUNK = 2048
+
+# symmetric triangle rules on the reference triangle (barycentric points, weights sum to 1)
+_TRIANGLE_RULES = {
+    1: (np.array([[1 / 3, 1 / 3, 1 / 3]]), np.array([1.0])),
+    3: (np.array([[2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]]),
+        np.full(3, 1 / 3)),
+}
+_a1, _b1 = 0.059715871789770, 0.470142064105115
+_a2, _b2 = 0.797426985353087, 0.101286507323456
+_TRIANGLE_RULES[7] = (
+    np.array([[1 / 3, 1 / 3, 1 / 3], [_a1, _b1, _b1], [_b1, _a1, _b1], [_b1, _b1, _a1],
+              [_a2, _b2, _b2], [_b2, _a2, _b2], [_b2, _b2, _a2]]),
+    np.array([0.225] + [0.132394152788506] * 3 + [0.125939180544827] * 3),
+)
+DEFAULT_GAUSS_POINTS = 7
+
+
+@dataclasses.dataclass
+class PairQuantities3:
+    """Mortar contributions of a batch of 3D pairs (arrays lead with the pair axis).
+
+    As :class:`~dolfinx_mortar.kernels.line2.PairQuantities`: ``D`` (n, ns, ns),
+    ``M`` (n, ns, nm) values; ``Dn`` (n, ns, ns, 3), ``Mn`` (n, ns, nm, 3),
+    ``gap`` (n, ns), ``area`` (n, ns) Duals over ``num_variables`` variables;
+    ``valid`` (n,): the pair faces and overlaps; ``overlap`` (n,): clipped area
+    over slave facet area.
+    """
+
+    D: np.ndarray
+    M: np.ndarray
+    Dn: Dual
+    Mn: Dual
+    gap: Dual
+    area: Dual
+    valid: np.ndarray
+    overlap: np.ndarray
+    num_variables: int
+    slices: dict
+
+
+# -- dual helpers ------------------------------------------------------------------------
+
+
+def _cross(a: Dual, b: Dual) -> Dual:
+    """3D cross product over the last value axis."""
+    return dual.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
+                       a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                       a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+
+
+def _cross2(a: Dual, b: Dual) -> Dual:
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def _normalize(v: Dual) -> Dual:
+    return v / dual.sqrt(dual.dot(v, v))[..., None]
+
+
+def _take(a: Dual, index: np.ndarray, axis: int) -> Dual:
+    """Gather along a value axis with per-pair indices (take_along_axis)."""
+    value = np.take_along_axis(a.value, index, axis=axis)
+    grad = np.take_along_axis(a.grad, index[..., None], axis=axis)
+    return Dual(value, grad)
+
+
+def _expand(a: Dual, axis: int) -> Dual:
+    """A new value axis (negative axes count value axes, not the derivative axis)."""
+    axis = axis % (a.value.ndim + 1)
+    return Dual(np.expand_dims(a.value, axis), np.expand_dims(a.grad, axis))
+
+
+# -- facets ---------------------------------------------------------------------------------
+
+
+def shape_functions(xi, nodes: int):
+    """N_k at reference points xi (..., 2) (Dual or array): triangles (0,0), (1,0), (0,1);
+    quadrilaterals (-1,-1), (1,-1), (1,1), (-1,1) (cyclic)."""
+    r, s = xi[..., 0], xi[..., 1]
+    if nodes == 3:
+        return [1.0 - r - s, r, s]
+    signs = ((-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0))
+    return [(1.0 + r * a) * (1.0 + s * b) * 0.25 for a, b in signs]
+
+
+def _shape_derivatives(xi: np.ndarray, nodes: int) -> np.ndarray:
+    """dN_k/dxi (..., nodes, 2) (values)."""
+    if nodes == 3:
+        return np.broadcast_to(np.array([[-1.0, -1.0], [1.0, 0.0], [0.0, 1.0]]),
+                               xi.shape[:-1] + (3, 2))
+    r, s = xi[..., 0], xi[..., 1]
+    signs = np.array([(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)])
+    out = np.empty(xi.shape[:-1] + (4, 2))
+    for k, (a, b) in enumerate(signs):
+        out[..., k, 0] = a * (1.0 + s * b) * 0.25
+        out[..., k, 1] = b * (1.0 + r * a) * 0.25
+    return out
+
+
+def _inverse_map(corners: Dual, point: Dual, nodes: int) -> Dual:
+    """Reference coordinates xi (..., 2) where sum_k N_k(xi) corners_k = point (2D plane
+    coordinates): closed form for triangles, Newton for bilinear quadrilaterals; the
+    derivatives follow from one Newton step in dual arithmetic (exact at the root)."""
+    c = corners.value  # (..., nodes, 2)
+    p = point.value
+    xi = np.zeros(p.shape)
+    if nodes == 3:
+        xi[...] = 0.0
+        iterations = 1
+    else:
+        iterations = 20
+    for _ in range(iterations):
+        N = np.stack([np.asarray(v) for v in shape_functions(xi, nodes)], axis=-1)
+        residual = np.einsum("...k,...kc->...c", N, c) - p
+        J = np.einsum("...kc,...kd->...cd", c, _shape_derivatives(xi, nodes))
+        step = np.linalg.solve(J, residual[..., None])[..., 0]
+        xi = xi - step
+        if nodes == 3:
+            break
+        if np.all(np.abs(step) < 1e-15 * (1.0 + np.abs(xi))):
+            break
+    # the final step in dual arithmetic: xi - J^-1 F(xi), with F's derivatives
+    N = shape_functions(xi, nodes)
+    mapped = corners[..., 0, :] * np.asarray(N[0])[..., None]
+    for k in range(1, nodes):
+        mapped = mapped + corners[..., k, :] * np.asarray(N[k])[..., None]
+    F = mapped - point
+    J = np.einsum("...kc,...kd->...cd", c, _shape_derivatives(xi, nodes))
+    inverse = np.linalg.inv(J)
+    correction = Dual(np.einsum("...cd,...d->...c", inverse, F.value),
+                      np.einsum("...cd,...dv->...cv", inverse, F.grad))
+    return Dual(xi, np.zeros(xi.shape + (F.grad.shape[-1],))) - correction
+
+
+def _dual_coefficients(slave_x: Dual, nodes: int) -> Dual:
+    """A (n, ns, ns) with Phi = A N biorthogonal on the whole slave facet: A = D_e M_e^-1."""
+    n = slave_x.shape[0]
+    nvar = slave_x.grad.shape[-1]
+    if nodes == 3:
+        A = np.array([[3.0, -1.0, -1.0], [-1.0, 3.0, -1.0], [-1.0, -1.0, 3.0]])
+        return Dual(np.broadcast_to(A, (n, 3, 3)), np.zeros((n, 3, 3, nvar)))
+    g, w = np.polynomial.legendre.leggauss(3)
+    points = np.array([[a, b] for a in g for b in g])
+    weights = np.array([wa * wb for wa in w for wb in w])
+    dN = _shape_derivatives(points, 4)  # (q, 4, 2)
+    N = np.stack(shape_functions(points, 4), axis=-1)  # (q, 4)
+    # |x_xi x x_eta| at each point
+    t1 = sum(_expand(slave_x[:, k, :], 1) * dN[None, :, k, 0, None] for k in range(4))
+    t2 = sum(_expand(slave_x[:, k, :], 1) * dN[None, :, k, 1, None] for k in range(4))
+    jacobian = dual.sqrt(dual.dot(_cross(t1, t2), _cross(t1, t2)))  # (n, q)
+    jw = jacobian * weights[None, :]
+    mass = Dual(np.einsum("nq,qj,qk->njk", jw.value, N, N),
+                np.einsum("nqv,qj,qk->njkv", jw.grad, N, N))
+    lumped = Dual(np.einsum("nq,qj->nj", jw.value, N), np.einsum("nqv,qj->njv", jw.grad, N))
+    inverse = np.linalg.inv(mass.value)
+    A = lumped.value[:, :, None] * inverse
+    # dA = (dDe - A dMe) Me^-1
+    dDe = np.einsum("njv,njk->njkv", lumped.grad, inverse)
+    dMe = np.einsum("nil,nlmv,nmk->nikv", A, mass.grad, inverse)
+    return Dual(A, dDe - dMe)
+
+
+# -- clipping (values) --------------------------------------------------------------------
+
+
+def _clip(slave2d: np.ndarray, master2d: np.ndarray):
+    """Clip the slave polygons by the master polygons (both CCW), all pairs at once.
+
+    Returns the clip vertex labels (n, V, 3): (kind, i, j) with kind 0 = slave
+    node i, 1 = master node j, 2 = slave edge i x master edge j; and counts (n,).
+    """
+    n, ns, _ = slave2d.shape
+    nm = master2d.shape[1]
+    V = _MAX_VERTICES + 2
+    positions = np.zeros((n, V, 2))
+    labels = np.zeros((n, V, 3), dtype=np.int64)
+    edges = np.zeros((n, V, 2), dtype=np.int64)  # edge from vertex k: (0 slave / 1 master, index)
+    positions[:, :ns] = slave2d
+    labels[:, :ns, 1] = np.arange(ns)
+    edges[:, :ns, 1] = np.arange(ns)
+    count = np.full(n, ns)
+    rows = np.arange(n)
+    for j in range(nm):
+        start, end = master2d[:, j], master2d[:, (j + 1) % nm]
+        direction = end - start
+        new_positions = np.zeros_like(positions)
+        new_labels = np.zeros_like(labels)
+        new_edges = np.zeros_like(edges)
+        new_count = np.zeros(n, dtype=np.int64)
+
+        target = (new_positions, new_labels, new_edges, new_count)
+
+        for k in range(V):
+            active = k < count
+            if not active.any():
+                break
+            following = np.where(count > 0, (k + 1) % np.maximum(count, 1), 0)
+            current = positions[:, k]
+            nxt = positions[rows, following]
+            s_cur, s_next = _side(start, direction, current), _side(start, direction, nxt)
+            inside_cur, inside_next = s_cur >= 0.0, s_next >= 0.0
+            denominator = np.where(s_cur - s_next == 0.0, 1.0, s_cur - s_next)
+            t = (s_cur / denominator)[:, None]
+            crossing = current + t * (nxt - current)
+            edge = edges[:, k]
+            # the crossing vertex: on a slave edge -> intersection label; on master edge j'
+            # -> the master node shared by edges j' and j
+            on_slave = edge[:, 0] == 0
+            shared = np.where((edge[:, 1] + 1) % nm == j, j, (j + 1) % nm)
+            crossing_label = np.where(
+                on_slave[:, None],
+                np.column_stack([np.full(n, 2), edge[:, 1], np.full(n, j)]),
+                np.column_stack([np.ones(n, dtype=np.int64), np.zeros(n, dtype=np.int64),
+                                 shared]))
+            along_clip = np.column_stack([np.ones(n, dtype=np.int64), np.full(n, j)])
+            next_label = labels[rows, following]
+            next_edge = edges[rows, following]
+            out_to_in = active & ~inside_cur & inside_next
+            in_to_out = active & inside_cur & ~inside_next
+            _emit(target, out_to_in, crossing, crossing_label, edge)
+            _emit(target, active & inside_next, nxt, next_label, next_edge)
+            _emit(target, in_to_out, crossing, crossing_label, along_clip)
+        positions, labels, edges, count = new_positions, new_labels, new_edges, new_count
+    return labels[:, :_MAX_VERTICES], np.minimum(count, _MAX_VERTICES), positions[:, :_MAX_VERTICES]
+
+
+def _side(start: np.ndarray, direction: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """> 0 left of the directed line (inside a counter-clockwise polygon)."""
+    return direction[:, 0] * (p[:, 1] - start[:, 1]) - direction[:, 1] * (p[:, 0] - start[:, 0])
+
+
+def _emit(target, mask, position, label, edge) -> None:
+    """Append a vertex to the polygons of the pairs in ``mask``."""
+    positions, labels, edges, count = target
+    rows = np.flatnonzero(mask)
+    index = count[rows]
+    keep = index < positions.shape[1]
+    rows, index = rows[keep], index[keep]
+    positions[rows, index] = position[rows]
+    labels[rows, index] = label[rows]
+    edges[rows, index] = edge[rows]
+    count[rows] += 1
+
+
+# -- the kernel -----------------------------------------------------------------------------
+
+
+def pair_quantities(
+    slave_x: np.ndarray,
+    master_x: np.ndarray,
+    slave_normals: np.ndarray,
+    *,
+    normals: str = "averaged",
+    integration: str = "segment",
+    basis: str = "standard",
+    num_gauss_points: int | None = None,
+    crosspoint: np.ndarray | None = None,
+    slave_facet: np.ndarray | None = None,
+) -> PairQuantities3:
+    """Mortar contributions of every pair, with derivatives (see the module docstring).
+
+    Args:
+        slave_x: (n, ns, 3) slave facet nodes (cyclic, counter-clockwise seen from
+            outside the slave body).
+        master_x: (n, nm, 3) master facet nodes (the same rule for the master body).
+        slave_normals: (n, ns, 3) unit nodal normals at the slave nodes (used with
+            ``normals="averaged"``).
+        normals, basis: as in 2D.
+        integration: ``segment`` (element-based integration is not built in 3D yet).
+        num_gauss_points: points of the triangle rule per integration cell: 1, 3 or 7.
+        crosspoint: (n, ns) slave nodes without a multiplier: their basis
+            function is shared equally by the facet's other nodes.
+        slave_facet: unused by segment-based integration (the interface passes it).
+    """
+    if normals not in NORMAL_OPTIONS:
+        raise ValueError(f"unknown normal option {normals!r}; expected one of {NORMAL_OPTIONS}")
+    if basis not in BASIS_OPTIONS:
+        raise ValueError(f"unknown multiplier basis {basis!r}; expected one of {BASIS_OPTIONS}")
+    if integration != "segment":
+        raise NotImplementedError(
+            "element-based integration is not available in 3D yet; use integration='segment'")
+    rule = num_gauss_points or DEFAULT_GAUSS_POINTS
+    if rule not in _TRIANGLE_RULES:
+        raise ValueError(f"3D segments take 1, 3 or 7 Gauss points per cell, got {rule}")
+    slave_x = np.asarray(slave_x, dtype=np.float64)
+    master_x = np.asarray(master_x, dtype=np.float64)
+    slave_normals = np.asarray(slave_normals, dtype=np.float64)
+    n, ns, _ = slave_x.shape
+    nm = master_x.shape[1]
+    nvar = 3 * (2 * ns + nm)
+    slices = {"slave": slice(0, 3 * ns), "master": slice(3 * ns, 3 * (ns + nm)),
+              "normals": slice(3 * (ns + nm), nvar)}
+    if crosspoint is None:
+        crosspoint = np.zeros((n, ns), dtype=bool)
+    crosspoint = np.asarray(crosspoint, dtype=bool).reshape(n, ns)
+    result = {
+        "D": np.zeros((n, ns, ns)), "M": np.zeros((n, ns, nm)),
+        "Dn": (np.zeros((n, ns, ns, 3)), np.zeros((n, ns, ns, 3, nvar))),
+        "Mn": (np.zeros((n, ns, nm, 3)), np.zeros((n, ns, nm, 3, nvar))),
+        "gap": (np.zeros((n, ns)), np.zeros((n, ns, nvar))),
+        "area": (np.zeros((n, ns)), np.zeros((n, ns, nvar))),
+    }
+    valid = np.zeros(n, dtype=bool)
+    overlap = np.zeros(n)
+    for start in range(0, n, _CHUNK):
+        stop = min(n, start + _CHUNK)
+        part = _integrate(slave_x[start:stop], master_x[start:stop],
+                          slave_normals[start:stop], crosspoint[start:stop],
+                          normals, basis, rule)
+        if part is None:
+            continue
+        rows, quantities, fraction = part
+        rows = rows + start
+        valid[rows] = True
+        overlap[rows] = fraction
+        result["D"][rows] = quantities["D"].value
+        result["M"][rows] = quantities["M"].value
+        for name in ("Dn", "Mn", "gap", "area"):
+            result[name][0][rows] = quantities[name].value
+            result[name][1][rows] = quantities[name].grad
+    return PairQuantities3(
+        D=result["D"], M=result["M"],
+        Dn=Dual(*result["Dn"]), Mn=Dual(*result["Mn"]),
+        gap=Dual(*result["gap"]), area=Dual(*result["area"]),
+        valid=valid, overlap=overlap, num_variables=nvar, slices=slices)
+
+
+def _normal_field(xs: Dual, xm: Dual, nodal: Dual, normals: str, ns: int, nm: int) -> Dual:
+    """The slave nodal normals n_j (n, ns, 3) of the chosen normal field."""
+    if normals == "averaged":
+        return nodal
+    if normals == "slave":
+        corners = []
+        for i in range(ns):
+            a = xs[:, (i + 1) % ns] - xs[:, i]
+            b = xs[:, (i - 1) % ns] - xs[:, i]
+            corners.append(_normalize(_cross(a, b)))
+        return dual.stack(corners, axis=1)
+    if nm == 4:
+        v = _cross(xm[:, 2] - xm[:, 0], xm[:, 3] - xm[:, 1])
+    else:
+        v = _cross(xm[:, 1] - xm[:, 0], xm[:, 2] - xm[:, 0])
+    master_normal = -_normalize(v)
+    return dual.stack([master_normal] * ns, axis=1)
+
+
+def _integrate(slave_x, master_x, slave_normals, crosspoint, normals, basis, rule):
+    n, ns, _ = slave_x.shape
+    nm = master_x.shape[1]
+    nvar = 3 * (2 * ns + nm)
+    variables = Dual.variables(
+        np.concatenate([slave_x.reshape(n, -1), master_x.reshape(n, -1),
+                        slave_normals.reshape(n, -1)], axis=1))
+    xs = Dual(variables.value[:, :3 * ns].reshape(n, ns, 3),
+              variables.grad[:, :3 * ns].reshape(n, ns, 3, nvar))
+    xm = Dual(variables.value[:, 3 * ns:3 * (ns + nm)].reshape(n, nm, 3),
+              variables.grad[:, 3 * ns:3 * (ns + nm)].reshape(n, nm, 3, nvar))
+    nodal = Dual(variables.value[:, 3 * (ns + nm):].reshape(n, ns, 3),
+                 variables.grad[:, 3 * (ns + nm):].reshape(n, ns, 3, nvar))
+    node_normals = _normal_field(xs, xm, nodal, normals, ns, nm)
+
+    # auxiliary plane: centre, normal, in-plane basis (values decide; duals follow)
+    x0 = dual.sum_(xs, axis=1) * (1.0 / ns)
+    n0 = _normalize(dual.sum_(node_normals, axis=1) * (1.0 / ns))
+    if nm == 4:
+        master_normal = np.cross(master_x[:, 2] - master_x[:, 0], master_x[:, 3] - master_x[:, 1])
+    else:
+        master_normal = np.cross(master_x[:, 1] - master_x[:, 0], master_x[:, 2] - master_x[:, 0])
+    master_normal /= np.linalg.norm(master_normal, axis=1, keepdims=True)
+    facing = np.einsum("ij,ij->i", n0.value, master_normal) < -_FACING_TOLERANCE
+    edge = xs[:, 1] - xs[:, 0]
+    e1 = _normalize(edge - n0 * dual.dot(edge, n0)[:, None])
+    e2 = _cross(n0, e1)
+
+    def plane(points: Dual) -> Dual:  # (n, k, 3) -> (n, k, 2)
+        offset = points - _expand(x0, 1)
+        return dual.stack([dual.dot(offset, _expand(e1, 1)), dual.dot(offset, _expand(e2, 1))],
+                          axis=-1)
+
+    S = plane(xs)
+    Mp = plane(xm)
+    slave_area = np.abs(_polygon_area(S.value))
+    labels, count, positions = _clip(S.value, Mp.value[:, ::-1])
+    # the master polygon was reversed to be counter-clockwise: map labels back
+    master_node = (nm - 1 - labels[..., 2]) % nm
+    master_edge_start = (nm - 2 - labels[..., 2]) % nm  # reversed edge j = (nm-1-j) -> (nm-2-j)
+    clip_area = _padded_area(positions, count)
+    contributing = facing & (count >= 3) & (clip_area > _AREA_TOLERANCE * slave_area)
+    rows = np.flatnonzero(contributing)
+    if rows.size == 0:
+        return None
+
+    def sub(a: Dual) -> Dual:
+        return Dual(a.value[rows], a.grad[rows])
+
+    xs, xm, S, Mp, node_normals, x0, n0, e1, e2 = (
+        sub(a) for a in (xs, xm, S, Mp, node_normals, x0, n0, e1, e2))
+    labels, count = labels[rows], count[rows]
+    master_node, master_edge_start = master_node[rows], master_edge_start[rows]
+    m = rows.size
+
+    # clip vertices recomputed from their labels
+    kind, i_slave = labels[..., 0], labels[..., 1]
+    Vn = _MAX_VERTICES
+    slave_vertex = _take(S, np.broadcast_to(i_slave[..., None], (m, Vn, 2)), axis=1)
+    master_vertex = _take(Mp, np.broadcast_to(master_node[..., None], (m, Vn, 2)), axis=1)
+    a0 = slave_vertex
+    a1 = _take(S, np.broadcast_to(((i_slave + 1) % ns)[..., None], (m, Vn, 2)), axis=1)
+    b0 = _take(Mp, np.broadcast_to(master_edge_start[..., None], (m, Vn, 2)), axis=1)
+    b1 = _take(Mp, np.broadcast_to(((master_edge_start + 1) % nm)[..., None], (m, Vn, 2)),
+               axis=1)
+    da, db = a1 - a0, b1 - b0
+    denominator = _cross2(da, db)
+    crossing = (kind == 2) & (denominator.value != 0.0)
+    one = Dual(np.ones(kind.shape), np.zeros(kind.shape + (nvar,)))
+    t = _cross2(b0 - a0, db) / dual.where(crossing, denominator, one)
+    intersection = a0 + da * _expand(t, -1)
+    vertex = dual.where((kind == 0)[..., None], slave_vertex,
+                        dual.where((kind == 1)[..., None], master_vertex, intersection))
+    present = np.arange(Vn)[None, :] < count[:, None]
+    weights_v = present / count[:, None]
+    centre = dual.sum_(vertex * weights_v[..., None], axis=1)  # (m, 2)
+
+    # triangle fan: cells (centre, v_k, v_k+1), k < count
+    following = np.where(present, (np.arange(Vn)[None, :] + 1) % np.maximum(count, 1)[:, None], 0)
+    v_next = _take(vertex, np.broadcast_to(following[..., None], (m, Vn, 2)), axis=1)
+    c = _expand(centre, 1)
+    edge_a, edge_b = vertex - c, v_next - c
+    cell_area = _cross2(edge_a, edge_b) * 0.5 * present  # (m, Vn)
+    bary, rule_weights = _TRIANGLE_RULES[rule]
+    # Gauss points (m, Vn, q, 2) in the plane
+    q = rule_weights.size
+    P = (_expand(c, 2) * bary[None, None, :, 0, None]
+         + _expand(vertex, 2) * bary[None, None, :, 1, None]
+         + _expand(v_next, 2) * bary[None, None, :, 2, None])
+    W = _expand(cell_area, 2) * rule_weights[None, None, :]  # (m, Vn, q)
+    P = Dual(P.value.reshape(m, Vn * q, 2), P.grad.reshape(m, Vn * q, 2, nvar))
+    W = Dual(W.value.reshape(m, Vn * q), W.grad.reshape(m, Vn * q, nvar))
+    xi = _inverse_map(_expand(S, 1), P, ns)  # (m, g, 2)
+    eta = _inverse_map(_expand(Mp, 1), P, nm)
+    N = shape_functions(xi, ns)
+    Nm = shape_functions(eta, nm)
+
+    # multiplier basis
+    if basis == "dual":
+        A = _dual_coefficients(xs, ns)
+        Phi = [sum(N[k] * _expand(A[:, j, k], 1) for k in range(ns)) for j in range(ns)]
+    else:
+        Phi = list(N)
+    if crosspoint[rows].any():
+        cross = crosspoint[rows]
+        others = (~cross).sum(axis=1)
+        shared = sum(Phi[j] * cross[:, j, None].astype(float) for j in range(ns))
+        share = np.where(others > 0, 1.0 / np.maximum(others, 1), 0.0)[:, None]
+        Phi = [dual.where(np.broadcast_to(cross[:, j, None], W.shape), Phi[j] * 0.0,
+                          Phi[j] + shared * share) for j in range(ns)]
+    normal_at = sum(_expand(node_normals[:, j], 1) * _expand(N[j], -1) for j in range(ns))
+    WPhi = [W * Phi[j] for j in range(ns)]
+
+    def integral(f: Dual) -> Dual:
+        return dual.sum_(f, axis=1)
+
+    D = dual.stack([dual.stack([integral(WPhi[j] * N[k]) for k in range(ns)], axis=1)
+                    for j in range(ns)], axis=1)
+    M = dual.stack([dual.stack([integral(WPhi[j] * Nm[k]) for k in range(nm)], axis=1)
+                    for j in range(ns)], axis=1)
+    Dn = dual.stack([dual.stack([integral(_expand(WPhi[j] * N[k], -1) * normal_at)
+                                 for k in range(ns)], axis=1) for j in range(ns)], axis=1)
+    Mn = dual.stack([dual.stack([integral(_expand(WPhi[j] * Nm[k], -1) * normal_at)
+                                 for k in range(nm)], axis=1) for j in range(ns)], axis=1)
+    area = dual.stack([integral(WPhi[j]) for j in range(ns)], axis=1)
+    gap = (dual.sum_(dual.sum_(Mn * _expand(xm, 1), axis=-1), axis=-1)
+           - dual.sum_(dual.sum_(Dn * _expand(xs, 1), axis=-1), axis=-1))
+    quantities = {"D": D, "M": M, "Dn": Dn, "Mn": Mn, "gap": gap, "area": area}
+    return rows, quantities, clip_area[rows] / slave_area[rows]
+
+
+def _polygon_area(points: np.ndarray) -> np.ndarray:
+    """Signed area of polygons (n, k, 2) (shoelace)."""
+    x, y = points[..., 0], points[..., 1]
+    return 0.5 * (x * np.roll(y, -1, axis=-1) - np.roll(x, -1, axis=-1) * y).sum(axis=-1)
+
+
+def _padded_area(positions: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """Areas of the clip polygons (n, V, 2) with ``count`` vertices each."""
+    n, V, _ = positions.shape
+    k = np.arange(V)[None, :]
+    following = np.where(k < count[:, None], (k + 1) % np.maximum(count, 1)[:, None], 0)
+    nxt = np.take_along_axis(positions, following[..., None], axis=1)
+    term = positions[..., 0] * nxt[..., 1] - nxt[..., 0] * positions[..., 1]
+    return 0.5 * np.where(k < count[:, None], term, 0.0).sum(axis=1)
