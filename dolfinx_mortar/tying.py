@@ -78,7 +78,7 @@ class MeshTying:
         fixed = dirichlet_dofs(bcs, self.V)
         fixed_blocks = np.unique(fixed // bs)
         fully_fixed = fixed_blocks[
-            np.isin(fixed_blocks * bs, fixed) & np.isin(fixed_blocks * bs + 1, fixed)
+            np.all([np.isin(fixed_blocks * bs + c, fixed) for c in range(bs)], axis=0)
         ]
         interface.set_crosspoints(fully_fixed)
         interface.update(None)
