@@ -101,9 +101,11 @@ class MortarInterface:
         basis: multiplier basis, ``standard`` (default) or ``dual``.
         num_gauss_points: per segment (or per slave facet for ``element``).
         search_margin: boxes are grown by this much; default twice the mean
-            slave facet edge length in 2D and half of it in 3D, where the number
-            of candidate pairs grows with the square of the margin (968 slave
-            triangles: 106 candidates per facet at two edge lengths, 20 at half).
+            slave facet edge length h in 2D and h/2 in 3D, where the number of
+            candidate pairs grows with the square of the margin. In 3D the boxes
+            also reach 2 margins (default h) behind each facet, so that surfaces
+            that already penetrate each other by up to 2 h + 2 margins before any
+            displacement are paired (2D: up to 2 margins).
         configuration: ``current`` (default): everything on x = X + u, for
             large deformations; ``reference``: integrals and normals on the
             undeformed surfaces, computed once, gap linear in u (small strain,
@@ -167,6 +169,7 @@ class MortarInterface:
         if not search_margin > 0.0:
             raise ValueError(f"search_margin must be positive, got {search_margin}")
         self.reuse = search.SearchReuse(margin=float(search_margin))
+        self.search_depth = 0.0 if self.gdim == 2 else 2.0 * self.reuse.margin
         self.statistics = MortarStatistics()
 
         index_map = V.dofmap.index_map
@@ -389,14 +392,17 @@ class MortarInterface:
         from the ``origin`` positions, as in the search itself)."""
         comm = self.comm
         margin = self.reuse.margin
-        slave_lower, slave_upper = search.facet_boxes(slave_x, self.slave.facets, slave_origin)
+        depth = self.search_depth
+        slave_lower, slave_upper = search.facet_boxes(
+            slave_x, self.slave.facets, slave_origin, depth)
         gdim = self.gdim
         if self.slave.num_facets:
             my_box = np.concatenate([slave_lower.min(axis=0), slave_upper.max(axis=0)])
         else:
             my_box = np.concatenate([np.full(gdim, np.inf), np.full(gdim, -np.inf)])
         boxes = np.array(comm.allgather(my_box))
-        master_lower, master_upper = search.facet_boxes(master_x, self.master.facets, master_origin)
+        master_lower, master_upper = search.facet_boxes(
+            master_x, self.master.facets, master_origin, depth)
         self._send_master = []
         self._send_slave = []
         for r in range(comm.size):
@@ -481,7 +487,7 @@ class MortarInterface:
             ])
         pairs = search.candidate_pairs(
             self._node_x, slave.facets, self._node_x, all_master_facets, self.reuse.margin,
-            slave_previous=node_origin, master_previous=node_origin,
+            slave_previous=node_origin, master_previous=node_origin, depth=self.search_depth,
         )
         local_slave_facets = slave.facets.astype(np.int64)
         if gdim == 2:

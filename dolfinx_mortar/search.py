@@ -43,20 +43,45 @@ from scipy.spatial import cKDTree
 
 
 def facet_boxes(
-    coordinates: np.ndarray, facets: np.ndarray, previous_coordinates: np.ndarray | None = None
+    coordinates: np.ndarray,
+    facets: np.ndarray,
+    previous_coordinates: np.ndarray | None = None,
+    depth: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(lower, upper) corners, each (num_facets, gdim), of the boxes of facets of k nodes.
 
     With ``previous_coordinates`` (the same nodes at an earlier state): the
-    swept boxes, the union of the boxes at both states.
+    swept boxes, the union of the boxes at both states. With ``depth`` > 0
+    each box also holds its facet moved by ``depth`` against its outward
+    normal (into its body): a surface that already lies up to ``depth``
+    inside the other body, with no earlier state to sweep from, is still
+    paired.
     """
     lower, upper = _corner_box(coordinates, facets)
+    if depth > 0.0 and facets.shape[0]:
+        behind = _facet_outward(coordinates, facets) * -depth
+        np.minimum(lower, lower + behind, out=lower)
+        np.maximum(upper, upper + behind, out=upper)
     if previous_coordinates is not None:
         before_lower, before_upper = _corner_box(previous_coordinates, facets)
         # fmin/fmax: a NaN state (a diverged iterate) does not erase the other one
         lower = np.fmin(lower, before_lower)
         upper = np.fmax(upper, before_upper)
     return lower, upper
+
+
+def _facet_outward(coordinates: np.ndarray, facets: np.ndarray) -> np.ndarray:
+    """Unit outward normal of each facet (2D: (t_y, -t_x); 3D: along (x_2 - x_0) x
+    (x_{k-1} - x_1), the cross product of the diagonals for quadrilaterals)."""
+    start = coordinates[facets[:, 0]]
+    if start.shape[1] == 2:
+        tangent = coordinates[facets[:, 1]] - start
+        normal = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
+    else:
+        normal = np.cross(coordinates[facets[:, 2]] - start,
+                          coordinates[facets[:, -1]] - coordinates[facets[:, 1]])
+    length = np.linalg.norm(normal, axis=1, keepdims=True)
+    return normal / np.where(length > 0.0, length, 1.0)
 
 
 def _corner_box(coordinates: np.ndarray, facets: np.ndarray):
@@ -92,11 +117,13 @@ def candidate_pairs(
     *,
     slave_previous: np.ndarray | None = None,
     master_previous: np.ndarray | None = None,
+    depth: float = 0.0,
 ) -> np.ndarray:
     """All (slave facet, master facet) index pairs whose grown boxes overlap.
 
     ``slave_previous`` and ``master_previous`` (the nodes at the previous
-    search) make the boxes swept (:func:`facet_boxes`). A k-d tree of box
+    search) make the boxes swept, ``depth`` makes them reach behind each
+    facet (:func:`facet_boxes`). A k-d tree of box
     centres finds the pairs whose centres are closer than the largest
     possible distance of overlapping boxes, then the boxes themselves decide.
     Boxes are grouped by size (within a factor 2) and each pair of groups is
@@ -111,8 +138,9 @@ def candidate_pairs(
     empty = np.zeros((0, 2), dtype=np.int64)
     if slave_facets.shape[0] == 0 or master_facets.shape[0] == 0:
         return empty
-    slave_lower, slave_upper = facet_boxes(slave_coordinates, slave_facets, slave_previous)
-    master_lower, master_upper = facet_boxes(master_coordinates, master_facets, master_previous)
+    slave_lower, slave_upper = facet_boxes(slave_coordinates, slave_facets, slave_previous, depth)
+    master_lower, master_upper = facet_boxes(
+        master_coordinates, master_facets, master_previous, depth)
     if not boxes_overlap(
         slave_lower.min(axis=0), slave_upper.max(axis=0),
         master_lower.min(axis=0), master_upper.max(axis=0), margin,
@@ -151,7 +179,7 @@ def candidate_pairs(
     if slave_previous is not None or master_previous is not None:
         keep = _near_now_or_crossed(
             slave_coordinates, slave_facets, slave, master_coordinates, master_facets, master,
-            margin,
+            margin, depth,
         )
         slave, master = slave[keep], master[keep]
     # sorted by (slave, master): one sort of a combined key (the pairs are distinct)
@@ -167,14 +195,15 @@ def _near_now_or_crossed(
     master_facets: np.ndarray,
     master: np.ndarray,
     margin: float,
+    depth: float = 0.0,
 ) -> np.ndarray:
     """Of swept candidates (slave facet ``slave[i]``, master facet ``master[i]``): those a
     search at the current positions also finds, and those whose slave facet has a node
     behind the master facet's line (3D: plane) now (it crossed). The other swept pairs only lie on
     the path of a body moving away: kept, they would make far-apart surfaces cost mortar
     work until the next search."""
-    lower_s, upper_s = facet_boxes(slave_coordinates, slave_facets)
-    lower_m, upper_m = facet_boxes(master_coordinates, master_facets)
+    lower_s, upper_s = facet_boxes(slave_coordinates, slave_facets, depth=depth)
+    lower_m, upper_m = facet_boxes(master_coordinates, master_facets, depth=depth)
     near = np.ones(slave.size, dtype=bool)
     for k in range(lower_s.shape[1]):  # boxes_overlap, per facet then per pair
         near &= (lower_s[:, k] - margin)[slave] <= (upper_m[:, k] + margin)[master]

@@ -318,7 +318,9 @@ def pair_quantities(
         integration: ``segment`` (element-based integration is not built in 3D yet).
         num_gauss_points: points of the triangle rule per integration cell: 1, 3 or 7.
         crosspoint: (n, ns) slave nodes without a multiplier: their basis
-            function is shared equally by the facet's other nodes.
+            function is shared equally by the facet's other nodes. A facet whose
+            nodes are all crosspoints (prescribed everywhere) has no multiplier
+            and contributes nothing.
         slave_facet: unused by segment-based integration (the interface passes it).
     """
     if normals not in NORMAL_OPTIONS:
