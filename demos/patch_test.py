@@ -8,11 +8,17 @@ multipliers reproduces it to solver tolerance for any mesh ratio and either
 slave side; element-based integration does not (its error is reported);
 penalty gives a uniform pressure with a uniform penetration p / eps.
 
+``--dim 3`` (benchmarks.md, section 6): a punch [0, 1]^2 x [0.5, 1] of
+hexahedra or tetrahedra (``--cell-type``) on a foundation [0, 1]^2 x [0, 0.5],
+non-matching in the ratio ``--ratio``, pressure 10 on the punch top, rollers
+under the foundation: contact pressure 10 and sigma_zz = -10 everywhere.
+
 Outputs (``--output DIR``): the pressure along the interface (PNG) and the
 displacement and contact pressure for ParaView (paraview/*.bp); ``--json FILE``
 writes the summary.
 
 Run:  mpirun -n 3 python3 demos/patch_test.py --ratio 3:7 --slave bottom --json patch.json
+      mpirun -n 3 python3 demos/patch_test.py --dim 3 --cell tetrahedron --ratio 3:7
 """
 
 from __future__ import annotations
@@ -36,13 +42,18 @@ E, NU, PRESSURE = 1000.0, 0.4, 10.0
 
 def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     parser = cli.parser(__doc__)
+    parser.add_argument("--dim", type=int, choices=(2, 3), default=2, help="2D or 3D")
     parser.add_argument("--ratio", default="3:2", help="punch:foundation interface elements")
     parser.add_argument(
         "--slave", choices=("top", "bottom"), default="top", help="which surface is the slave"
     )
     parser.add_argument("--refinement", type=int, default=0, help="halves h per level")
     parser.add_argument(
-        "--cell-type", choices=("triangle", "quadrilateral"), default="triangle", help="cells"
+        "--cell-type",
+        "--cell",
+        choices=meshes.CELL_TYPES + meshes.CELL_TYPES_3D,
+        default=None,
+        help="cells (default: triangle in 2D, hexahedron in 3D)",
     )
     parser.add_argument(
         "--material",
@@ -52,9 +63,15 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     )
     cli.add_common_arguments(parser)
     args = parser.parse_args(argv)
+    allowed = meshes.CELL_TYPES if args.dim == 2 else meshes.CELL_TYPES_3D
+    if args.cell_type is None:
+        args.cell_type = allowed[0] if args.dim == 2 else "hexahedron"
+    if args.cell_type not in allowed:
+        parser.error(f"--cell-type {args.cell_type} is not a {args.dim}D cell (one of {allowed})")
     ratio = tuple(int(n) for n in args.ratio.split(":"))
     start = time.perf_counter()
-    tagged = meshes.patch_test(
+    build = meshes.patch_test if args.dim == 2 else meshes.patch_test_3d
+    tagged = build(
         ratio=ratio,
         slave=args.slave,
         refinement=args.refinement,
@@ -62,32 +79,18 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         comm=comm,
     )
     mesh, markers = tagged.mesh, tagged.markers
-    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    gdim = args.dim
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (gdim,)))
     u = dolfinx.fem.Function(V, name="displacement")
     v = ufl.TestFunction(V)
     material = Material(E, NU, args.material)
     ds = ufl.Measure("ds", domain=mesh, subdomain_data=tagged.facet_tags)
-    traction = dolfinx.fem.Constant(mesh, np.array([0.0, -PRESSURE]))
-    F = internal_work(u, v, {0: material}) - ufl.inner(traction, v) * (
-        ds(markers["punch_top"]) + ds(markers["foundation_top_free"])
-    )
-
-    # exact lateral strain of the uniform state (plane strain, sigma_xx = 0)
-    strain_xx = PRESSURE * NU * (1.0 + NU) / E
-    fdim = mesh.topology.dim - 1
-    bottom = tagged.facet_tags.find(markers["foundation_bottom"])
-    bcs = [
-        dolfinx.fem.dirichletbc(
-            np.float64(0.0), dolfinx.fem.locate_dofs_topological(V.sub(1), fdim, bottom), V.sub(1)
-        )
-    ]
-    mesh.topology.create_connectivity(0, mesh.topology.dim)
-    for corner in ((0.0, 0.0), (4.0, 7.0)):
-        vertices = dolfinx.mesh.locate_entities(
-            mesh, 0, lambda x, c=corner: np.isclose(x[0], c[0]) & np.isclose(x[1], c[1])
-        )
-        dofs = dolfinx.fem.locate_dofs_topological(V.sub(0), 0, vertices)
-        bcs.append(dolfinx.fem.dirichletbc(np.float64(strain_xx * corner[0]), dofs, V.sub(0)))
+    traction = dolfinx.fem.Constant(mesh, np.array([0.0] * (gdim - 1) + [-PRESSURE]))
+    loaded = ds(markers["punch_top"])
+    if gdim == 2:
+        loaded = loaded + ds(markers["foundation_top_free"])
+    F = internal_work(u, v, {0: material}) - ufl.inner(traction, v) * loaded
+    bcs = _supports(tagged, V)
 
     pair = ContactPair(
         tagged.facet_tags,
@@ -108,7 +111,11 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         output.close()
 
     coordinates, pressure = problem.gathered_pressure()
-    interior = (coordinates[:, 0] > 4.0 + 1e-9) & (coordinates[:, 0] < 6.0 - 1e-9)
+    low, high = (4.0, 6.0) if gdim == 2 else (0.0, 1.0)
+    interior = np.all(
+        (coordinates[:, : gdim - 1] > low + 1e-9) & (coordinates[:, : gdim - 1] < high - 1e-9),
+        axis=1,
+    )
     # the pressure of every slave node, ends included, must be uniform
     deviation = float(np.max(np.abs(pressure - PRESSURE)) / PRESSURE)
     deviation_interior = float(
@@ -116,11 +123,12 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     )
     stress = material.stress(u)
     if args.material != "linear":
-        F_def = ufl.Identity(2) + ufl.grad(u)
+        F_def = ufl.Identity(gdim) + ufl.grad(u)
         stress = stress * F_def.T / ufl.det(F_def)
     W = dolfinx.fem.functionspace(mesh, ("DG", 0))
     sigma_yy = dolfinx.fem.Function(W)
-    sigma_yy.interpolate(dolfinx.fem.Expression(stress[1, 1], compat.interpolation_points(W)))
+    normal_stress = stress[gdim - 1, gdim - 1]
+    sigma_yy.interpolate(dolfinx.fem.Expression(normal_stress, compat.interpolation_points(W)))
     num_cells = mesh.topology.index_map(mesh.topology.dim).size_local
     stress_deviation = (
         comm.allreduce(
@@ -130,6 +138,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     )
     slave_force, master_force = problem.contact_forces()
     summary = {
+        "dim": gdim,
         "ratio": list(ratio),
         "slave": args.slave,
         "refinement": args.refinement,
@@ -152,14 +161,15 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         "pressure_max": float(pressure.max()),
         "slave_force": slave_force.tolist(),
         "master_force": master_force.tolist(),
-        "total_force_expected": PRESSURE * 2.0,
-        "num_dofs": V.dofmap.index_map.size_global * 2,
+        "total_force_expected": PRESSURE * (2.0 if gdim == 2 else 1.0),
+        "num_dofs": V.dofmap.index_map.size_global * gdim,
         "wall_time_s": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
         "timings": report.timings,
     }
     if comm.rank == 0:
         print(
-            f"patch test {args.ratio} slave={args.slave} {args.method}/{args.integration}: "
+            f"patch test {gdim}D {args.cell_type} {args.ratio} slave={args.slave} "
+            f"{args.method}/{args.integration}: "
             f"pressure deviation {deviation:.3e} (non-uniformity "
             f"{summary['pressure_nonuniformity_rel']:.1e}), "
             f"stress deviation {stress_deviation:.3e}, "
@@ -172,6 +182,40 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
             print(f"results written to {args.output}/ (patch_test_pressure.png, paraview/*.bp)")
     problem.destroy()
     return summary
+
+
+def _supports(tagged, V) -> list:
+    """Rollers under the foundation; each body's lateral rigid motions fixed at two corner
+    nodes by the exact uniform solution's lateral displacement eps x (eps = nu (1 + nu) p / E
+    in plane strain, nu p / E in 3D)."""
+    mesh, markers = tagged.mesh, tagged.markers
+    gdim = mesh.geometry.dim
+    fdim = mesh.topology.dim - 1
+    strain = PRESSURE * NU * ((1.0 + NU) if gdim == 2 else 1.0) / E
+    bottom = tagged.facet_tags.find(markers["foundation_bottom"])
+    vertical = V.sub(gdim - 1)
+    bcs = [
+        dolfinx.fem.dirichletbc(
+            np.float64(0.0), dolfinx.fem.locate_dofs_topological(vertical, fdim, bottom), vertical
+        )
+    ]
+    if gdim == 2:
+        corners = [((0.0, 0.0), (0,)), ((4.0, 7.0), (0,))]
+    else:
+        corners = [((0.0, 0.0, z), (0, 1)) for z in (0.0, 1.0)]
+        corners += [((1.0, 0.0, z), (1,)) for z in (0.0, 1.0)]
+    mesh.topology.create_connectivity(0, mesh.topology.dim)
+    for corner, components in corners:
+        vertices = dolfinx.mesh.locate_entities(
+            mesh,
+            0,
+            lambda x, c=corner: np.all([np.isclose(x[i], c[i]) for i in range(gdim)], axis=0),
+        )
+        for i in components:
+            dofs = dolfinx.fem.locate_dofs_topological(V.sub(i), 0, vertices)
+            value = np.float64(strain * corner[i])
+            bcs.append(dolfinx.fem.dirichletbc(value, dofs, V.sub(i)))
+    return bcs
 
 
 def plot(path: pathlib.Path, x, pressure, summary: dict) -> None:

@@ -26,6 +26,8 @@ import numpy as np
 from mpi4py import MPI
 from scipy.spatial import cKDTree
 
+from .normals import facet_normals
+
 FIXED_POINT_NOT_SETTLED = -100
 """SolveReport reason: the fixed-point active set kept changing."""
 UZAWA_NOT_SETTLED = -101
@@ -148,7 +150,8 @@ class InversionCheck:
         for a, *others in corners:
             edges = [X[:, b] - X[:, a] for b in others]
             self._corners.append(
-                (blocks[:, a], [blocks[:, b] for b in others], edges, 1.0 / _det(edges)))
+                (blocks[:, a], [blocks[:, b] for b in others], edges, 1.0 / _det(edges))
+            )
 
     def local_ratios(self, u: np.ndarray) -> np.ndarray:
         """Per owned cell: min over corners of det(current) / det(reference)."""
@@ -195,14 +198,31 @@ def _det(columns: list[np.ndarray]) -> np.ndarray:
     return ax * (by * cz - bz * cy) - ay * (bx * cz - bz * cx) + az * (bx * cy - by * cx)
 
 
-def _facet_geometry(start: np.ndarray, end: np.ndarray):
-    """Centres, outward unit normals and lengths of 2D facets start -> end (normal (t_y, -t_x),
-    outward as :func:`~dolfinx_mortar.surface.extract_surface` orients them)."""
-    tangent = end - start
-    length = np.linalg.norm(tangent, axis=1)
-    normal = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
-    normal /= np.where(length > 0, length, 1.0)[:, None]
-    return 0.5 * (start + end), normal, length
+def _facet_geometry(x: np.ndarray, facets: np.ndarray):
+    """Centres, outward unit normals and sizes of the facets (rows of node indices into
+    ``x``): 2D segments start -> end (normal (t_y, -t_x), outward as
+    :func:`~dolfinx_mortar.surface.extract_surface` orients them) of their length; 3D
+    triangles and quadrilaterals (normal at the centre) of their mean edge length."""
+    corners = np.asarray(x, dtype=np.float64)[facets]
+    centre = corners.mean(axis=1)
+    if corners.shape[0] == 0:
+        return centre, np.zeros_like(centre), np.zeros(0)
+    edges = np.roll(corners, -1, axis=1) - corners
+    if corners.shape[2] == 2:
+        tangent = edges[:, 0]
+        size = np.linalg.norm(tangent, axis=1)
+        normal = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
+        normal /= np.where(size > 0, size, 1.0)[:, None]
+        return centre, normal, size
+    size = np.linalg.norm(edges, axis=2).mean(axis=1)
+    return (
+        centre,
+        facet_normals(
+            corners.reshape(-1, 3),
+            np.arange(corners.shape[0] * corners.shape[1]).reshape(corners.shape[:2]),
+        ),
+        size,
+    )
 
 
 @dataclasses.dataclass
@@ -222,8 +242,13 @@ class Facing:
         return self.facets_compared > 0 and 2 * self.facets_looking_away > self.facets_compared
 
 
-def facing_report(comm: MPI.Intracomm, slave_x: np.ndarray, slave_facets: np.ndarray,
-                  master_x: np.ndarray, master_facets: np.ndarray) -> Facing:
+def facing_report(
+    comm: MPI.Intracomm,
+    slave_x: np.ndarray,
+    slave_facets: np.ndarray,
+    master_x: np.ndarray,
+    master_facets: np.ndarray,
+) -> Facing:
     """Collective: do the slave and the master surface face each other where they are closest?
 
     Contact needs opposed outward normals (the kernels pair only facets with
@@ -233,10 +258,8 @@ def facing_report(comm: MPI.Intracomm, slave_x: np.ndarray, slave_facets: np.nda
     can then never become active, and the bodies pass through each other.
     Surfaces in contact at an angle (cosine near 0) are not flagged.
     """
-    s_centre, s_normal, s_length = _facet_geometry(slave_x[slave_facets[:, 0]],
-                                                   slave_x[slave_facets[:, 1]])
-    m_centre, m_normal, _ = _facet_geometry(master_x[master_facets[:, 0]],
-                                            master_x[master_facets[:, 1]])
+    s_centre, s_normal, s_length = _facet_geometry(slave_x, slave_facets)
+    m_centre, m_normal, _ = _facet_geometry(master_x, master_facets)
     m_centre = np.vstack(comm.allgather(m_centre))
     m_normal = np.vstack(comm.allgather(m_normal))
     total_length = comm.allreduce(np.array([s_length.sum(), s_length.size]), op=MPI.SUM)
@@ -269,10 +292,16 @@ class Penetration:
     """"slave" (slave nodes behind the master surface) or "master" (the reverse)."""
 
 
-def penetration_report(comm: MPI.Intracomm, threshold: float,
-                       slave_ids: np.ndarray, slave_x: np.ndarray, slave_facets: np.ndarray,
-                       master_ids: np.ndarray, master_x: np.ndarray,
-                       master_facets: np.ndarray) -> Penetration:
+def penetration_report(
+    comm: MPI.Intracomm,
+    threshold: float,
+    slave_ids: np.ndarray,
+    slave_x: np.ndarray,
+    slave_facets: np.ndarray,
+    master_ids: np.ndarray,
+    master_x: np.ndarray,
+    master_facets: np.ndarray,
+) -> Penetration:
     """Collective: nodes of either surface that lie behind the other by > threshold x facet length.
 
     A node is behind a surface when the nearest facet of that surface (by
@@ -305,26 +334,25 @@ def penetration_report(comm: MPI.Intracomm, threshold: float,
 
 def _behind(comm, ids, points, x, facets, threshold) -> Penetration:
     # every facet of the other surface: a node may be behind one at any depth
-    start = np.vstack(comm.allgather(x[facets[:, 0]]))
-    end = np.vstack(comm.allgather(x[facets[:, 1]]))
+    corners = np.vstack(comm.allgather(np.asarray(x, dtype=np.float64)[facets]))
     depth = np.zeros(points.shape[0])
     deep = np.zeros(points.shape[0], dtype=bool)
-    if start.shape[0] and points.shape[0]:
-        tangent = end - start
-        centre, normal, length = _facet_geometry(start, end)
-        k = min(8, start.shape[0])
+    if corners.shape[0] and points.shape[0]:
+        nodes = corners.shape[1]
+        centre, normal, size = _facet_geometry(
+            corners.reshape(-1, corners.shape[2]),
+            np.arange(corners.shape[0] * nodes).reshape(-1, nodes),
+        )
+        k = min(8, corners.shape[0])
         _, candidates = cKDTree(centre).query(points, k=k)
         candidates = candidates.reshape(points.shape[0], k)
-        relative = points[:, None, :] - start[candidates]
-        t = np.einsum("nkc,nkc->nk", relative, tangent[candidates]) / length[candidates] ** 2
-        closest = start[candidates] + np.clip(t, 0.0, 1.0)[..., None] * tangent[candidates]
-        distance = np.linalg.norm(points[:, None, :] - closest, axis=2)
+        distance, inside = _distance_to_facets(points, corners[candidates], normal[candidates])
         best = np.argmin(distance, axis=1)
         rows = np.arange(points.shape[0])
         facet = candidates[rows, best]
-        t_best = t[rows, best]
-        depth = -np.einsum("nc,nc->n", relative[rows, best], normal[facet]) / length[facet]
-        deep = (t_best >= 0.0) & (t_best <= 1.0) & (depth > threshold)
+        relative = points - centre[facet]
+        depth = -np.einsum("nc,nc->n", relative, normal[facet]) / size[facet]
+        deep = inside[rows, best] & (depth > threshold)
     # a node on facets of several ranks is seen (and found deep) by each of them
     count = np.unique(np.concatenate(comm.allgather(np.asarray(ids)[deep]))).size
     local = (0.0, None)
@@ -336,3 +364,29 @@ def _behind(comm, ids, points, x, facets, threshold) -> Penetration:
         return Penetration()
     depth_max, where = max(gathered, key=lambda g: g[0])
     return Penetration(count=int(count), depth=depth_max, where=where)
+
+
+def _distance_to_facets(points: np.ndarray, corners: np.ndarray, normal: np.ndarray):
+    """(distance, inside) of each point (n, d) to each of its k candidate facets
+    (corners (n, k, m, d), unit normals (n, k, d)): inside when the point projects onto
+    the facet (2D: onto the segment; 3D: into the polygon in the plane of its normal),
+    the distance to that projection then, else to the nearest facet edge."""
+    p = points[:, None, None, :]
+    start = corners
+    edge = (
+        (np.roll(corners, -1, axis=2) - corners)
+        if corners.shape[2] > 2
+        else (corners[:, :, 1:] - corners[:, :, :1])
+    )
+    start = start[:, :, : edge.shape[2]]
+    length2 = np.einsum("nkec,nkec->nke", edge, edge)
+    t = np.einsum("nkec,nkec->nke", p - start, edge) / np.where(length2 > 0, length2, 1.0)
+    closest = start + np.clip(t, 0.0, 1.0)[..., None] * edge
+    to_edges = np.linalg.norm(p - closest, axis=3).min(axis=2)
+    if corners.shape[3] == 2:
+        inside = (t[:, :, 0] >= 0.0) & (t[:, :, 0] <= 1.0)
+        return to_edges, inside
+    side = np.einsum("nkec,nkc->nke", np.cross(edge, p - start), normal)
+    inside = np.all(side >= 0.0, axis=2)
+    plane = np.abs(np.einsum("nkc,nkc->nk", points[:, None, :] - corners.mean(axis=2), normal))
+    return np.where(inside, plane, to_edges), inside

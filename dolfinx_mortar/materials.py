@@ -1,4 +1,5 @@
-"""Strain energies and residual forms of plane-strain bodies in UFL (total Lagrangian).
+"""Strain energies and residual forms of 2D (plane strain) and 3D bodies in UFL (total
+Lagrangian).
 
 Each function returns the first Piola-Kirchhoff stress P(u) of a material;
 :func:`residual` turns a list of (stress, cells) into the weak form
@@ -17,8 +18,8 @@ import ufl
 class Material:
     """Young's modulus and Poisson's ratio of one body, and its model.
 
-    model: ``neo-hookean`` (compressible, W = mu/2 (I1 - 2 - 2 ln J) +
-    lambda/2 (ln J)^2 in plane strain), ``saint-venant-kirchhoff``
+    model: ``neo-hookean`` (compressible, W = mu/2 (I1 - d - 2 ln J) +
+    lambda/2 (ln J)^2 in dimension d), ``saint-venant-kirchhoff``
     (W = mu E:E + lambda/2 tr(E)^2), or ``linear`` (small strain).
     """
 
@@ -55,7 +56,8 @@ def neo_hookean_stress(u, mu: float, lmbda: float):
     F = ufl.variable(deformation_gradient(u))
     J = ufl.det(F)
     C = F.T * F
-    energy = 0.5 * mu * (ufl.tr(C) - 2.0 - 2.0 * ufl.ln(J)) + 0.5 * lmbda * ufl.ln(J) ** 2
+    dim = len(u)
+    energy = 0.5 * mu * (ufl.tr(C) - dim - 2.0 * ufl.ln(J)) + 0.5 * lmbda * ufl.ln(J) ** 2
     return ufl.diff(energy, F)
 
 

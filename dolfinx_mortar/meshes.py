@@ -588,6 +588,86 @@ def patch_test(
     return _tagged(data, markers, aliases, h_contact)
 
 
+CELL_TYPES_3D = ("tetrahedron", "hexahedron")
+"""Accepted values of :func:`patch_test_3d`'s ``cell_type``."""
+
+
+def patch_test_3d(
+    ratio: Sequence[int] = (3, 2),
+    slave: str = "top",
+    refinement: int = 0,
+    cell_type: str = "hexahedron",
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> TaggedMesh:
+    """3D contact patch test: a punch [0, 1]^2 x [0.5, 1] stacked on a foundation
+    [0, 1]^2 x [0, 0.5] (benchmarks.md, section 6).
+
+    Both blocks are structured boxes (``dolfinx.mesh.create_box``; tetrahedra split
+    each hexahedron into six) with the same footprint, so a uniform pressure on the
+    punch top passes through the interface as a uniform state. Across the interface
+    the punch has n_punch = ratio[0] * 2**refinement elements per side and the
+    foundation n_foundation = ratio[1] * 2**refinement; each block has
+    max(1, n // 2) elements through its height.
+
+    Args:
+        ratio: (n_punch, n_foundation) at refinement 0, integers >= 1.
+        slave: "top" makes the punch bottom the slave surface, "bottom" the foundation top.
+        refinement: Doubles the element counts per level.
+        cell_type: "tetrahedron" or "hexahedron".
+        comm: Communicator of the mesh.
+
+    Returns:
+        The mesh with cells "punch", "foundation" and facets "punch_contact",
+        "punch_top", "foundation_contact", "foundation_bottom"; ``h_contact`` is the
+        slave's element size.
+    """
+    import numpy as np
+
+    from .bodies import merge_meshes
+
+    n_punch, n_foundation = _check_ratio(ratio)
+    level = _check_refinement(refinement)
+    if cell_type not in CELL_TYPES_3D:
+        raise ValueError(f"cell_type must be one of {CELL_TYPES_3D}, got {cell_type!r}")
+    if slave not in ("top", "bottom"):
+        raise ValueError(f"slave must be 'top' or 'bottom', got {slave!r}")
+    n_punch *= 2**level
+    n_foundation *= 2**level
+    kind = getattr(dolfinx.mesh.CellType, cell_type)
+
+    def box(z0: float, n: int) -> dolfinx.mesh.Mesh:
+        return dolfinx.mesh.create_box(
+            comm, [[0.0, 0.0, z0], [1.0, 1.0, z0 + 0.5]], [n, n, max(1, n // 2)], kind
+        )
+
+    tagged = merge_meshes(
+        {
+            "punch": (
+                box(0.5, n_punch),
+                {
+                    "contact": lambda x: np.isclose(x[2], 0.5),
+                    "top": lambda x: np.isclose(x[2], 1.0),
+                },
+            ),
+            "foundation": (
+                box(0.0, n_foundation),
+                {
+                    "contact": lambda x: np.isclose(x[2], 0.5),
+                    "bottom": lambda x: np.isclose(x[2], 0.0),
+                },
+            ),
+        },
+        comm,
+    )
+    sides = ("punch_contact", "foundation_contact")
+    if slave == "bottom":
+        sides = sides[::-1]
+    tagged.markers["contact_slave"] = tagged.markers[sides[0]]
+    tagged.markers["contact_master"] = tagged.markers[sides[1]]
+    tagged.h_contact = 1.0 / (n_punch if slave == "top" else n_foundation)
+    return tagged
+
+
 def ironing(
     refinement: int = 0,
     cell_type: str = "triangle",
@@ -816,6 +896,7 @@ def tied_blocks(
 BUILDERS: dict[str, Callable[..., TaggedMesh]] = {
     "hertz": hertz,
     "patch_test": patch_test,
+    "patch_test_3d": patch_test_3d,
     "ironing": ironing,
     "rings": rings,
     "tied_blocks": tied_blocks,
@@ -855,11 +936,17 @@ def _main(argv: Sequence[str] | None = None) -> None:
     )
     parser.add_argument("name", choices=sorted(BUILDERS))
     parser.add_argument("--refinement", type=int, default=0)
-    parser.add_argument("--cell-type", default="triangle", choices=CELL_TYPES)
+    parser.add_argument(
+        "--cell-type",
+        choices=CELL_TYPES + CELL_TYPES_3D,
+        help="default: triangle in 2D, hexahedron in 3D",
+    )
     parser.add_argument("--case", default="B", choices=HERTZ_CASES, help="hertz only")
     parser.add_argument("--output", required=True, type=pathlib.Path, help="an .xdmf file")
     args = parser.parse_args(argv)
-    options = {"refinement": args.refinement, "cell_type": args.cell_type}
+    options = {"refinement": args.refinement}
+    if args.cell_type is not None:
+        options["cell_type"] = args.cell_type
     if args.name == "hertz":
         options["case"] = args.case
     try:

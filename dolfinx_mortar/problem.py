@@ -188,11 +188,6 @@ class ContactProblem:
             if value is not None and not value > 0:
                 raise ValueError(f"{name} must be positive, got {value}")
 
-        if u.function_space.mesh.geometry.dim != 2:
-            raise NotImplementedError(
-                "3D contact problems are not yet supported by ContactProblem (2D meshes "
-                "only); the 3D mortar quantities are available through MortarInterface, "
-                "and MeshTying ties 3D meshes")
         self.u = u
         self.V = u.function_space
         self.comm: MPI.Intracomm = self.V.mesh.comm
@@ -639,7 +634,7 @@ class ContactProblem:
         interface = self.interfaces[k]
         q = interface.quantities
         if q is None:
-            return np.zeros(2), np.zeros(2)
+            return np.zeros(interface.gdim), np.zeros(interface.gdim)
         rows = interface._rows(q)
         z_pair = interface.node_values(self.multipliers[k])[interface.pair_slave_nodes[rows]]
         coefficients = interface._force_coefficient_values(q, rows)  # -Dn (slave), Mn (master)

@@ -1,0 +1,304 @@
+"""ContactProblem in 3D: patch tests, a curved punch (semismooth Newton, c_n, linear
+solvers, serial = parallel), the exact Jacobian of the whole system, diagnostics."""
+
+from __future__ import annotations
+
+import importlib.util
+import pathlib
+import warnings
+
+import dolfinx
+import numpy as np
+import pytest
+import ufl
+from mpi4py import MPI
+
+from dolfinx_mortar import compat, meshes
+from dolfinx_mortar.loading import solve_load_steps
+from dolfinx_mortar.materials import Material, internal_work
+from dolfinx_mortar.problem import ContactPair, ContactProblem, ContactWarning
+
+DEMOS = pathlib.Path(__file__).parents[1] / "demos"
+CELLS = ("tetrahedron", "hexahedron")
+
+
+def patch_test(*args, comm=MPI.COMM_SELF) -> dict:
+    spec = importlib.util.spec_from_file_location("demo_patch_test", DEMOS / "patch_test.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.main(["--dim", "3", *args], comm=comm)
+
+
+def assert_exact(summary: dict, tolerance: float = 1e-10) -> None:
+    assert summary["converged"]
+    assert summary["max_pressure_deviation_rel"] <= tolerance, summary
+    assert summary["max_stress_deviation_rel"] <= tolerance, summary
+    slave, master = np.array(summary["slave_force"]), np.array(summary["master_force"])
+    # the master pushes the slave away from it: up on the punch, down on the foundation
+    sign = 1.0 if summary["slave"] == "top" else -1.0
+    expected = np.array([0.0, 0.0, sign * summary["total_force_expected"]])
+    assert np.abs(slave - expected).max() <= tolerance * abs(expected[2])
+    assert np.abs(slave + master).max() <= tolerance * abs(expected[2])
+
+
+@pytest.mark.parametrize("cell", CELLS)
+@pytest.mark.parametrize("ratio", ["1:1", "2:3", "3:7"])
+@pytest.mark.parametrize("slave", ["top", "bottom"])
+def test_patch_test_segment_lagrange_is_exact(cell, ratio, slave):
+    """Uniform pressure 10 through non-matching tetrahedral and hexahedral interfaces, either
+    slave side: contact pressure and sigma_zz uniform to rounding (measured <= 2e-13)."""
+    summary = patch_test("--cell", cell, "--ratio", ratio, "--slave", slave)
+    assert_exact(summary)
+    assert summary["newton_iterations"] == 1
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("cell", CELLS)
+def test_patch_test_is_exact_in_parallel(cell):
+    args = ("--cell", cell, "--ratio", "3:7", "--slave", "bottom")
+    summary = patch_test(*args, comm=MPI.COMM_WORLD)
+    assert summary["num_ranks"] == MPI.COMM_WORLD.size
+    assert_exact(summary)
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        ["--multipliers", "standard"],
+        ["--method", "penalty"],
+        ["--method", "augmented"],
+        ["--normals", "slave"],
+        ["--normals", "master"],
+        ["--active-set", "fixed-point"],
+        ["--linear-solver", "iterative"],
+        ["--condensation"],
+    ],
+)
+def test_patch_test_options_are_exact(options):
+    summary = patch_test("--cell", "tetrahedron", "--ratio", "2:3", *options)
+    assert_exact(summary)
+
+
+def test_patch_test_at_finite_strain_is_uniform():
+    """Neo-Hookean: the Cauchy pressure is uniform to rounding (its value is 10 over the
+    lateral stretch squared, not 10)."""
+    summary = patch_test("--cell", "hexahedron", "--ratio", "3:7", "--material", "neo-hookean")
+    assert summary["converged"]
+    assert summary["pressure_nonuniformity_rel"] <= 1e-10
+    assert 0.9 < summary["pressure_max"] / 10.0 < 1.0
+
+
+def curved_punch(comm, cell: str = "hexahedron", ratio=(6, 5), curvature: float = 0.1,
+                 material: str = "linear", slave: str = "top", **options):
+    """The 3D patch test's punch with a paraboloidal bottom z = 0.5 + curvature r^2 (r from
+    the axis x = y = 1/2), its top clamped and driven down by ``apply_load(t)`` = 0.02 t,
+    on the foundation clamped at its bottom: a circular contact zone that grows with t."""
+    tagged = meshes.patch_test_3d(ratio=ratio, slave=slave, cell_type=cell, comm=comm)
+    mesh, markers = tagged.mesh, tagged.markers
+    punch = tagged.cell_tags.find(markers["punch"])
+    nodes = np.unique(compat.geometry_dofmap(mesh)[punch])
+    x = mesh.geometry.x
+    r2 = (x[nodes, 0] - 0.5) ** 2 + (x[nodes, 1] - 0.5) ** 2
+    x[nodes, 2] += curvature * r2 * (1.0 - x[nodes, 2]) / 0.5
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (3,)))
+    u = dolfinx.fem.Function(V)
+    F = internal_work(u, ufl.TestFunction(V), {0: Material(1000.0, 0.3, material)})
+    drive = dolfinx.fem.Function(V)
+    top = tagged.facet_tags.find(markers["punch_top"])
+    bottom = tagged.facet_tags.find(markers["foundation_bottom"])
+    bcs = [
+        dolfinx.fem.dirichletbc(drive, dolfinx.fem.locate_dofs_topological(V, 2, top)),
+        dolfinx.fem.dirichletbc(np.zeros(3), dolfinx.fem.locate_dofs_topological(V, 2, bottom), V),
+    ]
+    pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"],
+                       name="punch")
+    problem = ContactProblem(F, u, bcs, [pair], **options)
+
+    def apply_load(t):
+        drive.x.array.reshape(-1, 3)[:, 2] = -0.02 * t
+
+    return problem, apply_load
+
+
+def solve_curved_punch(comm=MPI.COMM_WORLD, steps: int = 2, **options) -> dict:
+    problem, apply_load = curved_punch(comm, **options)
+    records = solve_load_steps(problem, apply_load, steps)
+    coordinates, pressure = problem.gathered_pressure()
+    slave, master = problem.contact_forces()
+    result = {
+        "coordinates": coordinates,
+        "pressure": pressure,
+        "active": problem.num_active(),
+        "iterations": [r.report.iterations for r in records],
+        "residuals": [r.report.residuals for r in records],
+        "slave_force": slave,
+        "master_force": master,
+        "c_n": problem.c_n,
+    }
+    problem.destroy()
+    return result
+
+
+@pytest.fixture(scope="module")
+def curved_reference():
+    return solve_curved_punch(MPI.COMM_SELF)
+
+
+def test_curved_punch_semismooth_newton(curved_reference):
+    """A contact zone of several elements, at most 8 semismooth iterations per step,
+    quadratic at the end (linear material: one iteration once the set is right), the
+    forces in balance, the pressure positive on the active nodes."""
+    result = curved_reference
+    assert 4 <= result["active"] < result["pressure"].size
+    assert max(result["iterations"]) <= 8
+    slave, master = result["slave_force"], result["master_force"]
+    assert slave[2] > 0.1
+    assert np.abs(slave + master).max() <= 1e-10 * slave[2]
+    assert np.abs(slave[:2]).max() <= 1e-8 * slave[2]  # symmetric punch
+    assert result["pressure"].min() >= -1e-10 * result["pressure"].max()
+
+
+@pytest.mark.parametrize("factor", [1e-2, 1e2])
+def test_curved_punch_does_not_depend_on_c_n(curved_reference, factor):
+    other = solve_curved_punch(MPI.COMM_SELF, c_n=factor * curved_reference["c_n"])
+    assert other["active"] == curved_reference["active"]
+    scale = np.abs(curved_reference["pressure"]).max()
+    assert np.abs(other["pressure"] - curved_reference["pressure"]).max() <= 1e-8 * scale
+
+
+@pytest.mark.parametrize("preconditioner", ["hypre", "gamg"])
+def test_curved_punch_iterative_solver_gives_the_direct_answer(curved_reference, preconditioner):
+    options = {} if preconditioner == "hypre" else {"petsc_options": {"condensed_pc_type": "gamg"}}
+    other = solve_curved_punch(MPI.COMM_SELF, linear_solver="iterative", **options)
+    assert other["iterations"] == curved_reference["iterations"]
+    scale = np.abs(curved_reference["pressure"]).max()
+    assert np.abs(other["pressure"] - curved_reference["pressure"]).max() <= 1e-8 * scale
+
+
+@pytest.mark.parallel
+def test_curved_punch_serial_equals_parallel():
+    serial = solve_curved_punch(MPI.COMM_SELF, cell="tetrahedron")
+    parallel = solve_curved_punch(MPI.COMM_WORLD, cell="tetrahedron")
+    assert parallel["active"] == serial["active"]
+    assert parallel["iterations"] == serial["iterations"]
+    np.testing.assert_allclose(parallel["coordinates"], serial["coordinates"], atol=1e-14)
+    scale = np.abs(serial["pressure"]).max()
+    assert np.abs(parallel["pressure"] - serial["pressure"]).max() <= 1e-8 * scale
+
+
+def test_curved_punch_neo_hookean_converges_quadratically():
+    """Once the active set has settled, r_{k+1}/r_0 <= 10 (r_k/r_0)^2 (measured on both
+    steps: 0.039 -> 5.5e-6 -> 2.5e-12 after the set changed at the second iteration)."""
+    result = solve_curved_punch(MPI.COMM_SELF, material="neo-hookean", cell="tetrahedron")
+    assert max(result["iterations"]) <= 8
+    for residuals in result["residuals"]:
+        q = np.array(residuals) / residuals[0]
+        # the tail after the last rise of the residual (the last change of the active set)
+        rises = np.flatnonzero(np.diff(q) > 0)
+        tail = slice(rises[-1] + 1 if rises.size else 0, None)
+        q, r = q[tail], np.array(residuals)[tail]
+        asymptotic = [(a, b) for a, b, rb in zip(q[:-1], q[1:], r[1:], strict=True)
+                      if a < 0.1 and rb > 1e-11]
+        assert asymptotic, residuals
+        for a, b in asymptotic:
+            assert b <= 10.0 * a**2, residuals
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("normals", ["averaged", "slave", "master"])
+@pytest.mark.parametrize("method", ["lagrange", "penalty"])
+def test_contact_jacobian_taylor(normals, method):
+    """The whole 3D contact system R(x) in a penetrating, sheared state (Neo-Hookean,
+    current configuration; every slave node 0.04 deep, so no active set changes within
+    the steps): |R(x + e h) - R(x) - e J h| = O(e^2)."""
+    problem, apply_load = curved_punch(MPI.COMM_WORLD, cell="tetrahedron", ratio=(4, 3),
+                                       curvature=0.0, material="neo-hookean", normals=normals,
+                                       method=method)
+    rng = np.random.default_rng(3 + problem.comm.rank)
+    u = problem.u
+    V = u.function_space
+    shift = dolfinx.fem.Function(V)
+    punch = dolfinx.mesh.locate_entities(V.mesh, 3, lambda x: x[2] >= 0.5 - 1e-12)
+    shift.interpolate(lambda x: np.vstack([0.01 * np.sin(3 * x[1]), 0.01 * np.cos(2 * x[0]),
+                                           -0.04 + 0.0 * x[2]]), punch)
+    u.x.array[:] = shift.x.array + 1e-3 * rng.standard_normal(u.x.array.size)
+    u.x.scatter_forward()
+    apply_load(0.0)
+    compat.set_bc_values(u, problem.bcs)
+    for z in problem.multipliers:
+        z.setArray(rng.uniform(0.5, 1.5, z.getLocalSize()))
+    problem._read_state_into_x()
+    snes = problem.snes
+    x0 = problem.x.copy()
+    r0 = problem.b.duplicate()
+    problem._residual(snes, x0, r0)
+    active = [a.copy() for a in problem.active]
+    assert problem.num_active() > 0
+    J = problem._assemble_system()
+    h = x0.duplicate()
+    h.setArray(rng.standard_normal(h.getLocalSize()))
+    h.getArray()[np.isin(np.arange(*h.getOwnershipRange()),
+                         problem.layout.u(problem._fixed_dofs))] = 0.0
+    Jh = h.duplicate()
+    J.mult(h, Jh)
+    remainders = []
+    steps = 1e-4 * 0.5 ** np.arange(5)
+    for eps in steps:
+        x = x0.copy()
+        x.axpy(eps, h)
+        r = r0.duplicate()
+        problem._residual(snes, x, r)
+        same = all(np.array_equal(a, b) for a, b in zip(active, problem.active, strict=True))
+        assert problem.comm.allreduce(same, op=MPI.LAND)
+        r.axpy(-1.0, r0)
+        r.axpy(-eps, Jh)
+        remainders.append(r.norm())
+    slope = np.polyfit(np.log(steps), np.log(remainders), 1)[0]
+    assert slope == pytest.approx(2.0, abs=0.1), remainders
+    problem.destroy()
+
+
+@pytest.mark.parallel
+def test_slave_surface_on_the_wrong_face_warns_in_3d():
+    """The punch's top tagged as the slave looks away from the foundation: a warning at set-up
+    that names the pair, and no silent pass-through."""
+    comm = MPI.COMM_WORLD
+    tagged = meshes.patch_test_3d(ratio=(3, 2), comm=comm)
+    V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (3,)))
+    u = dolfinx.fem.Function(V)
+    F = internal_work(u, ufl.TestFunction(V), {0: Material(1000.0, 0.3, "linear")})
+    markers = tagged.markers
+    wrong = ContactPair(tagged.facet_tags, markers["punch_top"], markers["foundation_contact"],
+                        name="punch")
+    with pytest.warns(ContactWarning, match=r"'punch'.*looks away from its master.*9 of 9"):
+        ContactProblem(F, u, [], [wrong]).destroy()
+    right = ContactPair(tagged.facet_tags, markers["punch_contact"],
+                        markers["foundation_contact"], name="punch")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ContactWarning)
+        ContactProblem(F, u, [], [right]).destroy()
+
+
+@pytest.mark.parallel
+def test_penetration_report_finds_nodes_behind_a_3d_surface():
+    """Foundation nodes pushed 0.3 (> half a facet) into the punch are found and located;
+    nodes beside the punch's footprint or only shallowly inside are not."""
+    comm = MPI.COMM_WORLD
+    problem, _ = curved_punch(comm, ratio=(3, 2), curvature=0.0)
+    u = problem.u
+    V = u.function_space
+    cells = dolfinx.mesh.locate_entities(V.mesh, 3, lambda x: x[2] <= 0.5 + 1e-12)
+    foundation = dolfinx.fem.locate_dofs_topological(V, 3, cells)
+    x = V.tabulate_dof_coordinates()
+    blocks = foundation[np.isclose(x[foundation, 2], 0.5)]
+    centre = blocks[np.isclose(x[blocks, 0], 0.5) & np.isclose(x[blocks, 1], 0.5)]
+    values = u.x.array.reshape(-1, 3)
+    values[blocks, 2] = 0.05
+    values[centre, 2] = 0.3
+    u.x.scatter_forward()
+    with pytest.warns(ContactWarning, match=r"1 master node\(s\) ended the step behind the "
+                      r"slave surface.*\(0.5, 0.5, 0.8"):
+        reports = problem.check_penetration()
+    assert reports[0].count == 1 and reports[0].side == "master"
+    assert reports[0].depth == pytest.approx(0.3 / (1.0 / 3.0), rel=1e-12)
+    problem.destroy()
