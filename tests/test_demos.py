@@ -73,7 +73,12 @@ HELP_DEFAULTS = {
     "hertz": ["(default: B)", "(default: 8.0)", "(default: 2)"],
     "patch_test": ["(default: 3:2)", "(default: top)", "(default: lagrange)"],
     "ironing": ["(default: 500)", "(default: quadrilateral)", "(default: 2.0)"],
-    "mesh_tying": ["(default: 5)", "(default: 3:4)", "(default: smooth)"],
+    "mesh_tying": [
+        "(None: 5 in 2D, 4 in 3D)",
+        "(None: 3:4 in 2D, 2:3 in 3D)",
+        "(default: smooth)",
+        "(default: 2)",
+    ],
 }
 
 
@@ -85,6 +90,56 @@ def test_demo_help_shows_defaults_and_the_output_options(name, capsys):
     text = " ".join(capsys.readouterr().out.split())
     for option in ("--output DIR", "--json FILE", *HELP_DEFAULTS[name]):
         assert option in text, option
+
+
+@pytest.mark.parallel
+@pytest.mark.timeout(600)
+@pytest.mark.parametrize("cell", ["tetrahedron", "hexahedron"])
+def test_mesh_tying_3d_serial_equals_parallel(cell):
+    """Two 3D meshes, 2:3 and 4:6 elements per unit length: 3 (n + 1)^2 (round(n/2) + 1)
+    displacements per box (3 (9 * 2 + 16 * 3) = 198, 3 (25 * 3 + 49 * 4) = 813) and one
+    multiplier per slave node, 4^2 and 7^2; N ranks give the serial errors and rates."""
+    args = ["--dim", "3", "--cell", cell, "--refinements", "2"]
+    module = load("mesh_tying")
+    serial = module.main(list(args), comm=MPI.COMM_SELF)
+    parallel = module.main(list(args), comm=MPI.COMM_WORLD)
+    json.dumps(parallel)
+    for summary in (serial, parallel):
+        assert [r["num_dofs"] for r in summary["runs"]] == [198, 813]
+        assert [r["num_multipliers"] for r in summary["runs"]] == [16, 49]
+    for key in ("l2_rate", "h1_rate", "max_l2_error", "max_h1_error"):
+        assert_close(serial[key], parallel[key], key)
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("basis", ["standard", "dual"])
+@pytest.mark.parametrize("cell", ["tetrahedron", "hexahedron"])
+def test_mesh_tying_3d_reproduces_a_linear_field(cell, basis):
+    """The demo's 3D patch test: P1 reproduces a linear field, so the tied solution is exact."""
+    summary = load("mesh_tying").main(
+        [
+            *("--dim", "3", "--cell", cell, "--basis", basis),
+            *("--solution", "linear", "--refinements", "2", "--ratio", "3:4"),
+        ]
+    )
+    assert summary["max_l2_error"] < 1e-12
+    assert summary["max_h1_error"] < 1e-11
+
+
+@pytest.mark.parametrize(
+    "option",
+    [
+        ["--dim", "3", "--cell", "triangle"],
+        ["--cell-type", "hexahedron"],
+        ["--dim", "3", "--ratio", "0:3"],
+    ],
+)
+def test_mesh_tying_demo_rejects_bad_3d_input(option, capsys):
+    """A cell of the other dimension or an empty block is a usage error, not a traceback."""
+    with pytest.raises(SystemExit) as exit_info:
+        load("mesh_tying").main(option, comm=MPI.COMM_SELF)
+    assert exit_info.value.code == 2
+    assert option[-2] in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(
@@ -192,6 +247,22 @@ def test_demo_outputs(tmp_path):
     assert rows[0].split(",")[:2] == ["refinement", "h"] and len(rows) == 3
     assert (tying / "mesh_tying_convergence.png").stat().st_size > 1000
     assert (tying / "paraview" / "displacement.bp").exists()
+
+    tying3d = tmp_path / "tying3d"
+    load("mesh_tying").main(
+        [
+            *("--dim", "3", "--refinements", "2"),
+            *("--output", str(tying3d), "--json", str(tying3d / "tying.json")),
+        ],
+        comm=MPI.COMM_SELF,
+    )
+    summary = json.loads((tying3d / "tying.json").read_text())
+    assert summary["dim"] == 3 and summary["cell_type"] == "tetrahedron"
+    assert {"l2_rate", "h1_rate", "max_l2_error"} <= set(summary)
+    rows = (tying3d / "mesh_tying_errors.csv").read_text().splitlines()
+    assert rows[0].split(",")[:2] == ["refinement", "h"] and len(rows) == 3
+    assert (tying3d / "mesh_tying_convergence.png").stat().st_size > 1000
+    assert (tying3d / "paraview" / "displacement.bp").exists()
 
 
 @pytest.mark.parallel

@@ -47,3 +47,20 @@ def test_linear_field_is_reproduced_on_non_matching_blocks(cell, basis):
     error = mesh.comm.allreduce(np.abs(uh.x.array - exact.x.array).max(), op=MPI.MAX)
     assert error < 1e-12
     assert tying.interface.num_global_multipliers == 5 * 5  # the slave grid's nodes
+
+
+def test_mumps_options_reach_the_factor():
+    """mat_mumps_* options (ours and the user's) are set on the factor, which exists only
+    once the KSP is set up: the 3D saddle point needs a larger workspace (ICNTL(14))."""
+    tagged = two_blocks("hexahedron", 2, 3, gap=0.0, comm=MPI.COMM_SELF)
+    V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (3,)))
+    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+    a = ufl.inner(ufl.grad(u), ufl.grad(v)) * ufl.dx
+    L = ufl.inner(dolfinx.fem.Constant(tagged.mesh, np.zeros(3)), v) * ufl.dx
+    bottom = dolfinx.mesh.locate_entities_boundary(tagged.mesh, 2, lambda x: np.isclose(x[2], 0))
+    bc = dolfinx.fem.dirichletbc(np.zeros(3), dolfinx.fem.locate_dofs_topological(V, 2, bottom), V)
+    markers = (tagged.markers["upper_bottom"], tagged.markers["lower_top"])
+    for options, expected in (({}, 200), ({"mat_mumps_icntl_14": 300}, 300)):
+        uh = dolfinx.fem.Function(V)
+        tying = MeshTying(a, L, uh, [bc], tagged.facet_tags, *markers, petsc_options=options)
+        assert tying.solver.getPC().getFactorMatrix().getMumpsIcntl(14) == expected
