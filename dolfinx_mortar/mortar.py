@@ -153,10 +153,6 @@ class MortarInterface:
         if self.gdim == 3:
             from .kernels import surface3
 
-            if integration not in surface3.INTEGRATION_OPTIONS:
-                raise NotImplementedError(
-                    f"integration={integration!r} is not available in 3D yet; "
-                    f"use one of {surface3.INTEGRATION_OPTIONS}")
             self.num_gauss_points = num_gauss_points or surface3.DEFAULT_GAUSS_POINTS
         if search_margin is None:
             corners = self.slave.reference_coordinates[self.slave.facets]

@@ -182,3 +182,79 @@ def test_degenerate_geometry_is_finite_and_continuous(case):
                              master + 1e-12 * rng.uniform(-1, 1, master.shape), basis=basis)
         assert np.abs(perturbed.D - q.D).max() < 1e-9
         assert np.abs(perturbed.M - q.M).max() < 1e-9
+
+
+def covering_pair(rng, ns, nm):
+    """A perturbed slave facet and a tilted, perturbed master facet that covers it whole."""
+    slave, _, normals = random_pair(rng, ns, nm)
+    master = (master_square(-0.5, 1.5, -0.5, 1.5) if nm == 4
+              else np.array([[-0.5, -0.5, -0.1], [2.5, -0.5, -0.1], [-0.5, 2.5, -0.1]]))
+    master = master + 0.05 * rng.uniform(-1, 1, master.shape)
+    return slave, master, normals
+
+
+@pytest.mark.parametrize("shapes", [(3, 3), (4, 4), (3, 4), (4, 3)])
+@pytest.mark.parametrize("normals", ["averaged", "slave", "master"])
+@pytest.mark.parametrize("basis", ["standard", "dual"])
+def test_element_based_taylor(shapes, normals, basis):
+    ns, nm = shapes
+    rng = np.random.default_rng(ns * 10 + nm + 1)
+    slave, master, nodal = covering_pair(rng, ns, nm)
+    x = np.concatenate([slave.ravel(), master.ravel(), nodal.ravel()])
+    direction = rng.uniform(-1, 1, x.size)
+
+    def quantities(values):
+        return surface3.pair_quantities(
+            values[:3 * ns].reshape(1, ns, 3), values[3 * ns:3 * (ns + nm)].reshape(1, nm, 3),
+            values[3 * (ns + nm):].reshape(1, ns, 3), normals=normals, basis=basis,
+            integration="element")
+
+    base = quantities(x)
+    assert base.overlap[0] == 1.0
+    gradient = np.concatenate([item.grad.reshape(-1, x.size)
+                               for item in (base.Dn, base.Mn, base.gap, base.area)])
+    predicted = gradient @ direction
+    assert np.abs(predicted).max() > 1e-3
+    steps = np.array([1e-2, 5e-3, 2.5e-3, 1.25e-3])
+    remainders = [np.abs(outputs(quantities(x + h * direction)) - outputs(base)
+                         - h * predicted).max() for h in steps]
+    slopes = np.diff(np.log(remainders)) / np.diff(np.log(steps))
+    assert np.all(np.abs(slopes - 2.0) < 0.1), slopes
+
+
+@pytest.mark.parametrize("shapes", [(3, 3), (4, 4), (3, 4), (4, 3)])
+@pytest.mark.parametrize("basis", ["standard", "dual"])
+def test_element_based_equals_segment_based_under_one_master_facet(shapes, basis):
+    """A flat slave facet wholly inside one parallel master facet: the integrands are
+    polynomials the slave rule integrates exactly, so both integrations agree."""
+    ns, nm = shapes
+    slave = SLAVE_QUAD if ns == 4 else SLAVE_TRIANGLE
+    master = (master_square(-0.5, 1.5, -0.5, 1.5) if nm == 4
+              else np.array([[-0.5, -0.5, -0.1], [2.5, -0.5, -0.1], [-0.5, 2.5, -0.1]]))
+    segment = evaluate(slave, master, basis=basis)
+    element = evaluate(slave, master, basis=basis, integration="element")
+    for name in ("D", "M"):
+        np.testing.assert_allclose(getattr(element, name), getattr(segment, name), atol=1e-14)
+    for name in ("gap", "area", "Dn", "Mn"):
+        np.testing.assert_allclose(getattr(element, name).value, getattr(segment, name).value,
+                                   atol=1e-14)
+
+
+@pytest.mark.parametrize("basis", ["standard", "dual"])
+def test_element_based_gives_each_gauss_point_to_one_master_facet(basis):
+    """Two master squares meeting at x = 1/2, where the middle row of the slave's 3 x 3
+    Gauss points lies: summed over both pairs, D is the whole facet's (each point counted
+    once) and the weighted gap is 0.1 times the area; the overlaps add up to 1."""
+    left, right = master_square(-0.5, 0.5, -0.5, 1.5), master_square(0.5, 1.5, -0.5, 1.5)
+    slave = np.stack([SLAVE_QUAD, SLAVE_QUAD])
+    normals = np.tile(DOWN, (2, 4, 1))
+    options = {"basis": basis, "integration": "element", "num_gauss_points": 9}
+    both = surface3.pair_quantities(slave, np.stack([left, right]), normals,
+                                    slave_facet=np.array([0, 0]), **options)
+    whole = evaluate(SLAVE_QUAD, master_square(-0.5, 1.5, -0.5, 1.5), **options)
+    np.testing.assert_allclose(both.D.sum(axis=0), whole.D[0], atol=1e-15)
+    assert both.overlap.sum() == pytest.approx(1.0, abs=1e-15)
+    np.testing.assert_allclose(both.gap.value.sum(axis=0), 0.1 * whole.area.value[0],
+                               atol=1e-15)
+    alone = surface3.pair_quantities(slave, np.stack([left, right]), normals, **options)
+    assert alone.overlap.sum() > 1.0  # without the facet numbers the middle row counts twice

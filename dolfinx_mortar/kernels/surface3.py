@@ -1,4 +1,4 @@
-"""3D mortar kernel: triangle and quadrilateral facets, segment-based integration.
+"""3D mortar kernel: triangle and quadrilateral facets, segment- and element-based integration.
 
 Per candidate pair (Puso and Laursen 2004; Popp, Gee and Wall 2009):
 
@@ -16,6 +16,13 @@ Per candidate pair (Puso and Laursen 2004; Popp, Gee and Wall 2009):
    bilinear quadrilaterals);
 5. D, M, Dn, Mn, the nodal areas and the weighted gaps integrated with the
    cell areas in the plane as weights.
+
+Element-based integration (``integration="element"``) instead takes the
+Gauss points of the slave facet, projects each along the normal field onto
+the master facet (closed form for triangles, Newton for quadrilaterals) and
+keeps the points that land on it; each point goes to one master facet only
+(the one it lands on most centrally), as in 2D. Cheaper, never exact in
+the patch test.
 
 Derivatives are exact: the clip topology (the labels) is decided on values;
 then every position is recomputed from the labels in forward-mode dual
@@ -41,7 +48,7 @@ from .. import dual
 from ..dual import Dual
 
 NORMAL_OPTIONS = ("averaged", "slave", "master")
-INTEGRATION_OPTIONS = ("segment",)
+INTEGRATION_OPTIONS = ("segment", "element")
 BASIS_OPTIONS = ("standard", "dual")
 
 _FACING_TOLERANCE = 1e-8
@@ -315,23 +322,27 @@ def pair_quantities(
         slave_normals: (n, ns, 3) unit nodal normals at the slave nodes (used with
             ``normals="averaged"``).
         normals, basis: as in 2D.
-        integration: ``segment`` (element-based integration is not built in 3D yet).
-        num_gauss_points: points of the triangle rule per integration cell: 1, 3 or 7.
+        integration: ``segment`` or ``element`` (module docstring).
+        num_gauss_points: points of the triangle rule per integration cell (segment)
+            or per slave triangle (element): 1, 3 or 7; a slave quadrilateral
+            (element) takes 1, 4 or 9 (3 and 7 are read as 4 and 9).
         crosspoint: (n, ns) slave nodes without a multiplier: their basis
             function is shared equally by the facet's other nodes. A facet whose
             nodes are all crosspoints (prescribed everywhere) has no multiplier
             and contributes nothing.
-        slave_facet: unused by segment-based integration (the interface passes it).
+        slave_facet: (n,) the slave facet of each pair: element-based integration
+            gives each of its Gauss points to one master facet (default: every
+            pair a facet of its own). Unused by segment-based integration.
     """
     if normals not in NORMAL_OPTIONS:
         raise ValueError(f"unknown normal option {normals!r}; expected one of {NORMAL_OPTIONS}")
     if basis not in BASIS_OPTIONS:
         raise ValueError(f"unknown multiplier basis {basis!r}; expected one of {BASIS_OPTIONS}")
-    if integration != "segment":
-        raise NotImplementedError(
-            "element-based integration is not available in 3D yet; use integration='segment'")
+    if integration not in INTEGRATION_OPTIONS:
+        raise ValueError(
+            f"unknown integration {integration!r}; expected one of {INTEGRATION_OPTIONS}")
     rule = num_gauss_points or DEFAULT_GAUSS_POINTS
-    if rule not in _TRIANGLE_RULES:
+    if integration == "segment" and rule not in _TRIANGLE_RULES:
         raise ValueError(f"3D segments take 1, 3 or 7 Gauss points per cell, got {rule}")
     slave_x = np.asarray(slave_x, dtype=np.float64)
     master_x = np.asarray(master_x, dtype=np.float64)
@@ -353,11 +364,23 @@ def pair_quantities(
     }
     valid = np.zeros(n, dtype=bool)
     overlap = np.zeros(n)
+    on_master = None
+    if integration == "element":
+        points, point_weights = _facet_rule(ns, rule)
+        on_master = _element_points_on_master(
+            slave_x, master_x, slave_normals, normals, points,
+            np.arange(n) if slave_facet is None else np.asarray(slave_facet).reshape(-1))
     for start in range(0, n, _CHUNK):
         stop = min(n, start + _CHUNK)
-        part = _integrate(slave_x[start:stop], master_x[start:stop],
-                          slave_normals[start:stop], crosspoint[start:stop],
-                          normals, basis, rule)
+        if on_master is None:
+            part = _integrate(slave_x[start:stop], master_x[start:stop],
+                              slave_normals[start:stop], crosspoint[start:stop],
+                              normals, basis, rule)
+        else:
+            part = _integrate_element(slave_x[start:stop], master_x[start:stop],
+                                      slave_normals[start:stop], crosspoint[start:stop],
+                                      normals, basis, points, point_weights,
+                                      on_master[start:stop])
         if part is None:
             continue
         rows, quantities, fraction = part
@@ -524,6 +547,199 @@ def _integrate(slave_x, master_x, slave_normals, crosspoint, normals, basis, rul
            - dual.sum_(dual.sum_(Dn * _expand(xs, 1), axis=-1), axis=-1))
     quantities = {"D": D, "M": M, "Dn": Dn, "Mn": Mn, "gap": gap, "area": area}
     return rows, quantities, clip_area[rows] / slave_area[rows]
+
+
+# -- element-based integration ------------------------------------------------------------
+
+
+def _facet_rule(nodes: int, rule: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss points (q, 2) and weights of the slave reference facet (triangle: the
+    symmetric rules of 1, 3 or 7 points, weights summing to its area 1/2;
+    quadrilateral: 1, 2 x 2 or 3 x 3 Gauss-Legendre, weights summing to 4)."""
+    if nodes == 3:
+        if rule not in _TRIANGLE_RULES:
+            raise ValueError(f"element-based triangles take 1, 3 or 7 Gauss points, got {rule}")
+        bary, weights = _TRIANGLE_RULES[rule]
+        return bary[:, 1:].copy(), 0.5 * weights
+    per_direction = {1: 1, 3: 2, 4: 2, 7: 3, 9: 3}.get(rule)
+    if per_direction is None:
+        raise ValueError(f"element-based quadrilaterals take 1, 4 or 9 Gauss points, got {rule}")
+    g, w = np.polynomial.legendre.leggauss(per_direction)
+    return (np.array([[a, b] for a in g for b in g]),
+            np.array([wa * wb for wa in w for wb in w]))
+
+
+def _interpolate(corners: Dual, N) -> Dual:
+    """sum_k N_k corners_k for corners (n, k, 3) and N_k (n, q) or (q,) -> (n, q, 3)."""
+    total = None
+    for k, Nk in enumerate(N):
+        Nk = np.asarray(Nk) if not isinstance(Nk, Dual) else Nk
+        term = _expand(corners[:, k], 1) * (Nk[..., None] if not isinstance(Nk, Dual)
+                                            else _expand(Nk, -1))
+        total = term if total is None else total + term
+    return total
+
+
+def _project_onto_master(point: Dual, direction: Dual, xm: Dual, nm: int):
+    """(eta (n, q, 2), alpha (n, q)) with sum_l Nm_l(eta) xm_l = point + alpha direction:
+    Newton on values (one step for triangles, whose map is linear), then one step in
+    dual arithmetic at the root for the derivatives (implicit function theorem)."""
+    c = xm.value  # (n, nm, 3)
+    p, d = point.value, direction.value
+    eta = np.zeros(p.shape[:-1] + (2,)) + (1.0 / 3.0 if nm == 3 else 0.0)
+    alpha = np.zeros(p.shape[:-1])
+
+    def jacobian(eta):
+        dN = _shape_derivatives(eta, nm)  # (n, q, nm, 2)
+        tangents = np.einsum("nqkd,nkc->nqcd", dN, c)
+        return np.concatenate([tangents, -d[..., None]], axis=-1)  # (n, q, 3, 3)
+
+    for _ in range(1 if nm == 3 else 30):
+        N = np.stack([np.asarray(v) for v in shape_functions(eta, nm)], axis=-1)
+        residual = np.einsum("nqk,nkc->nqc", N, c) - p - alpha[..., None] * d
+        J = jacobian(eta)
+        singular = np.abs(np.linalg.det(J)) <= 1e-300
+        J[singular] = np.eye(3)
+        step = np.linalg.solve(J, residual[..., None])[..., 0]
+        eta = eta - step[..., :2]
+        alpha = alpha - step[..., 2]
+        if np.all(np.abs(step) < 1e-15 * (1.0 + np.abs(np.concatenate(
+                [eta, alpha[..., None]], axis=-1)))):
+            break
+    N = shape_functions(eta, nm)
+    F = _interpolate(xm, N) - point - direction * _expand(
+        Dual(alpha, np.zeros(alpha.shape + (point.grad.shape[-1],))), -1)
+    J = jacobian(eta)
+    J[np.abs(np.linalg.det(J)) <= 1e-300] = np.eye(3)
+    inverse = np.linalg.inv(J)
+    correction = Dual(np.einsum("...cd,...d->...c", inverse, F.value),
+                      np.einsum("...cd,...dv->...cv", inverse, F.grad))
+    unknowns = Dual(np.concatenate([eta, alpha[..., None]], axis=-1),
+                    np.zeros(eta.shape[:-1] + (3, point.grad.shape[-1])))
+    solution = unknowns - correction
+    return solution[..., :2], solution[..., 2]
+
+
+def _element_geometry(slave_x, master_x, slave_normals, normals, points):
+    """Values only: (eta (n, q, 2), facing (n,)) of every pair's slave Gauss points."""
+    n, ns, _ = slave_x.shape
+    nm = master_x.shape[1]
+    xs, xm, nodal = (Dual(a, np.zeros(a.shape + (0,))) for a in (slave_x, master_x,
+                                                                  slave_normals))
+    node_normals = _normal_field(xs, xm, nodal, normals, ns, nm)
+    N = [np.broadcast_to(v, (n, points.shape[0])) for v in shape_functions(points, ns)]
+    point = _interpolate(xs, N)
+    direction = _interpolate(node_normals, N)
+    eta, _ = _project_onto_master(point, direction, xm, nm)
+    n0 = node_normals.value.sum(axis=1)
+    master_normal = _master_normal(master_x)
+    facing = np.einsum("ij,ij->i", n0, master_normal) < -_FACING_TOLERANCE * np.linalg.norm(
+        n0, axis=1)
+    return eta.value, facing
+
+
+def _master_normal(master_x: np.ndarray) -> np.ndarray:
+    if master_x.shape[1] == 4:
+        v = np.cross(master_x[:, 2] - master_x[:, 0], master_x[:, 3] - master_x[:, 1])
+    else:
+        v = np.cross(master_x[:, 1] - master_x[:, 0], master_x[:, 2] - master_x[:, 0])
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def _outside(eta: np.ndarray, nodes: int) -> np.ndarray:
+    """How far reference points lie outside the facet (<= 0 inside; smaller = more central)."""
+    if nodes == 3:
+        return np.max(np.stack([-eta[..., 0], -eta[..., 1], eta[..., 0] + eta[..., 1] - 1.0]),
+                      axis=0)
+    return np.max(np.abs(eta), axis=-1) - 1.0
+
+
+def _element_points_on_master(slave_x, master_x, slave_normals, normals, points, slave_facet):
+    """(n, q) mask: each Gauss point of a slave facet goes to the facing master facet it
+    lands on most centrally (within 1e-12 of its edges)."""
+    n, q = slave_x.shape[0], points.shape[0]
+    eta = np.zeros((n, q, 2))
+    facing = np.zeros(n, dtype=bool)
+    for start in range(0, n, _CHUNK):
+        stop = min(n, start + _CHUNK)
+        eta[start:stop], facing[start:stop] = _element_geometry(
+            slave_x[start:stop], master_x[start:stop], slave_normals[start:stop], normals,
+            points)
+    outside = _outside(eta, master_x.shape[1])
+    finite = np.all(np.isfinite(eta), axis=-1)
+    score = np.where((outside <= 1e-12) & finite & facing[:, None], outside, np.inf).ravel()
+    key = np.repeat(np.asarray(slave_facet, dtype=np.int64) * q, q) + np.tile(np.arange(q), n)
+    order = np.lexsort((score, key))
+    first = np.ones(order.size, dtype=bool)
+    first[1:] = key[order][1:] != key[order][:-1]
+    winner = np.zeros(order.size, dtype=bool)
+    winner[order[first]] = True
+    return (winner & np.isfinite(score)).reshape(n, q)
+
+
+def _integrate_element(slave_x, master_x, slave_normals, crosspoint, normals, basis, points,
+                       point_weights, on_master):
+    rows = np.flatnonzero(on_master.any(axis=1))
+    if rows.size == 0:
+        return None
+    slave_x, master_x, slave_normals = slave_x[rows], master_x[rows], slave_normals[rows]
+    crosspoint, on_master = crosspoint[rows], on_master[rows]
+    m, ns, _ = slave_x.shape
+    nm = master_x.shape[1]
+    nvar = 3 * (2 * ns + nm)
+    variables = Dual.variables(
+        np.concatenate([slave_x.reshape(m, -1), master_x.reshape(m, -1),
+                        slave_normals.reshape(m, -1)], axis=1))
+    xs = Dual(variables.value[:, :3 * ns].reshape(m, ns, 3),
+              variables.grad[:, :3 * ns].reshape(m, ns, 3, nvar))
+    xm = Dual(variables.value[:, 3 * ns:3 * (ns + nm)].reshape(m, nm, 3),
+              variables.grad[:, 3 * ns:3 * (ns + nm)].reshape(m, nm, 3, nvar))
+    nodal = Dual(variables.value[:, 3 * (ns + nm):].reshape(m, ns, 3),
+                 variables.grad[:, 3 * (ns + nm):].reshape(m, ns, 3, nvar))
+    node_normals = _normal_field(xs, xm, nodal, normals, ns, nm)
+    q = points.shape[0]
+    N = [np.broadcast_to(v, (m, q)) for v in shape_functions(points, ns)]
+    dN = _shape_derivatives(points, ns)  # (q, ns, 2)
+    point = _interpolate(xs, N)
+    normal_at = _interpolate(node_normals, N)
+    eta, _ = _project_onto_master(point, normal_at, xm, nm)
+    Nm = shape_functions(eta, nm)
+    t1 = _interpolate(xs, [np.broadcast_to(dN[:, k, 0], (m, q)) for k in range(ns)])
+    t2 = _interpolate(xs, [np.broadcast_to(dN[:, k, 1], (m, q)) for k in range(ns)])
+    jacobian = dual.sqrt(dual.dot(_cross(t1, t2), _cross(t1, t2)))  # (m, q)
+    W = jacobian * (point_weights[None, :] * on_master)
+
+    if basis == "dual":
+        A = _dual_coefficients(xs, ns)
+        Phi = [sum(_expand(A[:, j, k], 1) * N[k] for k in range(ns)) for j in range(ns)]
+    else:
+        Phi = [Dual(np.array(Nk), np.zeros(Nk.shape + (nvar,))) for Nk in N]
+    if crosspoint.any():
+        others = (~crosspoint).sum(axis=1)
+        shared = sum(Phi[j] * crosspoint[:, j, None].astype(float) for j in range(ns))
+        share = np.where(others > 0, 1.0 / np.maximum(others, 1), 0.0)[:, None]
+        Phi = [dual.where(np.broadcast_to(crosspoint[:, j, None], W.shape), Phi[j] * 0.0,
+                          Phi[j] + shared * share) for j in range(ns)]
+    WPhi = [W * Phi[j] for j in range(ns)]
+
+    def integral(f: Dual) -> Dual:
+        return dual.sum_(f, axis=1)
+
+    D = dual.stack([dual.stack([integral(WPhi[j] * N[k]) for k in range(ns)], axis=1)
+                    for j in range(ns)], axis=1)
+    M = dual.stack([dual.stack([integral(WPhi[j] * Nm[k]) for k in range(nm)], axis=1)
+                    for j in range(ns)], axis=1)
+    Dn = dual.stack([dual.stack([integral(_expand(WPhi[j] * N[k], -1) * normal_at)
+                                 for k in range(ns)], axis=1) for j in range(ns)], axis=1)
+    Mn = dual.stack([dual.stack([integral(_expand(WPhi[j] * Nm[k], -1) * normal_at)
+                                 for k in range(nm)], axis=1) for j in range(ns)], axis=1)
+    area = dual.stack([integral(WPhi[j]) for j in range(ns)], axis=1)
+    gap = (dual.sum_(dual.sum_(Mn * _expand(xm, 1), axis=-1), axis=-1)
+           - dual.sum_(dual.sum_(Dn * _expand(xs, 1), axis=-1), axis=-1))
+    quantities = {"D": D, "M": M, "Dn": Dn, "Mn": Mn, "gap": gap, "area": area}
+    fraction = (jacobian.value * point_weights * on_master).sum(axis=1) / (
+        jacobian.value * point_weights).sum(axis=1)
+    return rows, quantities, fraction
 
 
 def _polygon_area(points: np.ndarray) -> np.ndarray:
