@@ -45,7 +45,7 @@ import dataclasses
 import numpy as np
 
 from .. import dual
-from ..dual import Dual
+from ..dual import Dual, RowSubsetDual
 
 NORMAL_OPTIONS = ("averaged", "slave", "master")
 INTEGRATION_OPTIONS = ("segment", "element")
@@ -355,13 +355,14 @@ def pair_quantities(
     if crosspoint is None:
         crosspoint = np.zeros((n, ns), dtype=bool)
     crosspoint = np.asarray(crosspoint, dtype=bool).reshape(n, ns)
-    result = {
+    values = {
         "D": np.zeros((n, ns, ns)), "M": np.zeros((n, ns, nm)),
-        "Dn": (np.zeros((n, ns, ns, 3)), np.zeros((n, ns, ns, 3, nvar))),
-        "Mn": (np.zeros((n, ns, nm, 3)), np.zeros((n, ns, nm, 3, nvar))),
-        "gap": (np.zeros((n, ns)), np.zeros((n, ns, nvar))),
-        "area": (np.zeros((n, ns)), np.zeros((n, ns, nvar))),
+        "Dn": np.zeros((n, ns, ns, 3)), "Mn": np.zeros((n, ns, nm, 3)),
+        "gap": np.zeros((n, ns)), "area": np.zeros((n, ns)),
     }
+    names = ("Dn", "Mn", "gap", "area")
+    gradients: dict[str, list] = {name: [] for name in names}
+    all_rows = []
     valid = np.zeros(n, dtype=bool)
     overlap = np.zeros(n)
     on_master = None
@@ -385,18 +386,23 @@ def pair_quantities(
             continue
         rows, quantities, fraction = part
         rows = rows + start
+        all_rows.append(rows)
         valid[rows] = True
         overlap[rows] = fraction
-        result["D"][rows] = quantities["D"].value
-        result["M"][rows] = quantities["M"].value
-        for name in ("Dn", "Mn", "gap", "area"):
-            result[name][0][rows] = quantities[name].value
-            result[name][1][rows] = quantities[name].grad
+        for name in values:
+            values[name][rows] = quantities[name].value
+        for name in names:
+            gradients[name].append(quantities[name].grad)
+    rows = np.concatenate(all_rows) if all_rows else np.zeros(0, dtype=np.int64)
+
+    def subset(name: str) -> RowSubsetDual:
+        shape = (0,) + values[name].shape[1:] + (nvar,)
+        grads = np.concatenate(gradients[name]) if gradients[name] else np.zeros(shape)
+        return RowSubsetDual(values[name], rows, grads)
+
     return PairQuantities3(
-        D=result["D"], M=result["M"],
-        Dn=Dual(*result["Dn"]), Mn=Dual(*result["Mn"]),
-        gap=Dual(*result["gap"]), area=Dual(*result["area"]),
-        valid=valid, overlap=overlap, num_variables=nvar, slices=slices)
+        D=values["D"], M=values["M"], Dn=subset("Dn"), Mn=subset("Mn"), gap=subset("gap"),
+        area=subset("area"), valid=valid, overlap=overlap, num_variables=nvar, slices=slices)
 
 
 def _normal_field(xs: Dual, xm: Dual, nodal: Dual, normals: str, ns: int, nm: int) -> Dual:
@@ -418,9 +424,13 @@ def _normal_field(xs: Dual, xm: Dual, nodal: Dual, normals: str, ns: int, nm: in
     return dual.stack([master_normal] * ns, axis=1)
 
 
-def _integrate(slave_x, master_x, slave_normals, crosspoint, normals, basis, rule):
+def _pair_variables(slave_x, master_x, slave_normals, with_derivatives: bool = True):
+    """(xs, xm, nodal) as Duals over the pair's variables (none: values only)."""
     n, ns, _ = slave_x.shape
     nm = master_x.shape[1]
+    if not with_derivatives:
+        return tuple(Dual(a, np.zeros(a.shape + (0,))) for a in (slave_x, master_x,
+                                                                 slave_normals))
     nvar = 3 * (2 * ns + nm)
     variables = Dual.variables(
         np.concatenate([slave_x.reshape(n, -1), master_x.reshape(n, -1),
@@ -431,17 +441,16 @@ def _integrate(slave_x, master_x, slave_normals, crosspoint, normals, basis, rul
               variables.grad[:, 3 * ns:3 * (ns + nm)].reshape(n, nm, 3, nvar))
     nodal = Dual(variables.value[:, 3 * (ns + nm):].reshape(n, ns, 3),
                  variables.grad[:, 3 * (ns + nm):].reshape(n, ns, 3, nvar))
-    node_normals = _normal_field(xs, xm, nodal, normals, ns, nm)
+    return xs, xm, nodal
 
-    # auxiliary plane: centre, normal, in-plane basis (values decide; duals follow)
+
+def _auxiliary_plane(xs: Dual, xm: Dual, nodal: Dual, normals: str):
+    """The normal field's nodal normals, the plane's centre x0, normal n0, basis (e1, e2)
+    and the slave and master nodes in plane coordinates (S, Mp)."""
+    ns, nm = xs.shape[1], xm.shape[1]
+    node_normals = _normal_field(xs, xm, nodal, normals, ns, nm)
     x0 = dual.sum_(xs, axis=1) * (1.0 / ns)
     n0 = _normalize(dual.sum_(node_normals, axis=1) * (1.0 / ns))
-    if nm == 4:
-        master_normal = np.cross(master_x[:, 2] - master_x[:, 0], master_x[:, 3] - master_x[:, 1])
-    else:
-        master_normal = np.cross(master_x[:, 1] - master_x[:, 0], master_x[:, 2] - master_x[:, 0])
-    master_normal /= np.linalg.norm(master_normal, axis=1, keepdims=True)
-    facing = np.einsum("ij,ij->i", n0.value, master_normal) < -_FACING_TOLERANCE
     edge = xs[:, 1] - xs[:, 0]
     e1 = _normalize(edge - n0 * dual.dot(edge, n0)[:, None])
     e2 = _cross(n0, e1)
@@ -451,8 +460,15 @@ def _integrate(slave_x, master_x, slave_normals, crosspoint, normals, basis, rul
         return dual.stack([dual.dot(offset, _expand(e1, 1)), dual.dot(offset, _expand(e2, 1))],
                           axis=-1)
 
-    S = plane(xs)
-    Mp = plane(xm)
+    return node_normals, x0, n0, e1, e2, plane(xs), plane(xm)
+
+
+def _integrate(slave_x, master_x, slave_normals, crosspoint, normals, basis, rule):
+    nm = master_x.shape[1]
+    # the clip topology on values, for every pair; derivatives only where it contributes
+    _, _, n0, _, _, S, Mp = _auxiliary_plane(
+        *_pair_variables(slave_x, master_x, slave_normals, False), normals)
+    facing = np.einsum("ij,ij->i", n0.value, _master_normal(master_x)) < -_FACING_TOLERANCE
     slave_area = np.abs(_polygon_area(S.value))
     labels, count, positions = _clip(S.value, Mp.value[:, ::-1])
     # the master polygon was reversed to be counter-clockwise: map labels back
@@ -460,22 +476,37 @@ def _integrate(slave_x, master_x, slave_normals, crosspoint, normals, basis, rul
     master_edge_start = (nm - 2 - labels[..., 2]) % nm  # reversed edge j = (nm-1-j) -> (nm-2-j)
     clip_area = _padded_area(positions, count)
     contributing = facing & (count >= 3) & (clip_area > _AREA_TOLERANCE * slave_area)
-    rows = np.flatnonzero(contributing)
-    if rows.size == 0:
+    if not contributing.any():
         return None
+    # pairs grouped by their clip polygon's vertex count: no padded cells
+    all_rows, parts = [], []
+    for vertices in np.unique(count[contributing]):
+        rows = np.flatnonzero(contributing & (count == vertices))
+        all_rows.append(rows)
+        parts.append(_polygon_integrals(
+            slave_x[rows], master_x[rows], slave_normals[rows], crosspoint[rows], normals,
+            basis, rule, labels[rows, :vertices], count[rows], master_node[rows, :vertices],
+            master_edge_start[rows, :vertices]))
+    rows = np.concatenate(all_rows)
+    quantities = {name: Dual(np.concatenate([part[name].value for part in parts]),
+                             np.concatenate([part[name].grad for part in parts]))
+                  for name in parts[0]}
+    return rows, quantities, clip_area[rows] / slave_area[rows]
 
-    def sub(a: Dual) -> Dual:
-        return Dual(a.value[rows], a.grad[rows])
 
-    xs, xm, S, Mp, node_normals, x0, n0, e1, e2 = (
-        sub(a) for a in (xs, xm, S, Mp, node_normals, x0, n0, e1, e2))
-    labels, count = labels[rows], count[rows]
-    master_node, master_edge_start = master_node[rows], master_edge_start[rows]
-    m = rows.size
+def _polygon_integrals(slave_x, master_x, slave_normals, crosspoint, normals, basis, rule,
+                       labels, count, master_node, master_edge_start):
+    """D, M, Dn, Mn, gap and area of pairs whose clip polygons (labels (m, V, 3)) have V
+    vertices each, as Duals over the pair variables."""
+    m, ns, _ = slave_x.shape
+    nm = master_x.shape[1]
+    nvar = 3 * (2 * ns + nm)
+    xs, xm, nodal = _pair_variables(slave_x, master_x, slave_normals)
+    node_normals, x0, n0, e1, e2, S, Mp = _auxiliary_plane(xs, xm, nodal, normals)
 
     # clip vertices recomputed from their labels
     kind, i_slave = labels[..., 0], labels[..., 1]
-    Vn = _MAX_VERTICES
+    Vn = labels.shape[1]
     slave_vertex = _take(S, np.broadcast_to(i_slave[..., None], (m, Vn, 2)), axis=1)
     master_vertex = _take(Mp, np.broadcast_to(master_node[..., None], (m, Vn, 2)), axis=1)
     a0 = slave_vertex
@@ -521,32 +552,67 @@ def _integrate(slave_x, master_x, slave_normals, crosspoint, normals, basis, rul
         Phi = [sum(N[k] * _expand(A[:, j, k], 1) for k in range(ns)) for j in range(ns)]
     else:
         Phi = list(N)
-    if crosspoint[rows].any():
-        cross = crosspoint[rows]
+    if crosspoint.any():
+        cross = crosspoint
         others = (~cross).sum(axis=1)
         shared = sum(Phi[j] * cross[:, j, None].astype(float) for j in range(ns))
         share = np.where(others > 0, 1.0 / np.maximum(others, 1), 0.0)[:, None]
         Phi = [dual.where(np.broadcast_to(cross[:, j, None], W.shape), Phi[j] * 0.0,
                           Phi[j] + shared * share) for j in range(ns)]
     normal_at = sum(_expand(node_normals[:, j], 1) * _expand(N[j], -1) for j in range(ns))
-    WPhi = [W * Phi[j] for j in range(ns)]
+    return _mortar_integrals(W, Phi, N, Nm, normal_at, xs, xm)
 
-    def integral(f: Dual) -> Dual:
-        return dual.sum_(f, axis=1)
 
-    D = dual.stack([dual.stack([integral(WPhi[j] * N[k]) for k in range(ns)], axis=1)
-                    for j in range(ns)], axis=1)
-    M = dual.stack([dual.stack([integral(WPhi[j] * Nm[k]) for k in range(nm)], axis=1)
-                    for j in range(ns)], axis=1)
-    Dn = dual.stack([dual.stack([integral(_expand(WPhi[j] * N[k], -1) * normal_at)
-                                 for k in range(ns)], axis=1) for j in range(ns)], axis=1)
-    Mn = dual.stack([dual.stack([integral(_expand(WPhi[j] * Nm[k], -1) * normal_at)
-                                 for k in range(nm)], axis=1) for j in range(ns)], axis=1)
-    area = dual.stack([integral(WPhi[j]) for j in range(ns)], axis=1)
+def _stacked(items, nvar: int) -> tuple[np.ndarray, np.ndarray]:
+    """Values (m, k, g) and gradients (m, k, g, V) of k Duals (or constant arrays) (m, g)."""
+    value = np.stack([item.value if isinstance(item, Dual) else np.asarray(item)
+                      for item in items], axis=1)
+    if not all(isinstance(item, Dual) for item in items):
+        return value, np.zeros(value.shape + (nvar,))
+    return value, np.stack([item.grad for item in items], axis=1)
+
+
+def _mortar_integrals(W: Dual, Phi, N, Nm, normal_at: Dual, xs: Dual, xm: Dual) -> dict:
+    """D_jk = sum_g W Phi_j N_k, M_jl (with the master N_l), Dn and Mn (times the normal
+    field), area_j = sum_g W Phi_j and the weighted gaps, from the point values (m, g)
+    and their gradients, contracted over the points without forming the products."""
+    nvar = W.grad.shape[-1]
+    Pv, Pg = _stacked(Phi, nvar)
+    Nv, Ng = _stacked(N, nvar)
+    Mv, Mg = _stacked(Nm, nvar)
+    nv, ng = normal_at.value, normal_at.grad  # (m, g, 3), (m, g, 3, V)
+    Qv = W.value[:, None] * Pv  # W Phi_j
+    Qg = W.grad[:, None] * Pv[..., None] + W.value[:, None, :, None] * Pg
+
+    m, ns, g = Qv.shape
+    V = Qg.shape[-1]
+    Qg_rows = Qg.transpose(0, 1, 3, 2).reshape(m, ns * V, g)  # (m, j v, g)
+    Qn = (Qv[..., None] * nv[:, None]).reshape(m, ns, g * 3)  # (m, j, g c)
+
+    def weighted(Sv, Sg):
+        k = Sv.shape[1]
+        value = Qv @ Sv.transpose(0, 2, 1)  # (m, j, k)
+        grad = ((Qg_rows @ Sv.transpose(0, 2, 1)).reshape(m, ns, V, k).transpose(0, 1, 3, 2)
+                + (Qv @ Sg.transpose(0, 2, 1, 3).reshape(m, g, k * V)).reshape(m, ns, k, V))
+        Sn = Sv[..., None] * nv[:, None]  # (m, k, g, 3)
+        normal_value = Qv @ Sn.transpose(0, 2, 1, 3).reshape(m, g, k * 3)
+        products = Qv[:, :, None, :] * Sv[:, None, :, :]  # (m, j, k, g)
+        normal_grad = (
+            (Qg_rows @ Sn.transpose(0, 2, 1, 3).reshape(m, g, k * 3))
+            .reshape(m, ns, V, k, 3).transpose(0, 1, 3, 4, 2)
+            + (Sg.transpose(0, 1, 3, 2).reshape(m, k * V, g)
+               @ Qn.reshape(m, ns, g, 3).transpose(0, 2, 1, 3).reshape(m, g, ns * 3))
+            .reshape(m, k, V, ns, 3).transpose(0, 3, 1, 4, 2)
+            + (products.reshape(m, ns * k, g) @ ng.reshape(m, g, 3 * V))
+            .reshape(m, ns, k, 3, V))
+        return Dual(value, grad), Dual(normal_value.reshape(m, ns, k, 3), normal_grad)
+
+    D, Dn = weighted(Nv, Ng)
+    M, Mn = weighted(Mv, Mg)
+    area = Dual(Qv.sum(axis=2), Qg.sum(axis=2))
     gap = (dual.sum_(dual.sum_(Mn * _expand(xm, 1), axis=-1), axis=-1)
            - dual.sum_(dual.sum_(Dn * _expand(xs, 1), axis=-1), axis=-1))
-    quantities = {"D": D, "M": M, "Dn": Dn, "Mn": Mn, "gap": gap, "area": area}
-    return rows, quantities, clip_area[rows] / slave_area[rows]
+    return {"D": D, "M": M, "Dn": Dn, "Mn": Mn, "gap": gap, "area": area}
 
 
 # -- element-based integration ------------------------------------------------------------
@@ -624,8 +690,7 @@ def _element_geometry(slave_x, master_x, slave_normals, normals, points):
     """Values only: (eta (n, q, 2), facing (n,)) of every pair's slave Gauss points."""
     n, ns, _ = slave_x.shape
     nm = master_x.shape[1]
-    xs, xm, nodal = (Dual(a, np.zeros(a.shape + (0,))) for a in (slave_x, master_x,
-                                                                  slave_normals))
+    xs, xm, nodal = _pair_variables(slave_x, master_x, slave_normals, False)
     node_normals = _normal_field(xs, xm, nodal, normals, ns, nm)
     N = [np.broadcast_to(v, (n, points.shape[0])) for v in shape_functions(points, ns)]
     point = _interpolate(xs, N)
@@ -687,15 +752,7 @@ def _integrate_element(slave_x, master_x, slave_normals, crosspoint, normals, ba
     m, ns, _ = slave_x.shape
     nm = master_x.shape[1]
     nvar = 3 * (2 * ns + nm)
-    variables = Dual.variables(
-        np.concatenate([slave_x.reshape(m, -1), master_x.reshape(m, -1),
-                        slave_normals.reshape(m, -1)], axis=1))
-    xs = Dual(variables.value[:, :3 * ns].reshape(m, ns, 3),
-              variables.grad[:, :3 * ns].reshape(m, ns, 3, nvar))
-    xm = Dual(variables.value[:, 3 * ns:3 * (ns + nm)].reshape(m, nm, 3),
-              variables.grad[:, 3 * ns:3 * (ns + nm)].reshape(m, nm, 3, nvar))
-    nodal = Dual(variables.value[:, 3 * (ns + nm):].reshape(m, ns, 3),
-                 variables.grad[:, 3 * (ns + nm):].reshape(m, ns, 3, nvar))
+    xs, xm, nodal = _pair_variables(slave_x, master_x, slave_normals)
     node_normals = _normal_field(xs, xm, nodal, normals, ns, nm)
     q = points.shape[0]
     N = [np.broadcast_to(v, (m, q)) for v in shape_functions(points, ns)]
@@ -720,23 +777,7 @@ def _integrate_element(slave_x, master_x, slave_normals, crosspoint, normals, ba
         share = np.where(others > 0, 1.0 / np.maximum(others, 1), 0.0)[:, None]
         Phi = [dual.where(np.broadcast_to(crosspoint[:, j, None], W.shape), Phi[j] * 0.0,
                           Phi[j] + shared * share) for j in range(ns)]
-    WPhi = [W * Phi[j] for j in range(ns)]
-
-    def integral(f: Dual) -> Dual:
-        return dual.sum_(f, axis=1)
-
-    D = dual.stack([dual.stack([integral(WPhi[j] * N[k]) for k in range(ns)], axis=1)
-                    for j in range(ns)], axis=1)
-    M = dual.stack([dual.stack([integral(WPhi[j] * Nm[k]) for k in range(nm)], axis=1)
-                    for j in range(ns)], axis=1)
-    Dn = dual.stack([dual.stack([integral(_expand(WPhi[j] * N[k], -1) * normal_at)
-                                 for k in range(ns)], axis=1) for j in range(ns)], axis=1)
-    Mn = dual.stack([dual.stack([integral(_expand(WPhi[j] * Nm[k], -1) * normal_at)
-                                 for k in range(nm)], axis=1) for j in range(ns)], axis=1)
-    area = dual.stack([integral(WPhi[j]) for j in range(ns)], axis=1)
-    gap = (dual.sum_(dual.sum_(Mn * _expand(xm, 1), axis=-1), axis=-1)
-           - dual.sum_(dual.sum_(Dn * _expand(xs, 1), axis=-1), axis=-1))
-    quantities = {"D": D, "M": M, "Dn": Dn, "Mn": Mn, "gap": gap, "area": area}
+    quantities = _mortar_integrals(W, Phi, N, Nm, normal_at, xs, xm)
     fraction = (jacobian.value * point_weights * on_master).sum(axis=1) / (
         jacobian.value * point_weights).sum(axis=1)
     return rows, quantities, fraction
