@@ -23,12 +23,21 @@ forces against t, slave and master sides, which must balance) and
 paraview/displacement.bp, paraview/contact_pressure.bp (every step); ``--json
 FILE`` writes the summary.
 
+``--dim 3``: the 3D setup of the reference (Kratos' shallow_ironing_3D): die
+and block extruded one unit through the thickness z into hexahedra
+(``--layers``), u_z = 0 on the block's back face z = 0 only, the die top
+driven in x and y with u_z = 0; forces are per unit thickness as in 2D.
+``--plane-strain FILE`` (a 2D run's JSON) adds its curves to the figure.
+
 Run:  mpirun -n 2 python3 demos/ironing.py --output results/ironing
+      mpirun -n 2 python3 demos/ironing.py --dim 3 --output results/ironing3d \
+          --plane-strain results/ironing/summary.json
 """
 
 from __future__ import annotations
 
 import csv
+import pathlib
 import time
 
 import dolfinx
@@ -62,9 +71,21 @@ def die_displacement(t: float, depth: float, slide: float) -> tuple[float, float
 
 def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     parser = cli.parser(__doc__)
+    parser.add_argument("--dim", type=int, choices=(2, 3), default=2, help="2D or 3D")
     parser.add_argument("--refinement", type=int, default=0, help="halves h per level")
     parser.add_argument(
-        "--cell-type", choices=("triangle", "quadrilateral"), default="quadrilateral", help="cells"
+        "--cell-type",
+        choices=("triangle", "quadrilateral"),
+        default="quadrilateral",
+        help="cells (2D; 3D extrudes quadrilaterals into hexahedra)",
+    )
+    parser.add_argument(
+        "--layers", type=int, default=None,
+        help="3D: hexahedra through the thickness (None: 10 x 2**refinement)",
+    )
+    parser.add_argument(
+        "--plane-strain", type=pathlib.Path, default=None, metavar="FILE",
+        help="3D: a 2D run's JSON summary, drawn beside the 3D curves",
     )
     parser.add_argument(
         "--steps",
@@ -90,26 +111,38 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     args = parser.parse_args(argv)
     configure_logging(comm)
     start = time.perf_counter()
-    tagged = meshes.ironing(refinement=args.refinement, cell_type=args.cell_type, comm=comm)
+    gdim = args.dim
+    if gdim == 3:
+        tagged = meshes.ironing_3d(refinement=args.refinement, layers=args.layers, comm=comm)
+    else:
+        tagged = meshes.ironing(refinement=args.refinement, cell_type=args.cell_type, comm=comm)
     mesh, markers = tagged.mesh, tagged.markers
-    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (gdim,)))
     u = dolfinx.fem.Function(V, name="displacement")
     v = ufl.TestFunction(V)
     materials = {
         markers["die"]: Material(args.E_die, NU, "neo-hookean"),
         markers["block"]: Material(args.E_block, NU, "neo-hookean"),
     }
-    F = internal_work(u, v, materials, tagged.cell_tags)
+    # 3D: 2 x 2 x 2 Gauss points per hexahedron (UFL's estimate asks for thousands)
+    F = internal_work(u, v, materials, tagged.cell_tags,
+                      quadrature_degree=2 if gdim == 3 else None)
     fdim = mesh.topology.dim - 1
     bottom = tagged.facet_tags.find(markers["block_bottom"])
     top = tagged.facet_tags.find(markers["die_top"])
     die_motion = dolfinx.fem.Function(V)
     bcs = [
         dolfinx.fem.dirichletbc(
-            np.zeros(2), dolfinx.fem.locate_dofs_topological(V, fdim, bottom), V
+            np.zeros(gdim), dolfinx.fem.locate_dofs_topological(V, fdim, bottom), V
         ),
         dolfinx.fem.dirichletbc(die_motion, dolfinx.fem.locate_dofs_topological(V, fdim, top)),
     ]
+    if gdim == 3:
+        back = tagged.facet_tags.find(markers["block_back"])
+        out_of_plane = V.sub(2)
+        bcs.append(dolfinx.fem.dirichletbc(
+            np.float64(0.0), dolfinx.fem.locate_dofs_topological(out_of_plane, fdim, back),
+            out_of_plane))
     surfaces = (markers["die_contact"], markers["block_contact"])
     if args.slave == "block":
         surfaces = surfaces[::-1]
@@ -119,7 +152,8 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     def apply_load(t: float) -> None:
         ux, uy = die_displacement(t, args.depth, args.slide)
         die_motion.interpolate(
-            lambda x: np.vstack([np.full(x.shape[1], ux), np.full(x.shape[1], uy)])
+            lambda x: np.vstack([np.full(x.shape[1], ux), np.full(x.shape[1], uy)]
+                                + [np.zeros(x.shape[1])] * (gdim - 2))
         )
         die_motion.x.scatter_forward()
 
@@ -132,7 +166,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         """Force of the drive on the die: the bulk residual summed over the die top."""
         residual = dolfinx.fem.assemble_vector(residual_form)
         residual.scatter_reverse(dolfinx.la.InsertMode.add)
-        nodal = residual.array.reshape(-1, 2)[die_top_blocks]
+        nodal = residual.array.reshape(-1, gdim)[die_top_blocks]
         return comm.allreduce(nodal.sum(axis=0), op=MPI.SUM)
 
     def record(step) -> None:
@@ -185,10 +219,12 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         "slave": args.slave,
         "E_die": args.E_die,
         "E_block": args.E_block,
+        "dim": gdim,
         "refinement": args.refinement,
-        "cell_type": args.cell_type,
+        "cell_type": args.cell_type if gdim == 2 else "hexahedron",
+        "layers": (args.layers or 10 * 2**args.refinement) if gdim == 3 else None,
         "num_ranks": comm.size,
-        "num_dofs": V.dofmap.index_map.size_global * 2,
+        "num_dofs": V.dofmap.index_map.size_global * gdim,
         "steps_completed": len(records),
         "end_time": float(t[-1]) if t.size else 0.0,
         "newton_iterations": [r.iterations for r in records],
@@ -240,12 +276,18 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
                 writer = csv.DictWriter(stream, fieldnames=list(history[0]))
                 writer.writeheader()
                 writer.writerows(history)
-            plot(args.output / "ironing_forces.png", t, vertical, horizontal)
+            plane_strain = None
+            if args.plane_strain is not None:
+                import json
+
+                plane_strain = json.loads(args.plane_strain.read_text())["history"]
+            plot(args.output / "ironing_forces.png", t, vertical, horizontal, plane_strain)
     problem.destroy()
     return summary
 
 
-def plot(path, t, vertical, horizontal) -> None:
+def plot(path, t, vertical, horizontal, plane_strain=None) -> None:
+    """Forces on the block against t; a 2D history (``plane_strain``) dashed beside them."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -254,6 +296,15 @@ def plot(path, t, vertical, horizontal) -> None:
     fig, ax = plt.subplots(figsize=(6, 4))
     ax.plot(t, vertical, label="vertical force on the block")
     ax.plot(t, horizontal, label="horizontal force on the block")
+    if plane_strain:
+        t2 = [h["t"] for h in plane_strain]
+        ax.plot(t2, [-h["block_force_y"] for h in plane_strain], "C0--", lw=0.8,
+                label="vertical, plane strain")
+        ax.plot(t2, [h["block_force_x"] for h in plane_strain], "C1--", lw=0.8,
+                label="horizontal, plane strain")
+    for key, value in REFERENCE.items():
+        time_ = 1.0 if key.endswith("t1") else 2.0 if key.endswith("t2") else 1.5
+        ax.plot([time_], [value], "k+", ms=8)
     ax.axhline(REFERENCE_PLATEAU, color="k", ls="--", lw=0.8, label="reference plateau")
     ax.set_xlabel("t")
     ax.set_ylabel("force per unit thickness")

@@ -1,4 +1,5 @@
-"""gmsh builders for the 2D benchmark geometries (Hertz, patch test, ironing, rings, tied blocks).
+"""Builders of the benchmark geometries: gmsh for the 2D ones (Hertz, patch test, ironing,
+rings, tied blocks); structured boxes and extrusions for the 3D patch test and ironing.
 
 Every geometry is built here from a few numbers, so no geometry file is needed: the
 gmsh model lives on rank 0 only and :func:`compat.model_to_mesh` distributes it.
@@ -31,9 +32,11 @@ import operator
 import pathlib
 from collections.abc import Callable, Sequence
 
+import basix.ufl
 import dolfinx
 import dolfinx.io
 import dolfinx.mesh
+import ufl
 from mpi4py import MPI
 
 from dolfinx_mortar import compat
@@ -741,6 +744,78 @@ def ironing(
     return _tagged(data, markers, aliases, h_die)
 
 
+def ironing_3d(
+    refinement: int = 0,
+    layers: int | None = None,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> TaggedMesh:
+    """3D ironing: :func:`ironing`'s quadrilateral die and block extruded into hexahedra
+    through the thickness z in [0, 1] (``layers`` cells, default the block-top element
+    size 0.1 / 2**refinement).
+
+    Returns:
+        The mesh with cells "die", "block" and facets "die_contact" (the curved bottom),
+        "die_top", "block_contact" (y = 4), "block_bottom" (y = 0) and "block_back"
+        (z = 0); contact_slave is the die's curved bottom.
+    """
+    import numpy as np
+
+    from .bodies import merge_meshes
+
+    level = _check_refinement(refinement)
+    if layers is None:
+        layers = 10 * 2**level
+    if isinstance(layers, bool) or operator.index(layers) < 1:
+        raise ValueError(f"layers must be a positive integer, got {layers!r}")
+    bodies = {"die": None, "block": None}
+    if comm.rank == 0:
+        plane = ironing(refinement, "quadrilateral", comm=MPI.COMM_SELF)
+        x2 = plane.mesh.geometry.x[:, :2]
+        cells2 = compat.geometry_dofmap(plane.mesh)
+        for name in bodies:
+            cells = cells2[plane.cell_tags.find(plane.markers[name])]
+            nodes, local = np.unique(cells, return_inverse=True)
+            bodies[name] = _extruded(x2[nodes], local.reshape(cells.shape), layers)
+    radius, centre = 0.75, (0.8, 4.95)
+    arc_top = centre[1] - math.sqrt(radius**2 - 0.6**2)
+    groups = {
+        "die": {
+            "contact": lambda x: (np.abs(np.hypot(x[0] - centre[0], x[1] - centre[1]) - radius)
+                                  < 1e-6) & (x[1] <= arc_top + 1e-9),
+            "top": lambda x: np.isclose(x[1], 5.4),
+        },
+        "block": {
+            "contact": lambda x: np.isclose(x[1], 4.0),
+            "bottom": lambda x: np.isclose(x[1], 0.0),
+            "back": lambda x: np.isclose(x[2], 0.0),
+        },
+    }
+    element = basix.ufl.element("Lagrange", "hexahedron", 1, shape=(3,))
+    meshes = {}
+    for name, body in bodies.items():
+        x, cells = body if comm.rank == 0 else (np.zeros((0, 3)), np.zeros((0, 8), np.int64))
+        mesh = dolfinx.mesh.create_mesh(comm, cells=cells, x=x, e=ufl.Mesh(element))
+        meshes[name] = (mesh, groups[name])
+    tagged = merge_meshes(meshes, comm)
+    tagged.markers["contact_slave"] = tagged.markers["die_contact"]
+    tagged.markers["contact_master"] = tagged.markers["block_contact"]
+    tagged.h_contact = 0.05 * 0.5**level
+    return tagged
+
+
+def _extruded(x2, quadrilaterals, layers: int):
+    """Nodes (n (layers + 1), 3) and hexahedra (dolfinx vertex order) of quadrilaterals
+    (dolfinx order) extruded through z in [0, 1]."""
+    import numpy as np
+
+    n = x2.shape[0]
+    z = np.linspace(0.0, 1.0, layers + 1)
+    x = np.column_stack([np.tile(x2, (layers + 1, 1)), np.repeat(z, n)])
+    k = np.arange(layers)[:, None, None] * n
+    hexahedra = np.concatenate([quadrilaterals[None] + k, quadrilaterals[None] + k + n], axis=2)
+    return x, hexahedra.reshape(-1, 8).astype(np.int64)
+
+
 def rings(
     refinement: int = 0,
     inner_radius: float = 0.8,
@@ -898,6 +973,7 @@ BUILDERS: dict[str, Callable[..., TaggedMesh]] = {
     "patch_test": patch_test,
     "patch_test_3d": patch_test_3d,
     "ironing": ironing,
+    "ironing_3d": ironing_3d,
     "rings": rings,
     "tied_blocks": tied_blocks,
 }

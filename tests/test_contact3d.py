@@ -313,3 +313,31 @@ def test_penetration_report_finds_nodes_behind_a_3d_surface():
     assert reports[0].count == 1 and reports[0].side == "master"
     assert reports[0].depth == pytest.approx(0.3 / (1.0 / 3.0), rel=1e-12)
     problem.destroy()
+
+
+def demo(name: str):
+    spec = importlib.util.spec_from_file_location(f"demo_{name}", DEMOS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parallel
+@pytest.mark.timeout(600)
+def test_ironing_3d_small_run_balances_and_gives_the_serial_answer():
+    """The extruded die pressed 0.1 into the extruded block (two hexahedra through the
+    thickness): every step converges, die and block forces balance, the die-top reaction
+    equals the contact force, and N ranks give the serial forces to 1e-8."""
+    args = ["--dim", "3", "--layers", "2", "--steps", "40", "--end-time", "0.3"]
+    serial = demo("ironing").main(list(args), comm=MPI.COMM_SELF)
+    parallel = demo("ironing").main(list(args), comm=MPI.COMM_WORLD)
+    for summary in (serial, parallel):
+        assert summary["steps_completed"] == 6 and summary["end_time"] == pytest.approx(0.3)
+        assert summary["max_newton_iterations"] <= 8
+        assert summary["max_force_balance_rel"] <= 1e-8
+        assert summary["max_reaction_mismatch_rel"] <= 1e-8
+    last = (serial["history"][-1], parallel["history"][-1])
+    assert -last[0]["block_force_y"] > 1e7
+    for key in ("block_force_x", "block_force_y"):
+        assert last[1][key] == pytest.approx(last[0][key], rel=1e-8, abs=1e-8 * 1e8)
+    assert parallel["newton_iterations"] == serial["newton_iterations"]
