@@ -15,10 +15,10 @@ scales and the rules.
 * :class:`AugmentedLagrange`: z_j = max(0, lam_j - eps g^_j) with Uzawa updates
   lam <- z until lam settles.
 
-Rows are in force units (E x length in plane strain), whatever the strategy:
-active Lagrange rows are s g~_j, inactive rows h z_j, penalty rows
-w (z_j - lam_j + eps g^_j), with s ~ E/h, h the mean slave facet length and
-w = h min(1, s/eps). The scaling is constant per row, so it changes no Newton
+Rows are in force units (E x length in plane strain, E x area in 3D), whatever
+the strategy: active Lagrange rows are s g~_j, inactive rows h^(d-1) z_j,
+penalty rows w (z_j - lam_j + eps g^_j), with s ~ E/h, h the mean slave facet
+length and w = h^(d-1) min(1, s/eps). The scaling is constant per row, so it changes no Newton
 step; it makes SNES' tolerances independent of units, c_n and eps.
 """
 
@@ -45,10 +45,22 @@ class Scales:
     """s: about E/h of the slave side."""
     length: float
     """h: the mean slave facet length in the reference configuration."""
+    dim: int = 2
+    """The geometric dimension d."""
+
+    @property
+    def face(self) -> float:
+        """h^(d-1): the size of a slave facet (a length in 2D, an area in 3D)."""
+        return self.length ** (self.dim - 1)
 
     @property
     def dirichlet(self) -> float:
-        """k = s h: the scale of Dirichlet rows, about E."""
+        """k = s h^(d-1): the scale of Dirichlet rows (force per displacement)."""
+        return self.row * self.face
+
+    @property
+    def pressure(self) -> float:
+        """s h: about E."""
         return self.row * self.length
 
 
@@ -125,7 +137,7 @@ class SemismoothLagrange(Enforcement):
         return covered & (z - self.c_n * gap >= 0.0)
 
     def rows(self, k, z, active, gap, area) -> Rows:
-        weight = self.scales.length
+        weight = self.scales.face
         alpha = np.zeros_like(z)
         beta = np.zeros_like(z)
         delta = np.full_like(z, weight)
@@ -204,7 +216,7 @@ class Penalty(Enforcement):
 
     def rows(self, k, z, active, gap, area) -> Rows:
         eps = self.eps
-        weight = self.scales.length * min(1.0, self.scales.row / eps)
+        weight = self.scales.face * min(1.0, self.scales.row / eps)
         alpha = np.zeros_like(z)
         beta = np.zeros_like(z)
         delta = np.full_like(z, weight)
@@ -252,9 +264,9 @@ class AugmentedLagrange(Penalty):
             self.lam[k] = new
         change = problem.comm.allreduce(change, op=MPI.MAX)
         size = problem.comm.allreduce(size, op=MPI.MAX)
-        # floor: pressures of 1e-4 E (k ~ E) are "zero" for the relative test, so
+        # floor: pressures of 1e-4 E are "zero" for the relative test, so
         # rounding noise in z at zero load does not keep Uzawa going forever
-        return change <= self.tolerance * max(size, 1e-4 * self.scales.dirichlet)
+        return change <= self.tolerance * max(size, 1e-4 * self.scales.pressure)
 
 
 def create(method: str, active_set: str, scales: Scales, num_multipliers, *, c_n: float,

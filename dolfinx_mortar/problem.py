@@ -254,7 +254,9 @@ class ContactProblem:
         self._read_state_into_x()
 
         self._row_scale, self._slave_length, master_scale = self._stiffness_scale()
-        self._dirichlet_scale = self._row_scale * self._slave_length
+        scales = enforcement.Scales(self._row_scale, self._slave_length,
+                                    self.V.mesh.geometry.dim)
+        self._dirichlet_scale = scales.dirichlet
         # the two sides in series: the compliance of the contact, so that a stiff
         # slave on a soft master (ironing's die) does not get an overly stiff c_n
         contact_scale = 1.0 / (1.0 / self._row_scale + 1.0 / master_scale)
@@ -265,7 +267,7 @@ class ContactProblem:
             penalty = self._row_scale * (10.0 if method == "augmented" else 1.0)
         self.penalty = float(penalty)
         self.enforcement = enforcement.create(
-            method, active_set, enforcement.Scales(self._row_scale, self._slave_length),
+            method, active_set, scales,
             [i.num_owned_multipliers for i in self.interfaces], c_n=self.c_n,
             penalty=self.penalty, augmented_tolerance=augmented_tolerance,
             max_outer_iterations=max_outer_iterations)
@@ -369,8 +371,8 @@ class ContactProblem:
 
     def _stiffness_scale(self) -> tuple[float, float, float]:
         """(s, h, s_master): s about E/h of the slave side (the mean bulk stiffness
-        diagonal at slave dofs over h, the mean slave facet length in the reference
-        configuration) and the same s_master of the master side."""
+        diagonal at slave dofs over h^(d-1), h the mean slave facet length in the
+        reference configuration) and the same s_master of the master side."""
         self._K.zeroEntries()
         dolfinx.fem.petsc.assemble_matrix(self._K, self.J_form)
         self._K.assemble()
@@ -395,7 +397,9 @@ class ContactProblem:
                     "the form?)"
                 )
             length = float(sums[2] / sums[3])
-            scales.append((float(sums[0] / sums[1]) / length, length))
+            # a stiffness diagonal is about E h^(d-2)
+            scales.append((float(sums[0] / sums[1]) / length ** (self.V.mesh.geometry.dim - 1),
+                           length))
         diagonal.destroy()
         return scales[0][0], scales[0][1], scales[1][0]
 
@@ -473,7 +477,7 @@ class ContactProblem:
 
     def _covered(self, k: int) -> np.ndarray:
         interface = self.interfaces[k]
-        scale = interface.reuse.margin * 1e-10
+        scale = 1e-10 * interface.reuse.margin ** (interface.gdim - 1)
         return self.areas[k] > scale
 
     def _nodal_gaps(self, k: int) -> tuple[np.ndarray, np.ndarray]:

@@ -100,7 +100,8 @@ def test_patch_test_at_finite_strain_is_uniform():
 
 
 def curved_punch(comm, cell: str = "hexahedron", ratio=(6, 5), curvature: float = 0.1,
-                 material: str = "linear", slave: str = "top", **options):
+                 material: str = "linear", slave: str = "top", length: float = 1.0,
+                 modulus: float = 1.0, **options):
     """The 3D patch test's punch with a paraboloidal bottom z = 0.5 + curvature r^2 (r from
     the axis x = y = 1/2), its top clamped and driven down by ``apply_load(t)`` = 0.02 t,
     on the foundation clamped at its bottom: a circular contact zone that grows with t."""
@@ -111,9 +112,10 @@ def curved_punch(comm, cell: str = "hexahedron", ratio=(6, 5), curvature: float 
     x = mesh.geometry.x
     r2 = (x[nodes, 0] - 0.5) ** 2 + (x[nodes, 1] - 0.5) ** 2
     x[nodes, 2] += curvature * r2 * (1.0 - x[nodes, 2]) / 0.5
+    x *= length
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (3,)))
     u = dolfinx.fem.Function(V)
-    F = internal_work(u, ufl.TestFunction(V), {0: Material(1000.0, 0.3, material)})
+    F = internal_work(u, ufl.TestFunction(V), {0: Material(1000.0 * modulus, 0.3, material)})
     drive = dolfinx.fem.Function(V)
     top = tagged.facet_tags.find(markers["punch_top"])
     bottom = tagged.facet_tags.find(markers["foundation_bottom"])
@@ -126,7 +128,7 @@ def curved_punch(comm, cell: str = "hexahedron", ratio=(6, 5), curvature: float 
     problem = ContactProblem(F, u, bcs, [pair], **options)
 
     def apply_load(t):
-        drive.x.array.reshape(-1, 3)[:, 2] = -0.02 * t
+        drive.x.array.reshape(-1, 3)[:, 2] = -0.02 * length * t
 
     return problem, apply_load
 
@@ -175,6 +177,20 @@ def test_curved_punch_does_not_depend_on_c_n(curved_reference, factor):
     assert other["active"] == curved_reference["active"]
     scale = np.abs(curved_reference["pressure"]).max()
     assert np.abs(other["pressure"] - curved_reference["pressure"]).max() <= 1e-8 * scale
+
+
+@pytest.mark.parametrize("material", ["linear", "neo-hookean"])
+def test_curved_punch_is_unit_free(material):
+    """Lengths x 1e3 and moduli x 1e-6: the same dimensionless pressure p / E at the same
+    nodes x / L, the same active set and Newton iterations (every tolerance scales)."""
+    options = {"cell": "tetrahedron", "ratio": (4, 3), "material": material}
+    base = solve_curved_punch(MPI.COMM_SELF, **options)
+    scaled = solve_curved_punch(MPI.COMM_SELF, length=1e3, modulus=1e-6, **options)
+    assert scaled["active"] == base["active"] > 0
+    assert scaled["iterations"] == base["iterations"]
+    np.testing.assert_allclose(scaled["coordinates"] / 1e3, base["coordinates"], atol=1e-12)
+    scale = np.abs(base["pressure"]).max()
+    assert np.abs(scaled["pressure"] / 1e-6 - base["pressure"]).max() <= 1e-8 * scale
 
 
 @pytest.mark.parametrize("preconditioner", ["hypre", "gamg"])
