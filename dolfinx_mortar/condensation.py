@@ -71,70 +71,92 @@ class CondensedPreconditioner:
         self.ksp.setFromOptions()
         self._matrices: dict[str, PETSc.Mat] = {}
         self._vectors: dict[str, PETSc.Vec] = {}
-        self._K_c: PETSc.Mat | None = None
+        self._fingerprint = None
         self.num_active = 0
+        self.rebuilds = 0
+        """set-ups that built every matrix (J's pattern was new)"""
+        self.reuses = 0
+        """set-ups that only recomputed values (J's pattern had not changed)"""
 
     # -- PC interface ------------------------------------------------------
 
     def setUp(self, pc: PETSc.PC) -> None:  # noqa: N802 (petsc4py's name)
         # Every product runs over all multipliers, the inactive ones scaled to zero:
-        # then K_c's pattern follows J's, not the active set, and while it stays the
-        # factorization reuses its symbolic analysis.
+        # then every pattern below follows J's, not the active set. While J's pattern
+        # stays, the sub-matrices, the products (their symbolic part) and K_c are
+        # reused and only their values computed again.
         J = pc.getOperators()[0]
-        self._release_matrices()
+        fingerprint = _pattern_fingerprint(J, self.comm)
+        reuse = fingerprint == self._fingerprint and bool(self._matrices)
+        if not reuse:
+            self._release_matrices()
+        self._fingerprint = fingerprint
         m, v = self._matrices, self._vectors
-        A = J.createSubMatrix(self.is_u, self.is_u)
-        G = m["G"] = J.createSubMatrix(self.is_u, self.is_z)
-        C = m["C"] = J.createSubMatrix(self.is_z, self.is_u)
+        structure = PETSc.Mat.Structure
+        A = m["A"] = J.createSubMatrix(self.is_u, self.is_u, submat=m.get("A"))
+        G = m["G"] = J.createSubMatrix(self.is_u, self.is_z, submat=m.get("G"))
+        C = m["C"] = J.createSubMatrix(self.is_z, self.is_u, submat=m.get("C"))
         diagonal = J.getDiagonal()
         d = diagonal.getArray(readonly=True)[self.num_u:].copy()
         diagonal.destroy()
         active = d == 0.0
         self.num_active = self.comm.allreduce(int(active.sum()), op=MPI.SUM)
         normals, lengths = self._normals(G, active)
-        for name in ("inverse_d", "inverse_p", "active", "rz", "sz", "tz"):
-            v[name] = G.createVecRight()
-        for name in ("ru", "rp", "rc", "du", "tu"):
-            v[name] = A.createVecRight()
+        if not reuse:
+            for name in ("inverse_d", "inverse_p", "active", "rz", "sz", "tz"):
+                v[name] = G.createVecRight()
+            for name in ("ru", "rp", "rc", "du", "tu"):
+                v[name] = A.createVecRight()
         v["inverse_d"].getArray()[:] = np.where(active, 0.0, 1.0 / np.where(active, 1.0, d))
         v["inverse_p"].getArray()[:] = np.where(active, 1.0 / np.where(active, lengths, 1.0), 0.0)
         v["active"].getArray()[:] = active
-        T = m["T"] = self._normal_matrix(normals, A)
-        different = PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN
+        T = m["T"] = self._normal_matrix(normals, A, m.get("T"))
+
+        def scaled_copy(name, source, left=None, right=None):
+            if name in m:
+                source.copy(m[name], structure=structure.SAME_NONZERO_PATTERN)
+            else:
+                m[name] = source.copy()
+            m[name].diagonalScale(L=left, R=right)
+            return m[name]
+
+        def combination(name, terms):
+            """sum of factor * matrix over ``terms`` in one matrix of their joint pattern."""
+            if name not in m:
+                first_factor, first = terms[0]
+                m[name] = first.copy()
+                m[name].scale(first_factor)
+                for factor, matrix in terms[1:]:
+                    m[name].axpy(factor, matrix, structure=structure.DIFFERENT_NONZERO_PATTERN)
+                return m[name]
+            m[name].zeroEntries()
+            for factor, matrix in terms:
+                m[name].axpy(factor, matrix, structure=structure.SUBSET_NONZERO_PATTERN)
+            return m[name]
+
+        def product(name, left, right, transpose=False):
+            multiply = left.transposeMatMult if transpose else left.matMult
+            m[name] = multiply(right, result=m.get(name))
+            return m[name]
+
         # A' = A - G d^-1 C: the exact elimination of the rows with d != 0
-        scaled = C.copy()
-        scaled.diagonalScale(L=v["inverse_d"])
-        product = G.matMult(scaled)
-        A_prime = m["A_prime"] = A.copy()
-        A_prime.axpy(-1.0, product, structure=different)
-        for matrix in (scaled, product, A):
-            matrix.destroy()
+        scaled = scaled_copy("scaled_C", C, left=v["inverse_d"])
+        A_prime = combination("A_prime", [(1.0, A), (-1.0, product("G_C", G, scaled))])
         # B1 = (I - G P^-1 T) A'
-        G_p = m["G_p"] = G.copy()
-        G_p.diagonalScale(R=v["inverse_p"])
-        TA = T.matMult(A_prime)
-        correction = G_p.matMult(TA)
-        K_c = A_prime.copy()
-        K_c.axpy(-1.0, correction, structure=different)
+        G_p = scaled_copy("G_p", G, right=v["inverse_p"])
+        correction = product("G_p_T_A", G_p, product("T_A", T, A_prime))
+        B1 = combination("B1", [(1.0, A_prime), (-1.0, correction)])
         # K_c = B1 - T^T (T B1 + C_a): the normal rows at active nodes become the
         # constraints, negated so that their diagonal (c_n D_jj) is positive as the
         # stiffness is (the constraints row C_a is -c_n D n on the slave node)
-        C_a = C.copy()
-        C_a.diagonalScale(L=v["active"])
-        normal_rows = T.matMult(K_c)
-        normal_rows.axpy(1.0, C_a, structure=different)
-        replaced = T.transposeMatMult(normal_rows)
-        K_c.axpy(-1.0, replaced, structure=different)
-        for matrix in (TA, correction, C_a, normal_rows, replaced):
-            matrix.destroy()
-        if self._K_c is not None and _same_pattern(self._K_c, K_c, self.comm):
-            # the same matrix object and pattern: the factorization reuses its analysis
-            K_c.copy(self._K_c, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-            K_c.destroy()
+        C_a = scaled_copy("C_a", C, left=v["active"])
+        normal_rows = combination("normal_rows", [(1.0, product("T_B1", T, B1)), (1.0, C_a)])
+        replaced = product("replaced", T, normal_rows, transpose=True)
+        K_c = combination("K_c", [(1.0, B1), (-1.0, replaced)])
+        if reuse:
+            self.reuses += 1
         else:
-            if self._K_c is not None:
-                self._K_c.destroy()
-            self._K_c = K_c
+            self.rebuilds += 1
             K_c.setBlockSize(self.block_size)
             if self.near_nullspace:
                 vectors = []
@@ -219,13 +241,20 @@ class CondensedPreconditioner:
         normals[selected] /= lengths[selected, None]
         return normals, lengths
 
-    def _normal_matrix(self, normals: np.ndarray, A: PETSc.Mat) -> PETSc.Mat:
-        """T: row j holds n_j^T on the dofs of slave node j (zeros when j is not active)."""
+    def _normal_matrix(self, normals: np.ndarray, A: PETSc.Mat,
+                       existing: PETSc.Mat | None = None) -> PETSc.Mat:
+        """T: row j holds n_j^T on the dofs of slave node j (zeros when j is not active);
+        its pattern is fixed, so an ``existing`` T only gets the new values."""
         bs = self.block_size
         indptr = np.arange(0, bs * self.num_z + 1, bs, dtype=PETSc.IntType)
+        columns = self.z_node_dofs.reshape(-1).astype(PETSc.IntType)
+        if existing is not None:  # rows of the CSR data count from the first owned row
+            existing.setValuesCSR(indptr, columns, normals.reshape(-1))
+            existing.assemble()
+            return existing
         T = PETSc.Mat().createAIJ(
             size=((self.num_z, PETSc.DETERMINE), A.getSizes()[1]),
-            csr=(indptr, self.z_node_dofs.reshape(-1).astype(PETSc.IntType), normals.reshape(-1)),
+            csr=(indptr, columns, normals.reshape(-1)),
             comm=self.comm,
         )
         T.assemble()
@@ -240,18 +269,14 @@ class CondensedPreconditioner:
 
     def destroy(self, pc: PETSc.PC | None = None) -> None:
         self._release_matrices()
-        if self._K_c is not None:
-            self._K_c.destroy()
         self.ksp.destroy()
         self.is_u.destroy()
         self.is_z.destroy()
 
 
-def _same_pattern(a: PETSc.Mat, b: PETSc.Mat, comm: MPI.Intracomm) -> bool:
-    """Collective: do two AIJ matrices of the same layout have the same nonzero pattern?"""
-    same = a.getOwnershipRange() == b.getOwnershipRange()
-    if same:
-        indptr_a, indices_a, _ = a.getValuesCSR()
-        indptr_b, indices_b, _ = b.getValuesCSR()
-        same = np.array_equal(indptr_a, indptr_b) and np.array_equal(indices_a, indices_b)
-    return comm.allreduce(bool(same), op=MPI.LAND)
+def _pattern_fingerprint(J: PETSc.Mat, comm: MPI.Intracomm) -> tuple:
+    """Collective: a key of J's layout and nonzero pattern on every rank."""
+    indptr, indices, _ = J.getValuesCSR()
+    local = (J.getOwnershipRange(), indices.size,
+             hash(indptr.tobytes()), hash(indices.tobytes()))
+    return tuple(comm.allgather(local))

@@ -94,9 +94,14 @@ def test_condensed_hertz_equals_uncondensed(name):
         outcomes[condensation] = setup.steps(2)
         assert outcomes[condensation].converged
         solutions[condensation] = solution(setup.problem, setup.tagged.cell_tags)
+        if condensation:
+            condenser = setup.problem._condenser
+            set_ups = (condenser.rebuilds, condenser.reuses)
         setup.destroy()
     assert solutions[True]["active"] > 0
     assert outcomes[True].iterations == outcomes[False].iterations
+    # sub-matrices and products are built again only when J's pattern changed
+    assert set_ups[0] >= 1 and set_ups[1] > set_ups[0], set_ups
     assert_same_solution(solutions[True], solutions[False])
     records = outcomes[True].extra["records"]
     linear = sum(r.report.linear_iterations for r in records)
