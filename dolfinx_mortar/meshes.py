@@ -268,14 +268,19 @@ _OPTIONS = {
 def _build(
     comm: MPI.Comm,
     name: str,
-    construct: Callable[[_Model], None],
+    construct: Callable,
+    gdim: int = 2,
+    options: dict[str, float] | None = None,
 ) -> compat.MeshWithTags:
     """Run ``construct`` on rank 0 inside a fresh gmsh model and distribute the mesh.
 
-    gmsh is initialised (quietly) for this call and finalised afterwards; if the caller
-    already has gmsh running, a separate model is used and removed, and the options
-    touched here are restored, so the caller's gmsh state is left as it was.
+    ``construct`` gets a :class:`_Model` in 2D and the ``gmsh`` module in 3D; ``options``
+    (default the 2D builders') are set for the call. gmsh is initialised (quietly) for
+    this call and finalised afterwards; if the caller already has gmsh running, a
+    separate model is used and removed, and the options touched here are restored, so
+    the caller's gmsh state is left as it was.
     """
+    options = _OPTIONS if options is None else options
     model = None
     error: str | None = None
     own_session = False
@@ -290,13 +295,14 @@ def _build(
             gmsh.option.setNumber("General.Terminal", 0)
         previous = None if own_session else gmsh.model.getCurrent()
         try:
-            for option, value in _OPTIONS.items():
+            for option, value in options.items():
                 saved[option] = gmsh.option.getNumber(option)
                 gmsh.option.setNumber(option, value)
-            for option in ("Mesh.MeshSizeMax", "Mesh.RecombinationAlgorithm", "Mesh.Smoothing"):
+            for option in ("Mesh.MeshSizeMax", "Mesh.MeshSizeMin", "Mesh.RecombinationAlgorithm",
+                           "Mesh.Smoothing"):
                 saved[option] = gmsh.option.getNumber(option)
             gmsh.model.add(f"dolfinx_mortar_{name}")
-            construct(_Model(gmsh))
+            construct(_Model(gmsh) if gdim == 2 else gmsh)
             model = gmsh.model
         except Exception as exception:  # reported on every rank below
             error = f"{type(exception).__name__}: {exception}"
@@ -318,7 +324,7 @@ def _build(
         close()
         raise RuntimeError(f"building the {name} mesh with gmsh failed: {error}")
     try:
-        return compat.model_to_mesh(model, comm, 0, gdim=2)
+        return compat.model_to_mesh(model, comm, 0, gdim=gdim)
     finally:
         close()
 

@@ -1,0 +1,218 @@
+"""gmsh builders for 3D benchmark geometries (Hertz contact of a sphere).
+
+Like :mod:`dolfinx_mortar.meshes`, the gmsh model lives on rank 0 only and
+:func:`compat.model_to_mesh` distributes it; touching bodies are separate meshes of one
+dolfinx mesh (no shared node), each body one cell tag, the boundary pieces facet tags,
+``contact_slave`` and ``contact_master`` aliases of two of them. The geometry is built
+with gmsh's OpenCASCADE kernel, which keeps separately created volumes apart (no
+fragmenting), and meshed with tetrahedra.
+"""
+
+from __future__ import annotations
+
+import math
+
+from mpi4py import MPI
+
+from dolfinx_mortar import compat, meshes
+from dolfinx_mortar.meshes import TaggedMesh, _check_positive, _check_refinement
+
+HERTZ_SPHERE_CASES = ("block", "sphere")
+"""Accepted values of :func:`hertz_sphere`'s ``case``."""
+
+ELEMENTS_PER_RADIUS = 4
+"""n0: the element size within the refined zone is a / (n0 2**refinement) (a the contact
+radius), about n0 slave facets across the contact radius at refinement 0."""
+
+GROWTH_3D = 0.5
+"""Increase of the element size per unit distance beyond the refined zone, at refinement
+0; level k uses GROWTH_3D / 2**k so that refining halves the element size everywhere."""
+
+CAP_RADIUS = 0.5
+"""Radius (over R) of the spherical caps that are the contact surfaces of the balls; the
+rest of a ball's curved surface is the facet group "free" (no contact search there)."""
+
+_OPTIONS = {
+    "General.Terminal": 0,
+    "Mesh.ElementOrder": 1,
+    "Mesh.Algorithm": 6,
+    "Mesh.Algorithm3D": 1,
+    "Mesh.RecombineAll": 0,
+    "Mesh.MeshSizeFromPoints": 0,
+    "Mesh.MeshSizeFromCurvature": 0,
+    "Mesh.MeshSizeExtendFromBoundary": 0,
+    "Mesh.Optimize": 1,
+}
+
+
+def _build_3d(comm: MPI.Comm, name: str, construct) -> compat.MeshWithTags:
+    """``construct(gmsh)`` on rank 0 and the distributed volume mesh (:func:`meshes._build`)."""
+    return meshes._build(comm, name, construct, gdim=3, options=_OPTIONS)
+
+
+def hertz_contact_radius(load: float, radius: float, E_star: float) -> float:
+    """Hertz contact radius a = (3 F R / (4 E*))^(1/3) of a sphere (R: effective radius)."""
+    F = _check_positive("load", load)
+    R = _check_positive("radius", radius)
+    return (3.0 * F * R / (4.0 * _check_positive("E_star", E_star))) ** (1.0 / 3.0)
+
+
+def hertz_sphere(
+    case: str = "block",
+    refinement: int = 0,
+    radius: float = 1.0,
+    contact_radius: float = 0.1,
+    block_size: float = 1.0,
+    slave: str = "sphere",
+    elements_per_radius: int = ELEMENTS_PER_RADIUS,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> TaggedMesh:
+    """Quarter model (x >= 0, y >= 0) of a sphere pressed onto a block or onto a sphere.
+
+    The upper body is the lower half of the ball of radius R centred at (0, 0, R), cut to
+    x, y >= 0: it touches z = 0 at the origin and carries the load on its flat face z = R.
+
+    * case "block": on the block [0, L] x [0, L] x [-L, 0], L = ``block_size`` R.
+    * case "sphere": on the mirror image, the upper half of the ball centred at
+      (0, 0, -R), supported on its flat face z = -R. Its cell tag is "block" too, so
+      solvers treat both cases alike.
+
+    With a = ``contact_radius`` (pass the Hertz a of the actual load and moduli) the
+    tetrahedra have size h_contact = a / (n0 2**refinement), n0 = ``elements_per_radius``,
+    within the distance 1.5 a of the origin, growing linearly by
+    GROWTH_3D / 2**refinement per unit distance beyond, up to h_max = R / (4 2**refinement).
+    Every length is a multiple of R or a and the model is meshed at R = 1 and scaled, so
+    the same dimensionless problem gets the same mesh in any unit system.
+
+    Args:
+        case: "block" or "sphere".
+        refinement: Halves the sizes per level.
+        radius: Sphere radius R.
+        contact_radius: Contact radius a that sizes the refined zone, below R/3 (the
+            contact surfaces are the caps of radius CAP_RADIUS R = R/2).
+        block_size: L / R of case "block".
+        slave: "sphere" (the upper body's curved surface is the slave, default) or
+            "block" (the lower body's contact surface is).
+        elements_per_radius: n0.
+        comm: Communicator of the mesh.
+
+    Returns:
+        The mesh with cells "sphere", "block" and facets "sphere_surface" (the upper
+        ball's cap x^2 + y^2 <= (R/2)^2), "block_top" (z = 0 of the block, or the lower
+        ball's cap), "load" (z = R), "support" (z = -L or z = -R), "symmetry_x" (x = 0 of
+        both bodies), "symmetry_y" (y = 0 of both bodies), "free" (the rest of the balls'
+        curved surfaces); the aliases "contact_slave", "contact_master"; ``h_contact``
+        is the nominal element size of the contact zone.
+    """
+    if case not in HERTZ_SPHERE_CASES:
+        raise ValueError(f"case must be one of {HERTZ_SPHERE_CASES}, got {case!r}")
+    if slave not in ("sphere", "block"):
+        raise ValueError(f"slave must be 'sphere' or 'block', got {slave!r}")
+    level = _check_refinement(refinement)
+    n0 = _check_refinement(elements_per_radius)
+    if n0 < 1:
+        raise ValueError(f"elements_per_radius must be >= 1, got {elements_per_radius!r}")
+    unit = _check_positive("radius", radius)
+    a = float(f"{_check_positive('contact_radius', contact_radius) / unit:.12g}")
+    L = float(f"{_check_positive('block_size', block_size):.12g}")
+    if not 1.5 * a < CAP_RADIUS:
+        raise ValueError(f"contact_radius must be below {CAP_RADIUS / 1.5:.4g} R = "
+                         f"{CAP_RADIUS / 1.5 * unit:.6g}, got {contact_radius!r}")
+    cap = 1.0 - math.sqrt(1.0 - CAP_RADIUS**2)
+    scale = 0.5**level
+    h_contact = a / n0 * scale
+    h_max = 0.25 * scale
+    zone = 1.5 * a
+    growth = GROWTH_3D * scale
+    names = ["sphere", "block", "sphere_surface", "block_top", "load", "support",
+             "symmetry_x", "symmetry_y", "free"]
+    markers = {name: 1 + i if i < 2 else 9 + i for i, name in enumerate(names)}
+
+    def half_ball(occ, sign: float) -> list[int]:
+        """The quarter of the half ball of radius 1 centred at (0, 0, sign) on the side of
+        z = 0, as two conforming volumes: the cap of radius CAP_RADIUS and the rest."""
+        pieces = []
+        for low, high in ((0.0, cap), (cap, 1.0)):
+            ball = occ.addSphere(0.0, 0.0, sign, 1.0)
+            z0 = low if sign > 0 else -high
+            box = occ.addBox(0.0, 0.0, z0, 1.0, 1.0, high - low)
+            result, _ = occ.intersect([(3, ball)], [(3, box)])
+            assert len(result) == 1, result
+            pieces.append(result[0])
+        result, _ = occ.fragment([pieces[0]], [pieces[1]])
+        assert len(result) == 2, result
+        return [tag for _, tag in result]
+
+    def construct(gmsh) -> None:
+        occ = gmsh.model.occ
+        upper = half_ball(occ, 1.0)
+        if case == "block":
+            lower = [occ.addBox(0.0, 0.0, -L, L, L, L)]
+        else:
+            lower = half_ball(occ, -1.0)
+        occ.synchronize()
+        groups: dict[str, list[int]] = {name: [] for name in [*names[2:], "free"]}
+        tol = 1e-6  # OCC pads bounding boxes
+        for body, volumes in (("sphere", upper), ("block", lower)):
+            boundary = gmsh.model.getBoundary([(3, v) for v in volumes], oriented=False)
+            for _, face in boundary:
+                x0, y0, z0, x1, y1, z1 = gmsh.model.getBoundingBox(2, face)
+                kind = gmsh.model.getType(2, face)
+                if x1 - x0 < tol and abs(x0) < tol:
+                    groups["symmetry_x"].append(face)
+                elif y1 - y0 < tol and abs(y0) < tol:
+                    groups["symmetry_y"].append(face)
+                elif kind != "Plane":
+                    if min(abs(z0), abs(z1)) > tol:
+                        groups["free"].append(face)
+                    else:
+                        groups["sphere_surface" if body == "sphere" else "block_top"].append(face)
+                elif body == "sphere":
+                    groups["load"].append(face)
+                elif z1 - z0 < tol and abs(z1) < tol:
+                    groups["block_top"].append(face)
+                elif z1 - z0 < tol:
+                    groups["support"].append(face)
+        free = groups.pop("free")
+        expected = {"sphere_surface": 1, "block_top": 1, "load": 1, "support": 1,
+                    "symmetry_x": len(upper) + len(lower),
+                    "symmetry_y": len(upper) + len(lower)}
+        found = {name: len(faces) for name, faces in groups.items()}
+        if found != expected:
+            raise RuntimeError(f"unexpected faces of the model: {found}")
+        gmsh.model.addPhysicalGroup(3, upper, markers["sphere"], name="sphere")
+        gmsh.model.addPhysicalGroup(3, lower, markers["block"], name="block")
+        if free:
+            gmsh.model.addPhysicalGroup(2, free, markers["free"], name="free")
+        for name, faces in groups.items():
+            gmsh.model.addPhysicalGroup(2, faces, markers[name], name=name)
+
+        origins = [tag for _, tag in gmsh.model.getEntitiesInBoundingBox(
+            -tol, -tol, -tol, tol, tol, tol, dim=0)]
+        field = gmsh.model.mesh.field
+        distance = field.add("Distance")
+        field.setNumbers(distance, "PointsList", origins)
+        threshold = field.add("Threshold")
+        field.setNumber(threshold, "InField", distance)
+        field.setNumber(threshold, "SizeMin", h_contact)
+        field.setNumber(threshold, "SizeMax", h_max)
+        field.setNumber(threshold, "DistMin", zone)
+        field.setNumber(threshold, "DistMax", zone + max(h_max - h_contact, 0.0) / growth)
+        field.setAsBackgroundMesh(threshold)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", h_max)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", 0.0)
+        gmsh.model.mesh.generate(3)
+        types = set(gmsh.model.mesh.getElementTypes(3))
+        if types != {4}:
+            raise RuntimeError(f"gmsh produced element types {sorted(types)}, expected "
+                               "only type 4 (tetrahedra)")
+
+    data = _build_3d(comm, f"hertz_sphere_{case}", construct)
+    if unit != 1.0:
+        data.mesh.geometry.x[:] *= unit
+    every = {name: markers[name] for name in names}
+    sides = ("sphere_surface", "block_top") if slave == "sphere" else ("block_top",
+                                                                       "sphere_surface")
+    every["contact_slave"] = markers[sides[0]]
+    every["contact_master"] = markers[sides[1]]
+    return TaggedMesh(data.mesh, data.cell_tags, data.facet_tags, every, h_contact * unit)

@@ -1,0 +1,115 @@
+"""3D Hertz contact of a sphere on a block (demos/hertz_sphere.py) at refinement 0: the
+mesh builder's tags, the load transmitted exactly, the pressure near Hertz's, serial =
+parallel, and the same dimensionless answer in other units."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import pathlib
+
+import dolfinx
+import numpy as np
+import pytest
+import ufl
+from mpi4py import MPI
+
+from dolfinx_mortar import meshes3d
+
+DEMOS = pathlib.Path(__file__).parents[1] / "demos"
+ARGS = ["--refinement", "0", "--steps", "2"]
+
+
+def hertz_sphere(args, comm=MPI.COMM_SELF) -> dict:
+    spec = importlib.util.spec_from_file_location("demo_hertz_sphere", DEMOS / "hertz_sphere.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.main(list(args), comm=comm)
+
+
+@pytest.fixture(scope="module")
+def serial():
+    return hertz_sphere(ARGS)
+
+
+@pytest.mark.parametrize("case", meshes3d.HERTZ_SPHERE_CASES)
+def test_mesh_bodies_are_separate_and_tagged(case):
+    """Two bodies that share no node (two nodes at the contact point), the quarter load face
+    of area pi R^2 / 4 up to its facets, every named facet group present."""
+    R = 2.0
+    tagged = meshes3d.hertz_sphere(case=case, radius=R, contact_radius=0.2, comm=MPI.COMM_SELF)
+    mesh = tagged.mesh
+    assert np.count_nonzero(np.linalg.norm(mesh.geometry.x, axis=1) < 1e-12) == 2
+    assert tagged.h_contact == pytest.approx(0.2 / meshes3d.ELEMENTS_PER_RADIUS, rel=1e-12)
+    for name in ("contact_slave", "contact_master", "load", "support", "symmetry_x",
+                 "symmetry_y"):
+        assert tagged.facet_tags.find(tagged.markers[name]).size > 0, name
+    ds = ufl.Measure("ds", domain=mesh, subdomain_data=tagged.facet_tags)
+    area = dolfinx.fem.assemble_scalar(dolfinx.fem.form(
+        dolfinx.fem.Constant(mesh, 1.0) * ds(tagged.markers["load"])))
+    assert area == pytest.approx(math.pi * R**2 / 4.0, rel=1e-2)
+    assert area < math.pi * R**2 / 4.0  # inscribed facets
+
+
+def test_total_force_equals_the_load(serial):
+    """The contact force (times 4 for the quarter) is the applied load F, and slave and
+    master forces balance, to rounding (measured 2e-16)."""
+    assert serial["total_force"] == pytest.approx(serial["load"], rel=1e-8)
+    assert serial["force_balance"] <= 1e-10
+
+
+def test_pressure_is_near_hertz(serial):
+    """Refinement 0 (h = a/4, 2703 dofs), measured: p_max/p0 - 1 = +3.2 % (the largest of
+    scattered nodal values), the fitted peak p0_fit/p0 - 1 = +0.17 %, a_contact = 0.0945
+    vs a = 0.1008 (-0.26 slave elements), L2 pressure error 8.5 %; one linear problem per
+    active set, so few Newton iterations (measured [4, 4])."""
+    assert 0.0 < serial["p_max"] / serial["p0_exact"] - 1.0 < 0.06
+    assert abs(serial["p0_fit_error_rel"]) < 0.02
+    assert abs(serial["a_error_in_elements"]) < 1.0
+    assert 0.03 < serial["l2_pressure_error_rel"] < 0.12
+    assert max(serial["newton_iterations"]) <= 6
+
+
+@pytest.mark.parametrize("case, slave", [("sphere", "sphere"), ("block", "block")])
+def test_two_spheres_and_the_block_as_slave(case, slave):
+    """Two equal spheres (R/2 in Hertz's formulas), or the block's top as the slave: the
+    load transmitted to rounding; measured p_max/p0 - 1 = +3.5 % and +3.3 %."""
+    summary = hertz_sphere([*ARGS, "--case", case, "--slave", slave])
+    assert summary["total_force"] == pytest.approx(summary["load"], rel=1e-8)
+    assert 0.0 < summary["p_max"] / summary["p0_exact"] - 1.0 < 0.06
+    assert abs(summary["a_error_in_elements"]) < 1.0
+
+
+def test_the_same_problem_in_other_units(serial):
+    """Lengths x 8, moduli x 10, force x 640 (= 8^2 x 10): the same mesh (scaled) and the
+    same p_max / p0, a_contact / a (measured: equal to 1e-12)."""
+    scaled = hertz_sphere([*ARGS, "--radius", "8", "--load", repr(0.15 * 640.0),
+                           "--E1", "2000", "--E2", "2000"])
+    assert scaled["a_exact"] == pytest.approx(8.0 * serial["a_exact"], rel=1e-12)
+    assert scaled["num_dofs"] == serial["num_dofs"]
+    for key, exact in (("p_max", "p0_exact"), ("a_contact", "a_exact")):
+        ratios = [summary[key] / summary[exact] for summary in (serial, scaled)]
+        assert ratios[1] == pytest.approx(ratios[0], rel=1e-6, abs=0.0), key
+
+
+@pytest.mark.parallel
+def test_serial_equals_parallel():
+    serial = hertz_sphere(ARGS, comm=MPI.COMM_SELF)
+    parallel = hertz_sphere(ARGS, comm=MPI.COMM_WORLD)
+    assert parallel["num_ranks"] == MPI.COMM_WORLD.size
+    assert parallel["num_dofs"] == serial["num_dofs"]
+    assert parallel["active_nodes"] == serial["active_nodes"]
+    for key in ("p_max", "total_force", "a_contact", "l2_pressure_error_rel"):
+        assert parallel[key] == pytest.approx(serial[key], rel=1e-8), key
+    assert parallel["total_force"] == pytest.approx(parallel["load"], rel=1e-8)
+
+
+@pytest.mark.parametrize(
+    "option", [["--load", "-1"], ["--E2", "0"], ["--nu1", "0.5"], ["--load", "100"]]
+)
+def test_demo_rejects_bad_physical_input(option, capsys):
+    """Before any mesh is built; a load of 100 gives a = 0.88 R, beyond the contact cap."""
+    with pytest.raises(SystemExit) as exit_info:
+        hertz_sphere(option)
+    assert exit_info.value.code == 2
+    assert ("R/3" if option[1] == "100" else option[0]) in capsys.readouterr().err
