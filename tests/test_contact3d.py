@@ -357,3 +357,36 @@ def test_ironing_3d_small_run_balances_and_gives_the_serial_answer():
     for key in ("block_force_x", "block_force_y"):
         assert last[1][key] == pytest.approx(last[0][key], rel=1e-8, abs=1e-8 * 1e8)
     assert parallel["newton_iterations"] == serial["newton_iterations"]
+
+
+@pytest.mark.parallel
+def test_bad_3d_input_fails_on_every_rank_with_a_message():
+    """Unknown options, a tag that marks nothing, a slave on the master's body, an iterative
+    solver with standard multipliers, a quadratic space: a ValueError on every rank (the
+    parallel run would hang if one rank went on)."""
+    from dolfinx_mortar.surface import SurfaceError
+
+    comm = MPI.COMM_WORLD
+    tagged = meshes.patch_test_3d(ratio=(2, 3), comm=comm)
+    V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (3,)))
+    u = dolfinx.fem.Function(V)
+    F = internal_work(u, ufl.TestFunction(V), {0: Material(1.0, 0.3, "linear")})
+    markers = tagged.markers
+    pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"])
+    for key, value in (("method", "lagrangian"), ("integration", "nodal"), ("normals", "up"),
+                       ("multipliers", "mortar"), ("linear_solver", "cg")):
+        with pytest.raises(ValueError, match=f"unknown {key}"):
+            ContactProblem(F, u, [], [pair], **{key: value})
+    with pytest.raises(ValueError, match="needs multipliers='dual'"):
+        ContactProblem(F, u, [], [pair], multipliers="standard", linear_solver="iterative")
+    with pytest.raises(SurfaceError, match="marks no facet"):
+        ContactProblem(F, u, [], [ContactPair(tagged.facet_tags, 999, markers["contact_master"])])
+    wrong = ContactPair(tagged.facet_tags, markers["foundation_bottom"],
+                        markers["foundation_contact"])
+    with pytest.raises(ValueError, match="wrong body"):
+        ContactProblem(F, u, [], [wrong])
+    quadratic = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 2, (3,)))
+    w = dolfinx.fem.Function(quadratic)
+    G = internal_work(w, ufl.TestFunction(quadratic), {0: Material(1.0, 0.3, "linear")})
+    with pytest.raises(SurfaceError, match="degree|quadratic|P1|linear"):
+        ContactProblem(G, w, [], [pair])
