@@ -154,11 +154,8 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         default=None,
         help="Poisson's ratio of the lower body (None: the case's, 0.3)",
     )
-    parser.add_argument(
-        "--material",
-        choices=("linear", "neo-hookean", "saint-venant-kirchhoff"),
-        default="linear",
-        help="linear (small strain, what Hertz theory assumes) or finite-strain models",
+    cli.add_material_argument(
+        parser, "linear (small strain, what Hertz theory assumes) or finite-strain models"
     )
     parser.add_argument(
         "--refinement", type=int, default=2, help="halves the element sizes per level"

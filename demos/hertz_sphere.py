@@ -205,11 +205,8 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         default="sphere",
         help="slave surface: the sphere's curved surface or the lower body's",
     )
-    parser.add_argument(
-        "--material",
-        choices=("linear", "neo-hookean", "saint-venant-kirchhoff"),
-        default="linear",
-        help="linear (small strain, what Hertz theory assumes) or finite-strain models",
+    cli.add_material_argument(
+        parser, "linear (small strain, what Hertz theory assumes) or finite-strain models"
     )
     parser.add_argument(
         "--refinement", type=int, default=0, help="halves the element sizes per level"

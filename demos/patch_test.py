@@ -55,12 +55,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         default=None,
         help="cells (default: triangle in 2D, hexahedron in 3D)",
     )
-    parser.add_argument(
-        "--material",
-        choices=("linear", "neo-hookean", "saint-venant-kirchhoff"),
-        default="linear",
-        help="bulk material of both bodies",
-    )
+    cli.add_material_argument(parser)
     cli.add_common_arguments(parser)
     args = parser.parse_args(argv)
     allowed = meshes.CELL_TYPES if args.dim == 2 else meshes.CELL_TYPES_3D

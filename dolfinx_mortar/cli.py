@@ -50,6 +50,17 @@ def add_output_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def add_material_argument(
+    parser: argparse.ArgumentParser,
+    help: str = "bulk material of both bodies",  # noqa: A002 (argparse's name)
+) -> None:
+    """``--material``: one of the library's models (:data:`dolfinx_mortar.materials.MODELS`),
+    default ``linear``."""
+    from .materials import MODELS
+
+    parser.add_argument("--material", choices=MODELS, default="linear", help=help)
+
+
 def add_common_arguments(
     parser: argparse.ArgumentParser,
     normals: str | None = "averaged",

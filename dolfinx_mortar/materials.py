@@ -86,12 +86,15 @@ def internal_work(u, v, materials: dict[int, Material], cell_tags=None,
     """sum over bodies of int P(u) : grad(v) dX; keys of ``materials`` are cell tags.
 
     With ``cell_tags=None`` a single material (any key) applies everywhere.
-    ``quadrature_degree`` overrides UFL's estimate, which for the logarithms and
-    inverses of the hyperelastic laws on hexahedra asks for thousands of points per
-    cell (2 gives the usual 2 x 2 x 2 Gauss rule of trilinear elements).
+    ``quadrature_degree`` overrides UFL's estimate. On hexahedra the default is 2
+    (the 2 x 2 x 2 Gauss rule of trilinear elements, exact for linear elasticity
+    on parallelepipeds): there UFL's estimate for the logarithms and inverses of the
+    hyperelastic laws asks for thousands of points per cell.
     """
-    metadata = {} if quadrature_degree is None else {"quadrature_degree": quadrature_degree}
     mesh = u.function_space.mesh
+    if quadrature_degree is None and mesh.topology.cell_name() == "hexahedron":
+        quadrature_degree = 2
+    metadata = {} if quadrature_degree is None else {"quadrature_degree": quadrature_degree}
     if cell_tags is None:
         if len(materials) != 1:
             raise ValueError("several materials need cell_tags to say where each applies")

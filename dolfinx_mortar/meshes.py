@@ -36,6 +36,7 @@ import basix.ufl
 import dolfinx
 import dolfinx.io
 import dolfinx.mesh
+import numpy as np
 import ufl
 from mpi4py import MPI
 
@@ -630,8 +631,6 @@ def patch_test_3d(
         "punch_top", "foundation_contact", "foundation_bottom"; ``h_contact`` is the
         slave's element size.
     """
-    import numpy as np
-
     from .bodies import merge_meshes
 
     n_punch, n_foundation = _check_ratio(ratio)
@@ -764,8 +763,6 @@ def ironing_3d(
         "die_top", "block_contact" (y = 4), "block_bottom" (y = 0) and "block_back"
         (z = 0); contact_slave is the die's curved bottom.
     """
-    import numpy as np
-
     from .bodies import merge_meshes
 
     level = _check_refinement(refinement)
@@ -812,8 +809,6 @@ def ironing_3d(
 def _extruded(x2, quadrilaterals, layers: int):
     """Nodes (n (layers + 1), 3) and hexahedra (dolfinx vertex order) of quadrilaterals
     (dolfinx order) extruded through z in [0, 1]."""
-    import numpy as np
-
     n = x2.shape[0]
     z = np.linspace(0.0, 1.0, layers + 1)
     x = np.column_stack([np.tile(x2, (layers + 1, 1)), np.repeat(z, n)])

@@ -3,8 +3,6 @@ solvers, serial = parallel), the exact Jacobian of the whole system, diagnostics
 
 from __future__ import annotations
 
-import importlib.util
-import pathlib
 import warnings
 
 import dolfinx
@@ -12,21 +10,18 @@ import numpy as np
 import pytest
 import ufl
 from mpi4py import MPI
+from test_contact import assert_taylor_second_order, demo
 
 from dolfinx_mortar import compat, meshes
 from dolfinx_mortar.loading import solve_load_steps
 from dolfinx_mortar.materials import Material, internal_work
 from dolfinx_mortar.problem import ContactPair, ContactProblem, ContactWarning
 
-DEMOS = pathlib.Path(__file__).parents[1] / "demos"
 CELLS = ("tetrahedron", "hexahedron")
 
 
 def patch_test(*args, comm=MPI.COMM_SELF) -> dict:
-    spec = importlib.util.spec_from_file_location("demo_patch_test", DEMOS / "patch_test.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.main(["--dim", "3", *args], comm=comm)
+    return demo("patch_test").main(["--dim", "3", *args], comm=comm)
 
 
 def assert_exact(summary: dict, tolerance: float = 1e-10) -> None:
@@ -255,33 +250,7 @@ def test_contact_jacobian_taylor(normals, method):
     for z in problem.multipliers:
         z.setArray(rng.uniform(0.5, 1.5, z.getLocalSize()))
     problem._read_state_into_x()
-    snes = problem.snes
-    x0 = problem.x.copy()
-    r0 = problem.b.duplicate()
-    problem._residual(snes, x0, r0)
-    active = [a.copy() for a in problem.active]
-    assert problem.num_active() > 0
-    J = problem._assemble_system()
-    h = x0.duplicate()
-    h.setArray(rng.standard_normal(h.getLocalSize()))
-    h.getArray()[np.isin(np.arange(*h.getOwnershipRange()),
-                         problem.layout.u(problem._fixed_dofs))] = 0.0
-    Jh = h.duplicate()
-    J.mult(h, Jh)
-    remainders = []
-    steps = 1e-4 * 0.5 ** np.arange(5)
-    for eps in steps:
-        x = x0.copy()
-        x.axpy(eps, h)
-        r = r0.duplicate()
-        problem._residual(snes, x, r)
-        same = all(np.array_equal(a, b) for a, b in zip(active, problem.active, strict=True))
-        assert problem.comm.allreduce(same, op=MPI.LAND)
-        r.axpy(-1.0, r0)
-        r.axpy(-eps, Jh)
-        remainders.append(r.norm())
-    slope = np.polyfit(np.log(steps), np.log(remainders), 1)[0]
-    assert slope == pytest.approx(2.0, abs=0.1), remainders
+    assert_taylor_second_order(problem, seed=3)
     problem.destroy()
 
 
@@ -329,13 +298,6 @@ def test_penetration_report_finds_nodes_behind_a_3d_surface():
     assert reports[0].count == 1 and reports[0].side == "master"
     assert reports[0].depth == pytest.approx(0.3 / (1.0 / 3.0), rel=1e-12)
     problem.destroy()
-
-
-def demo(name: str):
-    spec = importlib.util.spec_from_file_location(f"demo_{name}", DEMOS / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.mark.parallel

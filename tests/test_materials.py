@@ -16,7 +16,7 @@ import pytest
 import ufl
 from mpi4py import MPI
 
-from dolfinx_mortar.materials import Material
+from dolfinx_mortar.materials import Material, internal_work
 
 E, NU = 6.896e8, 0.32  # the ironing block
 MU = E / (2 * (1 + NU))
@@ -85,3 +85,26 @@ def test_saint_venant_kirchhoff_uniaxial_plane_strain_stretch():
     green = 0.5 * (stretch**2 - 1)
     S11, S22 = (2 * MU + LAMBDA) * green, LAMBDA * green
     assert np.allclose(P, np.diag([stretch * S11, S22]), rtol=1e-12, atol=1e-12 * E)
+
+
+def test_hexahedra_default_to_two_by_two_by_two_gauss_points():
+    """On hexahedra internal_work integrates with degree 2 unless told otherwise: exact
+    for linear elasticity on a box (the same stiffness as degree 6 to rounding), and
+    the Neo-Hookean form asks for 8 points per cell, not UFL's estimate."""
+    import dolfinx.fem.petsc
+
+    mesh = dolfinx.mesh.create_box(MPI.COMM_SELF, [[0, 0, 0], [1, 2, 3]], [2, 1, 1],
+                                   dolfinx.mesh.CellType.hexahedron)
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (3,)))
+    u, v = dolfinx.fem.Function(V), ufl.TestFunction(V)
+    du = ufl.TrialFunction(V)
+    linear = {0: Material(3.0, 0.3, "linear")}
+    stiffness = []
+    for degree in (None, 6):
+        F = internal_work(u, v, linear, quadrature_degree=degree)
+        A = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(ufl.derivative(F, u, du)))
+        A.assemble()
+        stiffness.append(A.convert("dense").getDenseArray())
+    assert np.abs(stiffness[0] - stiffness[1]).max() <= 1e-12 * np.abs(stiffness[1]).max()
+    F = internal_work(u, v, {0: Material(3.0, 0.3, "neo-hookean")})
+    assert {i.metadata()["quadrature_degree"] for i in F.integrals()} == {2}
