@@ -34,6 +34,8 @@ dolfinx (ghost mode none, like the gmsh builders of :mod:`dolfinx_mortar.meshes`
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from collections.abc import Callable, Mapping
 
 import basix
@@ -46,12 +48,33 @@ import numpy as np
 from mpi4py import MPI
 
 from . import compat
-from .meshes import TaggedMesh
 
 FIRST_FACET_VALUE = 11
 """Facet tag values start here (or after the last body value with more than 10 bodies)."""
 
 Locator = Callable[[np.ndarray], np.ndarray]
+
+
+
+@dataclasses.dataclass
+class TaggedMesh:
+    """A mesh of several separate bodies with its cell and facet tags.
+
+    Attributes:
+        mesh: The distributed mesh of all bodies.
+        cell_tags: One tag value per body.
+        facet_tags: Tagged boundary pieces and internal symmetry lines.
+        markers: Name to tag value, identical on every rank. ``contact_slave`` and
+            ``contact_master`` repeat the value of the slave and master surfaces.
+        h_contact: Nominal element size on the slave contact surface (the one the
+            mortar integrals live on); nan if the builder does not define one.
+    """
+
+    mesh: dolfinx.mesh.Mesh
+    cell_tags: dolfinx.mesh.MeshTags
+    facet_tags: dolfinx.mesh.MeshTags
+    markers: dict[str, int]
+    h_contact: float = math.nan
 
 
 class _Body:

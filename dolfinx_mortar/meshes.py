@@ -24,7 +24,6 @@ mesh with its tags for ParaView.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import itertools
 import json
 import math
@@ -41,6 +40,7 @@ import ufl
 from mpi4py import MPI
 
 from dolfinx_mortar import compat
+from dolfinx_mortar.bodies import TaggedMesh, merge_meshes
 
 CELL_TYPES = ("triangle", "quadrilateral")
 """Accepted values of every builder's ``cell_type``."""
@@ -59,27 +59,6 @@ _HERTZ_RADIUS = 8.0
 
 _HERTZ_HALF_WIDTH = {"A": 0.39, "B": 1.0, "C": 0.7}
 """Contact half-width a of the Hertz cases at radius 8 (it scales with sqrt(radius))."""
-
-
-@dataclasses.dataclass
-class TaggedMesh:
-    """A mesh of several separate bodies with its cell and facet tags.
-
-    Attributes:
-        mesh: The distributed mesh of all bodies.
-        cell_tags: One tag value per body.
-        facet_tags: Tagged boundary pieces and internal symmetry lines.
-        markers: Name to tag value, identical on every rank. ``contact_slave`` and
-            ``contact_master`` repeat the value of the slave and master surfaces.
-        h_contact: Nominal element size on the slave contact surface (the one the
-            mortar integrals live on); nan if the builder does not define one.
-    """
-
-    mesh: dolfinx.mesh.Mesh
-    cell_tags: dolfinx.mesh.MeshTags
-    facet_tags: dolfinx.mesh.MeshTags
-    markers: dict[str, int]
-    h_contact: float = math.nan
 
 
 # ---------------------------------------------------------------------------------------
@@ -631,8 +610,6 @@ def patch_test_3d(
         "punch_top", "foundation_contact", "foundation_bottom"; ``h_contact`` is the
         slave's element size.
     """
-    from .bodies import merge_meshes
-
     n_punch, n_foundation = _check_ratio(ratio)
     level = _check_refinement(refinement)
     if cell_type not in CELL_TYPES_3D:
@@ -763,8 +740,6 @@ def ironing_3d(
         "die_top", "block_contact" (y = 4), "block_bottom" (y = 0) and "block_back"
         (z = 0); contact_slave is the die's curved bottom.
     """
-    from .bodies import merge_meshes
-
     level = _check_refinement(refinement)
     if layers is None:
         layers = 10 * 2**level
