@@ -137,6 +137,20 @@ def add_common_arguments(
         default=None,
         help="contact search margin, a length (None: scaled from the facet size)",
     )
+    friction = parser.add_mutually_exclusive_group()
+    friction.add_argument(
+        "--mu", type=float, default=None,
+        help="Coulomb friction coefficient (default: frictionless)")
+    friction.add_argument(
+        "--tresca", type=float, default=None, help="Tresca friction: the slip bound, a pressure"
+    )
+    parser.add_argument(
+        "--c-t",
+        type=float,
+        default=None,
+        help="tangential complementarity parameter (None: c_n; with --method penalty the "
+        "tangential penalty)",
+    )
 
 
 def problem_options(args: argparse.Namespace) -> dict[str, Any]:
@@ -153,7 +167,18 @@ def problem_options(args: argparse.Namespace) -> dict[str, Any]:
         "condensation": args.condensation,
         "linear_solver": args.linear_solver,
         "search_margin": args.search_margin,
+        "friction": friction_option(args),
+        "c_t": args.c_t,
     }
+
+
+def friction_option(args: argparse.Namespace):
+    """ContactProblem's ``friction`` from ``--mu`` / ``--tresca`` (None: frictionless)."""
+    if args.mu is not None:
+        return ("coulomb", args.mu)
+    if args.tresca is not None:
+        return ("tresca", args.tresca)
+    return None
 
 
 def write_summary(path: pathlib.Path | None, summary: Mapping[str, Any]) -> None:

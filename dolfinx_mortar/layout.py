@@ -359,10 +359,13 @@ class MonolithicMatrix:
         group_rows, group_cols: (groups, nr) and (groups, nc) monolithic
             indices of each group's dense block; negative ones are dropped.
         diagonal_rows: owned monolithic rows that get a diagonal entry.
+        point_entries: (rows, cols) of further single entries in owned rows
+            (node-local couplings, e.g. a tangential multiplier row on its
+            node's normal multiplier); their values follow the diagonal's.
     """
 
     def __init__(self, comm: MPI.Intracomm, sizes, local_to_global, bulk_pattern,
-                 group_rows, group_cols, diagonal_rows):
+                 group_rows, group_cols, diagonal_rows, point_entries=None):
         import scipy.sparse
 
         num_owned, num_global = (int(n) for n in sizes)
@@ -371,6 +374,12 @@ class MonolithicMatrix:
                                             create=False)
         group_rowmap, group_indptr, group_indices = self.groups.pattern_csr()
         self.diagonal_rows = np.asarray(diagonal_rows, dtype=PETSc.IntType)
+        self._entry_rows, self._entry_cols = self.diagonal_rows, self.diagonal_rows
+        if point_entries is not None:
+            self._entry_rows = np.concatenate(
+                [self.diagonal_rows, np.asarray(point_entries[0], dtype=PETSc.IntType)])
+            self._entry_cols = np.concatenate(
+                [self.diagonal_rows, np.asarray(point_entries[1], dtype=PETSc.IntType)])
         bulk_indptr, bulk_indices = bulk_pattern
         num_bulk = bulk_indptr.size - 1
         owned = bool(np.all((group_rowmap >= first) & (group_rowmap < first + num_owned)))
@@ -383,11 +392,11 @@ class MonolithicMatrix:
             pattern = scipy.sparse.csr_matrix(
                 (np.ones(bulk_indices.size), bulk_indices, bulk_ptr), shape=shape)
             group_local = np.repeat(group_rowmap.astype(np.int64) - first, np.diff(group_indptr))
-            diagonal = self.diagonal_rows.astype(np.int64)
+            entry_rows = self._entry_rows.astype(np.int64)
             extra = scipy.sparse.coo_matrix(
-                (np.ones(group_local.size + diagonal.size),
-                 (np.concatenate([group_local, diagonal - first]),
-                  np.concatenate([group_indices, diagonal]))), shape=shape).tocsr()
+                (np.ones(group_local.size + entry_rows.size),
+                 (np.concatenate([group_local, entry_rows - first]),
+                  np.concatenate([group_indices, self._entry_cols]))), shape=shape).tocsr()
             pattern = (pattern + extra).tocsr()
             pattern.sum_duplicates()
             pattern.sort_indices()
@@ -407,7 +416,7 @@ class MonolithicMatrix:
                 preallocator.setValuesIJV(group_indptr, group_indices,
                                           np.zeros(group_indices.size), addv=insert,
                                           rowmap=group_rowmap)
-            self._add_diagonal(preallocator, np.zeros(self.diagonal_rows.size), insert)
+            self._add_diagonal(preallocator, np.zeros(self._entry_rows.size), insert)
             preallocator.assemble()
             preallocator.preallocatorPreallocate(self.mat, fill=True)
             preallocator.destroy()
@@ -418,12 +427,14 @@ class MonolithicMatrix:
         lgmap.destroy()
 
     def _add_diagonal(self, matrix: PETSc.Mat, values: np.ndarray, mode) -> None:
-        if self.diagonal_rows.size:
-            matrix.setValuesIJV(np.arange(self.diagonal_rows.size + 1, dtype=PETSc.IntType),
-                                self.diagonal_rows, values, addv=mode, rowmap=self.diagonal_rows)
+        """The diagonal values, then those of the point entries (one per entry)."""
+        if self._entry_rows.size:
+            matrix.setValuesIJV(np.arange(self._entry_rows.size + 1, dtype=PETSc.IntType),
+                                self._entry_cols, values, addv=mode, rowmap=self._entry_rows)
 
     def add(self, group_values, groups, diagonal_values) -> None:
-        """Add the listed groups' blocks, (nr, nc, len(groups)), and the diagonal values.
+        """Add the listed groups' blocks, (nr, nc, len(groups)), and the diagonal values
+        (followed by the point entries' values, if any).
 
         The caller zeroes the matrix, adds the bulk form through the
         local-to-global map (:func:`compat.add_matrix_local`) and assembles.

@@ -538,17 +538,31 @@ class MortarInterface:
         return self._pair_dofs
 
     def _refresh_coordinates(self, slave_x: np.ndarray, master_x: np.ndarray) -> None:
+        self._fill_node_table(self._node_x, slave_x, master_x)
+
+    def _fill_node_table(self, table: np.ndarray, slave_values: np.ndarray,
+                         master_values: np.ndarray) -> None:
+        """Per-node values (gdim per node) of the surfaces into a node table (collective)."""
         ns, nm = self.slave.num_nodes, self.master.num_nodes
-        self._node_x[:ns] = slave_x
-        self._node_x[ns:ns + nm] = master_x
+        table[:ns] = slave_values
+        table[ns:ns + nm] = master_values
         if self.comm.size > 1:
             start = time.perf_counter()
-            _, remote_master_x = self._receive(self.master, self._send_master, master_x)
-            _, remote_slave_x = self._receive(self.slave, self._send_slave, slave_x)
-            self._node_x[ns + nm:] = np.concatenate(
-                [remote_master_x.reshape(-1, self.gdim), remote_slave_x.reshape(-1, self.gdim)]
+            _, remote_master = self._receive(self.master, self._send_master, master_values)
+            _, remote_slave = self._receive(self.slave, self._send_slave, slave_values)
+            table[ns + nm:] = np.concatenate(
+                [remote_master.reshape(-1, self.gdim), remote_slave.reshape(-1, self.gdim)]
             )
             self.statistics.time_exchange += time.perf_counter() - start
+
+    def node_field(self, values: np.ndarray) -> np.ndarray:
+        """A vector field (an array of the displacement space, ghosts up to date) at every
+        node of the node table, as the pairs' stencils index it. Collective."""
+        blocks = values.reshape(-1, self.block_size)
+        table = np.empty_like(self._node_x)
+        self._fill_node_table(table, blocks[self.slave.node_blocks, :self.gdim],
+                              blocks[self.master.node_blocks, :self.gdim])
+        return table
 
     # -- PETSc objects -----------------------------------------------------
 

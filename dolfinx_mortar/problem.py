@@ -51,11 +51,12 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from . import compat, diagnostics, enforcement, kernels, solvers
+from . import friction as friction_rules
 from .enforcement import ACTIVE_SET_STRATEGIES, METHODS
 from .layout import BlockLayout, dirichlet_dofs
 from .mortar import MortarInterface
 from .solvers import SolveReport
-from .system import ContactSystem
+from .system import ContactSystem, Tangential
 
 logger = logging.getLogger("dolfinx_mortar")
 
@@ -132,6 +133,14 @@ class ContactProblem:
             PETSc's GAMG on the condensed matrix, its block size set and the
             rigid-body modes of each body as near-nullspace (options under
             ``<prefix>condensed_``, e.g. ``pc_type: hypre`` for BoomerAMG).
+        friction: ``None`` (frictionless, the default), ``("coulomb", mu)``,
+            ``("tresca", bound)`` (a pressure), or a list of these, one per
+            pair (:mod:`dolfinx_mortar.friction`; 2D, direct linear solver,
+            with ``lagrange`` semismooth or ``penalty``).
+        c_t: the tangential complementarity parameter (pressure / length;
+            default c_n), or with ``penalty`` the tangential penalty (default
+            the normal one). Like c_n it changes the Newton path, never the
+            Lagrange solution.
         petsc_options: SNES/KSP options (defaults: newtonls, full steps,
             MUMPS LU); the user's options database with the prefix wins.
         petsc_options_prefix: prefix of those options.
@@ -159,6 +168,8 @@ class ContactProblem:
         configuration: str = "current",
         condensation: bool = False,
         linear_solver: str = "direct",
+        friction=None,
+        c_t: float | None = None,
         petsc_options: dict | None = None,
         petsc_options_prefix: str = "dolfinx_mortar_",
     ):
@@ -184,7 +195,12 @@ class ContactProblem:
             raise ValueError("active_set='fixed-point' applies to method='lagrange' only")
         if not pairs:
             raise ValueError("ContactProblem needs at least one ContactPair")
-        for value, name in ((c_n, "c_n"), (penalty, "penalty")):
+        self.friction_laws = friction_rules.laws_per_pair(friction, len(pairs))
+        self.has_friction = any(law is not None for law in self.friction_laws)
+        if self.has_friction:
+            friction_rules.check_options(u.function_space.mesh.geometry.dim, method, active_set,
+                                   condensation, linear_solver)
+        for value, name in ((c_n, "c_n"), (penalty, "penalty"), (c_t, "c_t")):
             if value is not None and not value > 0:
                 raise ValueError(f"{name} must be positive, got {value}")
 
@@ -231,16 +247,21 @@ class ContactProblem:
         for interface in self.interfaces:
             interface.set_crosspoints(fully_fixed)
 
+        counts = [i.num_owned_multipliers for i in self.interfaces]
         self.layout = BlockLayout(
-            self.comm,
-            self.interfaces[0].num_owned_dofs,
-            [i.num_owned_multipliers for i in self.interfaces],
-        )
+            self.comm, self.interfaces[0].num_owned_dofs,
+            counts + (counts if self.has_friction else []))
         self.multipliers = [i.create_multiplier_vector() for i in self.interfaces]
+        coefficient_names = ("gap", "area") + (("slip", "slip_area") if self.has_friction else ())
         self._row_coefficients = [
-            {name: i.create_multiplier_vector() for name in ("gap", "area")}
+            {name: i.create_multiplier_vector() for name in coefficient_names}
             for i in self.interfaces
         ]
+        self.tangential = ([i.create_multiplier_vector() for i in self.interfaces]
+                           if self.has_friction else [])
+        self.slips: list[np.ndarray] = [np.zeros(n) for n in counts]
+        self._increments: list[np.ndarray | None] = [None] * len(self.interfaces)
+        self._start_u = u.x.array.copy()
         self.active: list[np.ndarray] = [
             np.zeros(i.num_owned_multipliers, dtype=bool) for i in self.interfaces
         ]
@@ -266,13 +287,17 @@ class ContactProblem:
             # eps makes augmented Lagrange converge in far fewer updates
             penalty = self._row_scale * (10.0 if method == "augmented" else 1.0)
         self.penalty = float(penalty)
+        if c_t is None:
+            c_t = self.penalty if method == "penalty" else self.c_n
+        self.c_t = float(c_t)
         self.enforcement = enforcement.create(
             method, active_set, scales,
             [i.num_owned_multipliers for i in self.interfaces], c_n=self.c_n,
             penalty=self.penalty, augmented_tolerance=augmented_tolerance,
             max_outer_iterations=max_outer_iterations)
         self.system = ContactSystem(self.V, self.layout, self.interfaces, self._K, self.J_form,
-                                    self.bcs, self._fixed_dofs, self._dirichlet_scale)
+                                    self.bcs, self._fixed_dofs, self._dirichlet_scale,
+                                    friction=self.has_friction)
         self.timings = {
             "bulk assembly": 0.0,
             "contact search": 0.0,
@@ -437,7 +462,7 @@ class ContactProblem:
         array = self.x.getArray()
         owned = self.layout.num_u[self.comm.rank]
         array[self.layout.owned_u] = self.u.x.array[:owned]
-        for field, z in enumerate(self.multipliers, start=1):
+        for field, z in enumerate(self.multipliers + self.tangential, start=1):
             array[self.layout.owned(field)] = z.getArray(readonly=True)
 
     def _write_x_into_state(self, x: PETSc.Vec) -> None:
@@ -445,7 +470,7 @@ class ContactProblem:
         owned = self.layout.num_u[self.comm.rank]
         self.u.x.array[:owned] = array[self.layout.owned_u]
         self.u.x.scatter_forward()
-        for field, z in enumerate(self.multipliers, start=1):
+        for field, z in enumerate(self.multipliers + self.tangential, start=1):
             z.getArray()[:] = array[self.layout.owned(field)]
 
     # -- contact -----------------------------------------------------------
@@ -472,8 +497,36 @@ class ContactProblem:
             self.gaps[k] = gap_vector.getArray(readonly=True).copy()
             self.areas[k] = area_vector.getArray(readonly=True).copy()
             self.active[k] = self._decide_active(k)
+            if self.has_friction:
+                self._update_slip(k)
         self.timings["contact search"] += searching
         self.timings["mortar integration"] += time.perf_counter() - start - searching
+
+    def _update_slip(self, k: int) -> None:
+        """The weighted slips u~_j of pair k since the solve started (collective)."""
+        interface = self.interfaces[k]
+        q = interface.quantities
+        table = interface.node_field(self.u.x.array - self._start_u)
+        self._increments[k] = table
+        rows = interface._rows(q)
+        stencil = interface.stencil
+        du = np.concatenate([table[stencil.slave_nodes[rows]], table[stencil.master_nodes[rows]]],
+                            axis=1)
+        values = friction_rules.pair_slip(interface._force_coefficient_values(q, rows), du)
+        vector = self._row_coefficients[k]["slip"]
+        vector.zeroEntries()
+        vector.setValues(interface.pair_multipliers[rows].reshape(-1).astype(PETSc.IntType),
+                         values.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
+        vector.assemble()
+        self.slips[k] = vector.getArray(readonly=True).copy()
+
+    def _tangential_rows(self, k: int) -> friction_rules.TangentialRows:
+        """Pair k's owned tangential rows (:mod:`dolfinx_mortar.friction`)."""
+        return friction_rules.tangential_rows(
+            self.friction_laws[k], self.enforcement.scales.face, self.c_t,
+            self.method == "lagrange", self.tangential[k].getArray(readonly=True),
+            self.multipliers[k].getArray(readonly=True), self.active[k], self.slips[k],
+            self.areas[k])
 
     def _covered(self, k: int) -> np.ndarray:
         interface = self.interfaces[k]
@@ -527,11 +580,16 @@ class ContactProblem:
         start = time.perf_counter()
         for interface, z in zip(self.interfaces, self.multipliers, strict=True):
             interface.contact_force(z, b_u)
+        for interface, y in zip(self.interfaces, self.tangential, strict=False):
+            friction_rules.add_tangential_force(interface, y, b_u)
         compat.set_bc(b_u, self.bcs, self.u.x.petsc_vec, -self._dirichlet_scale)
         array = b.getArray()
         array[self.layout.owned_u] = b_u.getArray(readonly=True)
         for k in range(len(self.interfaces)):
             array[self.layout.owned(k + 1)] = self._multiplier_rows(k)[0]
+            if self.has_friction:
+                field = self.system.tangential_field(k)
+                array[self.layout.owned(field)] = self._tangential_rows(k).residual
         self.timings["mortar integration"] += time.perf_counter() - start
 
     def _jacobian(self, snes, x, A, P) -> None:
@@ -539,8 +597,11 @@ class ContactProblem:
 
     def _assemble_system(self) -> PETSc.Mat:
         """The monolithic Jacobian (:class:`~dolfinx_mortar.system.ContactSystem`)."""
+        tangential = None
+        if self.has_friction:
+            tangential = Tangential(self.tangential, self._tangential_rows, self._increments)
         rebuilt, contact, bulk = self.system.assemble(
-            self.multipliers, self._row_coefficients, self._multiplier_rows)
+            self.multipliers, self._row_coefficients, self._multiplier_rows, tangential)
         if rebuilt and hasattr(self, "snes"):
             self.snes.setJacobian(self._jacobian, self.system.mat)
         self.timings["bulk assembly"] += bulk
@@ -557,6 +618,7 @@ class ContactProblem:
         """
         start = time.perf_counter()
         before = dict(self.timings)
+        self._start_u = self.u.x.array.copy()
         self._read_state_into_x()
         report = self.enforcement.solve(self)
         total = time.perf_counter() - start
@@ -595,13 +657,15 @@ class ContactProblem:
         return {
             "u": self.u.x.array.copy(),
             "z": [z.getArray(readonly=True).copy() for z in self.multipliers],
+            "y": [y.getArray(readonly=True).copy() for y in self.tangential],
             "enforcement": self.enforcement.save_state(),
         }
 
     def restore_state(self, state: dict) -> None:
         """Put back a :meth:`save_state` (not collective; call it on every rank)."""
         self.u.x.array[:] = state["u"]
-        for z, values in zip(self.multipliers, state["z"], strict=True):
+        for z, values in zip(self.multipliers + self.tangential, state["z"] + state["y"],
+                             strict=True):
             z.getArray()[:] = values
         self.enforcement.restore_state(state["enforcement"])
         self._read_state_into_x()
@@ -645,7 +709,37 @@ class ContactProblem:
         ns = interface.stencil.ns
         slave = np.einsum("nj,njkc->c", z_pair, coefficients[:, :, :ns])
         master = np.einsum("nj,njlc->c", z_pair, coefficients[:, :, ns:])
+        if self.has_friction:
+            y_pair = interface.node_values(self.tangential[k])[interface.pair_slave_nodes[rows]]
+            tangent = friction_rules.tangential_coefficients(coefficients)
+            slave = slave + np.einsum("nj,njkc->c", y_pair, tangent[:, :, :ns])
+            master = master + np.einsum("nj,njlc->c", y_pair, tangent[:, :, ns:])
         return (self.comm.allreduce(slave, op=MPI.SUM), self.comm.allreduce(master, op=MPI.SUM))
+
+    def friction_state(self, k: int = 0) -> dict:
+        """Pair k's frictional state at this rank's owned slave nodes (not collective).
+
+        Keys: ``coordinates`` (reference), ``traction`` y_j (the tangential multiplier:
+        the friction traction on the slave is -y_j tau_j), ``slip`` u~_j / A_j (the slip
+        of the slave against the master since the last solve started, a length),
+        ``sticking`` and ``slipping`` (active nodes in each state) and ``dissipation``
+        y_j u~_j (the frictional work of the step at the node, >= 0).
+        """
+        if not self.has_friction:
+            raise RuntimeError("friction_state: this problem has no friction")
+        interface = self.interfaces[k]
+        rows = self._tangential_rows(k)
+        active = self.active[k]
+        y = self.tangential[k].getArray(readonly=True).copy()
+        area = np.where(active, self.areas[k], 1.0)
+        return {
+            "coordinates": interface.owned_multiplier_coordinates.copy(),
+            "traction": y,
+            "slip": np.where(active, self.slips[k] / area, 0.0),
+            "sticking": rows.sticking.copy(),
+            "slipping": active & ~rows.sticking,
+            "dissipation": y * self.slips[k],
+        }
 
     def pressure_function(self, k: int = 0, function: dolfinx.fem.Function | None = None):
         """A P1 scalar Function with the contact pressure at the slave nodes (0 elsewhere).

@@ -4,8 +4,12 @@ The bulk Jacobian form is assembled in place; each candidate pair adds one
 dense block (10 x 14 in 2D): rows are the 8 force dofs (slave a, b, master c, d)
 and the 2 slave multipliers, columns the 12 pair dofs and the 2 multipliers.
 Dirichlet rows and the multiplier rows' own diagonal (delta of the
-enforcement) go on the diagonal. The matrix and its pattern are rebuilt only
-when a new search changed the pairs, not on every search.
+enforcement) go on the diagonal. With friction (:mod:`dolfinx_mortar.friction`)
+each pair also has a tangential multiplier field (fields P + 1 .. 2P of the
+layout, P pairs): the dense blocks grow by the slave nodes' tangential rows
+and columns (2D: 12 x 16), and each tangential row gets its own diagonal and
+one entry on its node's normal multiplier. The matrix and its pattern are
+rebuilt only when a new search changed the pairs, not on every search.
 """
 
 from __future__ import annotations
@@ -26,6 +30,16 @@ if typing.TYPE_CHECKING:
     from .mortar import MortarInterface
 
 
+class Tangential(typing.NamedTuple):
+    """What the matrix needs of friction: per pair the tangential multipliers, a callable
+    k -> :class:`~dolfinx_mortar.friction.TangentialRows`, and du = u - u_start at the
+    node table."""
+
+    multipliers: list
+    rows: typing.Callable
+    increments: list
+
+
 class ContactSystem:
     """Pattern, assembly and lifetime of the monolithic matrix (see the module docstring).
 
@@ -38,12 +52,14 @@ class ContactSystem:
         fixed_dofs: the local Dirichlet dofs (may include a few owned elsewhere).
         dirichlet_scale: the diagonal of Dirichlet rows (force units, module
             docstring of :mod:`dolfinx_mortar.enforcement`).
+        friction: whether the layout has the tangential multiplier fields.
     """
 
     def __init__(self, V: dolfinx.fem.FunctionSpace, layout: BlockLayout,
                  interfaces: list[MortarInterface], K: PETSc.Mat, J_form, bcs: list,
-                 fixed_dofs: np.ndarray, dirichlet_scale: float):
+                 fixed_dofs: np.ndarray, dirichlet_scale: float, friction: bool = False):
         self.comm = layout.comm
+        self.friction = friction
         self.layout = layout
         self.interfaces = interfaces
         self.J_form = J_form
@@ -69,15 +85,23 @@ class ContactSystem:
     def mat(self) -> PETSc.Mat:
         return self.matrix.mat
 
+    def tangential_field(self, k: int) -> int:
+        """The layout field of pair k's tangential multipliers."""
+        return len(self.interfaces) + 1 + k
+
     def assemble(self, multipliers: list[PETSc.Vec], coefficient_vectors: list[dict],
-                 rows: typing.Callable[[int], Rows]) -> tuple[bool, float, float]:
+                 rows: typing.Callable[[int], Rows],
+                 tangential: Tangential | None = None) -> tuple[bool, float, float]:
         """Assemble the matrix at the current contact state.
 
         Args:
             multipliers: the multiplier vectors, one per pair.
             coefficient_vectors: per pair, ghosted multiplier vectors "gap" and "area"
-                to scatter the row coefficients to ghost slave nodes.
+                (and "slip", "slip_area" with friction) to scatter the row
+                coefficients to ghost slave nodes.
             rows: pair k -> the enforcement's rows (residual, alpha, beta, delta).
+            tangential: with friction, the tangential multipliers, their rows and
+                the slip increments at the node table, per pair.
 
         Returns:
             (whether the matrix was rebuilt, seconds on contact, seconds on the bulk).
@@ -90,9 +114,14 @@ class ContactSystem:
         group_values, groups = [], []
         offset = 0
         row_values = [rows(k) for k in range(len(self.interfaces))]
+        friction_rows = ([tangential.rows(k) for k in range(len(self.interfaces))]
+                         if self.friction else None)
         for k in range(len(self.interfaces)):
+            friction = None
+            if self.friction:
+                friction = (tangential.multipliers[k], friction_rows[k], tangential.increments[k])
             blocks = self._contact_blocks(k, multipliers[k], coefficient_vectors[k],
-                                          row_values[k])
+                                          row_values[k], friction)
             if blocks is not None:
                 values = blocks[0]
                 if values.shape[:2] != self._block_shape:
@@ -108,8 +137,11 @@ class ContactSystem:
         else:
             group_values = np.zeros(self._block_shape + (0,))
             groups = np.zeros(0, dtype=np.int64)
-        diagonal = np.concatenate(
-            [np.full(self.fixed_rows.size, self.dirichlet_scale)] + [r[3] for r in row_values])
+        diagonal = [np.full(self.fixed_rows.size, self.dirichlet_scale)] + [
+            r[3] for r in row_values]
+        if self.friction:
+            diagonal += [r.own for r in friction_rows] + [r.normal for r in friction_rows]
+        diagonal = np.concatenate(diagonal)
         matrix = self.matrix.mat
         self.matrix.add(group_values, groups, diagonal)
         contact = time.perf_counter() - start - zeroing
@@ -129,8 +161,11 @@ class ContactSystem:
         force_dofs = layout.u(interface._force_columns())
         force_dofs[np.isin(force_dofs, self._fixed_all)] = -1
         pair_z = layout.z(interface.pair_multipliers, k + 1)
-        rows = np.concatenate([force_dofs, pair_z], axis=1)
-        cols = np.concatenate([layout.u(interface.pair_dofs), pair_z], axis=1)
+        multipliers = [pair_z]
+        if self.friction:
+            multipliers.append(layout.z(interface.pair_multipliers, self.tangential_field(k)))
+        rows = np.concatenate([force_dofs] + multipliers, axis=1)
+        cols = np.concatenate([layout.u(interface.pair_dofs)] + multipliers, axis=1)
         return rows, cols
 
     def _update_pattern(self) -> bool:
@@ -151,23 +186,30 @@ class ContactSystem:
                                                  strict=True))
         if self.comm.allreduce(same, op=MPI.LAND):
             return False  # a search found the same pairs (or none again): keep the matrix
-        diagonal_rows = np.concatenate(
-            [self.fixed_rows]
-            + [layout.z(i.multiplier_offset + np.arange(i.num_owned_multipliers), k + 1)
-               for k, i in enumerate(self.interfaces)])
+        owned = [i.multiplier_offset + np.arange(i.num_owned_multipliers)
+                 for i in self.interfaces]
+        normal_rows = [layout.z(o, k + 1) for k, o in enumerate(owned)]
+        diagonal_rows = [self.fixed_rows] + normal_rows
+        point_entries = None
+        if self.friction:
+            tangential_rows = [layout.z(o, self.tangential_field(k)) for k, o in enumerate(owned)]
+            diagonal_rows += tangential_rows
+            point_entries = (np.concatenate(tangential_rows), np.concatenate(normal_rows))
         if self.matrix is not None:
             self.matrix.destroy()
         bulk_pattern, local_to_global = self._bulk
         self.matrix = MonolithicMatrix(
             self.comm, (layout.num_owned, layout.num_global), local_to_global, bulk_pattern,
-            np.concatenate(pattern[0]), np.concatenate(pattern[1]), diagonal_rows)
+            np.concatenate(pattern[0]), np.concatenate(pattern[1]),
+            np.concatenate(diagonal_rows), point_entries)
         self._pattern = pattern
         return True
 
-    def _contact_blocks(self, k: int, z: PETSc.Vec, vectors: dict, rows: Rows):
+    def _contact_blocks(self, k: int, z: PETSc.Vec, vectors: dict, rows: Rows, friction=None):
         """Pair k's dense blocks and which candidate pairs they belong to (m,).
 
-        d(-B^T z)/du, d(-B^T z)/dz = -B^T, d C/du (2D: 8 x 12, 8 x 2, 2 x 12); only the
+        d(-B^T z)/du, d(-B^T z)/dz = -B^T, d C/du (2D: 8 x 12, 8 x 2, 2 x 12); with
+        friction also d(-T^T y)/du, -T^T and the tangential rows' d C_t/du. Only the
         pairs that contribute, from the factorized gradients (no full dual numbers).
         None before the first evaluation (no pairs yet).
         """
@@ -182,6 +224,13 @@ class ContactSystem:
         vectors["area"].getArray()[:] = beta
         alpha_nodes = interface.node_values(vectors["gap"])
         beta_nodes = interface.node_values(vectors["area"])
+        if friction is not None:
+            y, tangential, du_table = friction
+            y_nodes = interface.node_values(y)
+            vectors["slip"].getArray()[:] = tangential.slip
+            vectors["slip_area"].getArray()[:] = tangential.area
+            slip_nodes = interface.node_values(vectors["slip"])
+            slip_area_nodes = interface.node_values(vectors["slip_area"])
         if contributing.size == 0:
             return None
         stencil, gdim = interface.stencil, interface.gdim
@@ -191,18 +240,53 @@ class ContactSystem:
             v[slave_nodes] for v in (z_nodes, alpha_nodes, beta_nodes))
         js = range(ns)
         # -sum_j z_j d(coefficient_jkc)/dx: +Dn for the slave nodes, -Mn for the master nodes
-        terms = [[(stencil.dn(j, a, c), z_pair[:, j]) for j in js]
-                 for a in range(ns) for c in range(gdim)]
-        terms += [[(stencil.mn(j, a, c), -z_pair[:, j]) for j in js]
-                  for a in range(nm) for c in range(gdim)]
-        terms += [[(stencil.GAP + j, alpha_pair[:, j]), (stencil.AREA + j, beta_pair[:, j])]
-                  for j in js]
+        slave_terms = [[(stencil.dn(j, a, c), z_pair[:, j]) for j in js]
+                       for a in range(ns) for c in range(gdim)]
+        master_terms = [[(stencil.mn(j, a, c), -z_pair[:, j]) for j in js]
+                        for a in range(nm) for c in range(gdim)]
+        multiplier_rows = [[(stencil.GAP + j, alpha_pair[:, j]),
+                            (stencil.AREA + j, beta_pair[:, j])] for j in js]
+        num_multipliers = ns
+        if friction is not None:
+            from . import friction as friction_module
+
+            rotation = friction_module.ROTATION
+            y_pair, slip_pair, slip_area_pair = (
+                v[slave_nodes] for v in (y_nodes, slip_nodes, slip_area_nodes))
+            # -sum_j y_j d(R coefficient_jk)/dx, (R coefficient)[c] = sum_e R[c, e] coefficient[e]
+            for a in range(ns):
+                for c in range(gdim):
+                    slave_terms[a * gdim + c] += [
+                        (stencil.dn(j, a, e), rotation[c, e] * y_pair[:, j])
+                        for j in js for e in range(gdim) if rotation[c, e]]
+            for a in range(nm):
+                for c in range(gdim):
+                    master_terms[a * gdim + c] += [
+                        (stencil.mn(j, a, e), -rotation[c, e] * y_pair[:, j])
+                        for j in js for e in range(gdim) if rotation[c, e]]
+            du_slave = du_table[slave_nodes]
+            du_master = du_table[stencil.master_nodes[contributing]]
+            multiplier_rows += [
+                friction_module.slip_terms(stencil, j, du_slave, du_master, slip_pair[:, j])
+                + [(stencil.AREA + j, slip_area_pair[:, j])] for j in js]
+            num_multipliers = 2 * ns
+        terms = slave_terms + master_terms + multiplier_rows
         forces, columns = (ns + nm) * gdim, stencil.width * gdim
-        values = np.zeros((forces + ns, columns + ns, contributing.size))
+        values = np.zeros((forces + num_multipliers, columns + num_multipliers,
+                           contributing.size))
         values[:, :columns] = interface._combined_gradients(q, contributing, terms)
         coefficients = interface._force_coefficient_values(q, contributing)  # (m, j, k, c)
-        values[:forces, columns:] = -coefficients.reshape(
+        values[:forces, columns:columns + ns] = -coefficients.reshape(
             contributing.size, ns, forces).transpose(2, 1, 0)
+        if friction is not None:
+            tangent = friction_module.tangential_coefficients(coefficients)  # (m, j, k, c)
+            values[:forces, columns + ns:] = -tangent.reshape(
+                contributing.size, ns, forces).transpose(2, 1, 0)
+            # u~_j = -T_j du: its direct derivative -T_j on the facet nodes' columns
+            slots = np.concatenate([stencil.slave_slots, stencil.master_slots])
+            force_columns = (slots[:, None] * gdim + np.arange(gdim)).reshape(-1)
+            direct = -tangent.reshape(contributing.size, ns, forces) * slip_pair[:, :, None]
+            values[forces + ns:, force_columns] += direct.transpose(1, 2, 0)
         return values, contributing
 
     def destroy(self) -> None:

@@ -1,0 +1,185 @@
+"""Coulomb and Tresca friction with tangential multipliers (2D).
+
+Per slave node j the multiplier is the vector lambda_j = z_j n_j + y_j tau_j,
+with tau_j = R n_j the nodal normal turned by +90 degrees. The contact force
+is -sum_j D_jk lambda_j on slave node k and +sum_j M_jl lambda_j on master
+node l, so the displacement rows become
+
+    R_u = F(u) - B^T z - T^T y,   T_j = -(R Dn)_j on slave dofs, +(R Mn)_j on master dofs,
+
+and everything T needs comes from the kernel's Dn and Mn (R is constant):
+no new mortar integrals. The weighted slip of the slave against the master
+over the current solve is
+
+    u~_j = tau_j . (sum_k D_jk du_k - sum_l M_jl du_l) = -T_j du,   du = u - u_start,
+
+with u_start the state the solve started from (the previous converged step;
+a cut-back restores it), and s_j = u~_j / A_j its nodal value (a length). It
+is exact for a rigid translation; a rigid rotation by theta within one step
+adds theta g~_j, which vanishes on active nodes, where the gap is closed.
+
+The conditions, on active nodes (a projection, or Alart-Curnier, form of the
+complementarity function of Hueber, Stadler and Wohlmuth, 2008):
+
+    C_j = y_j - P_b(v_j),   v_j = y_j + c_t s_j,   P_b = projection onto [-b, b],
+
+b_j = mu max(z_j, 0) (Coulomb) or the given bound (Tresca); y_j = 0 on the
+other nodes. Stick, |v_j| < b_j: C_j = -c_t s_j, no slip. Slip: y_j = b_j
+sign(v_j), parallel to s_j, so the friction traction -y_j on the slave
+opposes its slip, and the nodal dissipation y_j u~_j is never negative. The
+semismooth Newton derivative is exact in both states; at the kink |v| = b
+the stick branch is taken (a node that has just come into contact, z = 0 and
+nothing slipped, starts held instead of sliding freely for one iteration),
+except for mu = 0, which always slips: y = 0 with no coupling at all, the
+frictionless Newton path. With the penalty method v_j = eps_t s_j
+(regularized stick, y = eps_t s while it sticks).
+
+Rows are scaled by h^(d-1), like the normal rows (:mod:`enforcement`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from petsc4py import PETSc
+
+LAWS = ("coulomb", "tresca")
+
+ROTATION = np.array([[0.0, -1.0], [1.0, 0.0]])
+"""R: tau = R n."""
+
+
+@dataclasses.dataclass(frozen=True)
+class FrictionLaw:
+    """``("coulomb", mu)``: slip bound mu z_j; ``("tresca", bound)``: a fixed bound (a pressure)."""
+
+    kind: str
+    value: float
+
+    @classmethod
+    def parse(cls, friction) -> FrictionLaw | None:
+        """A law from the user's ``friction`` (None, a (kind, value) pair or a FrictionLaw)."""
+        if friction is None or isinstance(friction, FrictionLaw):
+            return friction
+        try:
+            kind, value = friction
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"friction must be None, ('coulomb', mu) or ('tresca', bound); got {friction!r}"
+            ) from None
+        if kind not in LAWS:
+            raise ValueError(f"unknown friction law {kind!r}; expected one of {LAWS}")
+        value = float(value)
+        if not value >= 0.0:
+            raise ValueError(f"the {kind} friction parameter must be >= 0, got {value}")
+        return cls(kind, value)
+
+
+@dataclasses.dataclass
+class TangentialRows:
+    """Owned tangential rows of one pair: residual C_j and its derivative
+    dC_j = slip du~_j + area dA_j + normal dz_j + own dy_j; ``sticking`` per node."""
+
+    residual: np.ndarray
+    slip: np.ndarray
+    area: np.ndarray
+    normal: np.ndarray
+    own: np.ndarray
+    sticking: np.ndarray
+
+
+def tangential_rows(law: FrictionLaw | None, weight: float, c_t: float, lagrange: bool,
+                    y: np.ndarray, z: np.ndarray, active: np.ndarray, slip: np.ndarray,
+                    area: np.ndarray) -> TangentialRows:
+    """The rows of the module docstring at the current state (weight = h^(d-1))."""
+    n = y.size
+    residual = weight * y
+    d_slip, d_area, d_normal = np.zeros(n), np.zeros(n), np.zeros(n)
+    d_own = np.full(n, weight)
+    sticking = np.zeros(n, dtype=bool)
+    if law is None or not np.any(active):
+        return TangentialRows(residual, d_slip, d_area, d_normal, d_own, sticking)
+    a = np.where(active, area, 1.0)
+    s = slip / a
+    v = (y if lagrange else 0.0) + c_t * s
+    if law.kind == "coulomb":
+        bound = law.value * np.maximum(z, 0.0)
+        d_bound = np.where(z > 0.0, law.value, 0.0)
+    else:
+        bound = np.full(n, law.value)
+        d_bound = np.zeros(n)
+    # ties (|v| = b) stick when there is friction: a node that just came into contact
+    # (z = 0, nothing slipped yet) starts held, not free to slide
+    sticking = active & ((np.abs(v) < bound) | ((np.abs(v) == bound) & (law.value > 0.0)))
+    slipping = active & ~sticking
+    sign = np.sign(v)
+    residual[sticking] = weight * (y - v)[sticking]
+    d_slip[sticking] = -weight * c_t / a[sticking]
+    d_area[sticking] = weight * c_t * (slip / a**2)[sticking]
+    d_own[sticking] = 0.0 if lagrange else weight
+    residual[slipping] = weight * (y - bound * sign)[slipping]
+    d_normal[slipping] = -weight * (d_bound * sign)[slipping]
+    return TangentialRows(residual, d_slip, d_area, d_normal, d_own, sticking)
+
+
+def tangential_coefficients(force_coefficients: np.ndarray) -> np.ndarray:
+    """T's values (rows, j, nodes, 2) from B's (-Dn slave, +Mn master): R applied to each."""
+    return force_coefficients @ ROTATION.T
+
+
+def pair_slip(force_coefficients: np.ndarray, du: np.ndarray) -> np.ndarray:
+    """(rows, j): each pair's part of u~_j = -T_j du, du (rows, facet nodes, 2)."""
+    return -np.einsum("njkc,nkc->nj", tangential_coefficients(force_coefficients), du)
+
+
+def slip_terms(stencil, j: int, du_slave: np.ndarray, du_master: np.ndarray,
+               weight: np.ndarray) -> list:
+    """Combined-gradient terms of weight * u~_j over the pair's kernel outputs at fixed du.
+
+    u~_j = sum_k Dn_jk . (R^T du_k) - sum_l Mn_jl . (R^T du_l); du_* are (rows, nodes, 2).
+    """
+    rotated_slave = du_slave @ ROTATION
+    rotated_master = du_master @ ROTATION
+    terms = [(stencil.dn(j, k, c), weight * rotated_slave[:, k, c])
+             for k in range(stencil.ns) for c in range(2)]
+    terms += [(stencil.mn(j, m, c), -weight * rotated_master[:, m, c])
+              for m in range(stencil.nm) for c in range(2)]
+    return terms
+
+
+def add_tangential_force(interface, y: PETSc.Vec, vector: PETSc.Vec) -> None:
+    """Add -T^T y to ``vector`` (displacement layout), as ``contact_force`` adds -B^T z."""
+    q = interface._require()
+    rows = interface._rows(q)
+    y_pair = interface.node_values(y)[interface.pair_slave_nodes[rows]]
+    tangent = tangential_coefficients(interface._force_coefficient_values(q, rows))
+    force = -np.einsum("nj,njkc->nkc", y_pair, tangent)
+    vector.setValues(interface._force_columns()[rows].reshape(-1).astype(PETSc.IntType),
+                     force.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
+    vector.assemble()
+
+
+def laws_per_pair(friction, num_pairs: int) -> list[FrictionLaw | None]:
+    """One law (or None) per pair from the user's ``friction``: one for all, or a list."""
+    if isinstance(friction, list):
+        if len(friction) != num_pairs:
+            raise ValueError(f"friction: got {len(friction)} laws for {num_pairs} contact pairs")
+        return [FrictionLaw.parse(f) for f in friction]
+    law = FrictionLaw.parse(friction)
+    return [law] * num_pairs
+
+
+def check_options(gdim: int, method: str, active_set: str, condensation: bool,
+                  linear_solver: str) -> None:
+    """Raise for the combinations friction does not support (yet)."""
+    if gdim != 2:
+        raise ValueError("friction is implemented in 2D only; 3D contact is frictionless for now")
+    if method not in ("lagrange", "penalty"):
+        raise ValueError(f"friction works with method='lagrange' or 'penalty', got {method!r}")
+    if active_set != "semismooth":
+        raise ValueError("friction needs active_set='semismooth' (the stick and slip sets are "
+                         "decided in the Newton iterations)")
+    if condensation or linear_solver != "direct":
+        raise ValueError("friction needs linear_solver='direct' without condensation (the "
+                         "condensed system does not hold the tangential rows yet)")

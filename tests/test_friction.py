@@ -1,0 +1,234 @@
+"""Coulomb and Tresca friction (2D): exact patch tests, Taylor tests, mu = 0, bad input."""
+
+from __future__ import annotations
+
+import dolfinx
+import numpy as np
+import pytest
+import ufl
+from mpi4py import MPI
+from test_contact import assert_taylor_second_order, built_problem, penetrating_blocks
+
+from dolfinx_mortar import compat, meshes
+from dolfinx_mortar.materials import Material, internal_work
+from dolfinx_mortar.problem import ContactPair, ContactProblem
+
+E, NU, PRESSURE = 1000.0, 0.3, 10.0
+SHEAR_MODULUS = E / (2.0 * (1.0 + NU))
+
+
+def sheared_blocks(ratio, slave: str, friction, top_shift: float, side_shear: float,
+                   cell_type: str = "triangle", **options):
+    """Two blocks [0, 1] x [0, 0.5] and [0, 1] x [0.5, 1] (meshes.tied_blocks, non-matching),
+    pressed by PRESSURE on the top and sheared: the bottom held, the top moved by
+    ``top_shift`` along x (both with the Poisson expansion of the uniform state), a
+    vertical shear traction ``side_shear`` on the sides. With side_shear = the interface
+    shear, the exact solution is uniform: sigma_yy = -PRESSURE, sigma_xy = side_shear,
+    sigma_xx = 0."""
+    tagged = meshes.tied_blocks(ratio=ratio, cell_type=cell_type)
+    mesh = tagged.mesh
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    u, v = dolfinx.fem.Function(V), ufl.TestFunction(V)
+    fdim = mesh.topology.dim - 1
+    where = {1: lambda x: np.isclose(x[0], 0.0), 2: lambda x: np.isclose(x[0], 1.0),
+             3: lambda x: np.isclose(x[1], 0.0), 4: lambda x: np.isclose(x[1], 1.0)}
+    facets = [dolfinx.mesh.locate_entities_boundary(mesh, fdim, f) for f in where.values()]
+    values = np.concatenate([np.full(f.size, tag, dtype=np.int32)
+                             for tag, f in zip(where, facets, strict=True)])
+    order = np.argsort(np.concatenate(facets))
+    boundary = dolfinx.mesh.meshtags(mesh, fdim, np.concatenate(facets)[order], values[order])
+    ds = ufl.Measure("ds", domain=mesh, subdomain_data=boundary)
+    shear = dolfinx.fem.Constant(mesh, float(side_shear))
+    pressure = dolfinx.fem.Constant(mesh, PRESSURE)
+    F = (internal_work(u, v, {0: Material(E, NU, "linear")})
+         - (-shear * v[1] * ds(1) + shear * v[1] * ds(2) - pressure * v[1] * ds(4)))
+    V0, V1 = V.sub(0), V.sub(1)
+    X = V0.collapse()[0]
+    bottom_y = dolfinx.fem.locate_dofs_topological(V1, fdim, facets[2])
+    bottom_x, top = (dolfinx.fem.locate_dofs_topological((V0, X), fdim, facets[i])
+                     for i in (2, 3))
+    # u_x = eps_xx x (+ top_shift on the top), eps_xx the plane-strain Poisson expansion
+    expansion = NU * (1.0 + NU) * PRESSURE / E
+    bottom_values, top_values = dolfinx.fem.Function(X), dolfinx.fem.Function(X)
+    bottom_values.interpolate(lambda x: expansion * x[0])
+    top_values.interpolate(lambda x: top_shift + expansion * x[0])
+    bcs = [dolfinx.fem.dirichletbc(0.0, bottom_y, V1),
+           dolfinx.fem.dirichletbc(bottom_values, bottom_x, V0),
+           dolfinx.fem.dirichletbc(top_values, top, V0)]
+    upper, lower = tagged.markers["upper_interface"], tagged.markers["lower_interface"]
+    pair = (ContactPair(tagged.facet_tags, upper, lower) if slave == "upper"
+            else ContactPair(tagged.facet_tags, lower, upper))
+    problem = ContactProblem(F, u, bcs, [pair], configuration="reference", friction=friction,
+                             **options)
+    return problem
+
+
+def solved(problem):
+    report = problem.solve()
+    assert report.converged, report
+    return report
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("slave", ["upper", "lower"])
+@pytest.mark.parametrize("ratio", [(3, 7), (7, 3)])
+def test_full_slip_gives_mu_times_pressure_at_every_node(ratio, slave):
+    """mu = 0.2: the top pulled 0.02 beyond what the interface holds; every slave node
+    slips with y_j = mu z_j = 2 and z_j = 10, the uniform exact solution."""
+    mu = 0.2
+    problem = sheared_blocks(ratio, slave, ("coulomb", mu), top_shift=0.02,
+                             side_shear=mu * PRESSURE)
+    report = solved(problem)
+    state = problem.friction_state()
+    active = problem.active[0]
+    z = problem.multipliers[0].getArray(readonly=True)
+    assert problem.comm.allreduce(int(active.sum()), op=MPI.SUM) == \
+        problem.interfaces[0].num_global_multipliers
+    np.testing.assert_allclose(z, PRESSURE, rtol=1e-10)
+    np.testing.assert_allclose(state["traction"], mu * PRESSURE, rtol=1e-10)
+    assert not state["sticking"].any() and state["slipping"].all()
+    # slip: the top's shift less the elastic shear of both blocks (height 1)
+    expected_slip = 0.02 - mu * PRESSURE / SHEAR_MODULUS
+    np.testing.assert_allclose(state["slip"], expected_slip, rtol=1e-8)
+    assert np.all(state["dissipation"] > 0.0)
+    assert report.iterations <= 10
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("slave", ["upper", "lower"])
+def test_below_the_limit_the_blocks_stick(slave):
+    """mu = 0.5 and a shear of 3 < mu p = 5: slip 0 to solver tolerance at every node,
+    y_j = 3 (the uniform shear) and z_j = 10."""
+    shear = 3.0
+    problem = sheared_blocks((3, 7), slave, ("coulomb", 0.5), top_shift=shear / SHEAR_MODULUS,
+                             side_shear=shear)
+    solved(problem)
+    state = problem.friction_state()
+    assert state["sticking"].all()
+    np.testing.assert_allclose(problem.multipliers[0].getArray(readonly=True), PRESSURE,
+                               rtol=1e-10)
+    np.testing.assert_allclose(state["traction"], shear, rtol=1e-10)
+    assert np.max(np.abs(state["slip"]), initial=0.0) < 1e-12 * shear / SHEAR_MODULUS + 1e-14
+
+
+def test_tresca_bound_is_the_slip_traction():
+    """Tresca with bound 1.5: full slip with y_j = 1.5 whatever the pressure."""
+    problem = sheared_blocks((3, 7), "upper", ("tresca", 1.5), top_shift=0.02, side_shear=1.5)
+    solved(problem)
+    state = problem.friction_state()
+    np.testing.assert_allclose(state["traction"], 1.5, rtol=1e-10)
+    assert state["slipping"].all()
+
+
+def test_penalty_friction_sticks_with_an_elastic_slip():
+    """Penalty friction (regularized stick): y = eps_t s while it sticks, so the nodes
+    creep by shear / eps_t; full slip still gives mu p exactly."""
+    eps = 1e4
+    problem = sheared_blocks((3, 7), "upper", ("coulomb", 0.5), top_shift=0.0078,
+                             side_shear=0.0078 * SHEAR_MODULUS, method="penalty",
+                             penalty=1e5, c_t=eps)
+    solved(problem)
+    state = problem.friction_state()
+    assert state["sticking"].all()
+    np.testing.assert_allclose(state["traction"], eps * state["slip"], rtol=1e-10)
+    problem = sheared_blocks((3, 7), "upper", ("coulomb", 0.2), top_shift=0.02,
+                             side_shear=2.0, method="penalty", penalty=1e5, c_t=eps)
+    solved(problem)
+    z = problem.multipliers[0].getArray(readonly=True)
+    np.testing.assert_allclose(problem.friction_state()["traction"], 0.2 * z, rtol=1e-10)
+
+
+@pytest.mark.parametrize("mu", [0.0, 0.3])
+def test_zero_friction_is_the_frictionless_problem(mu):
+    """Hertz (demos/hertz.py): mu = 0 gives the frictionless Newton path and answer; the
+    Coulomb problem with mu = 0.3 differs (similar materials: only slightly)."""
+    argv = ["--refinement", "0"]
+    frictionless = built_problem("hertz", argv)
+    frictional = built_problem("hertz", argv + ["--mu", str(mu)])
+    reports = [ContactProblem.solve(p) for p in (frictionless, frictional)]
+    u0, u1 = (p.u.x.array for p in (frictionless, frictional))
+    change = np.max(np.abs(u1 - u0)) / np.max(np.abs(u0))
+    if mu == 0.0:
+        assert reports[0].iterations == reports[1].iterations
+        assert change < 1e-10
+        assert not np.any(frictional.tangential[0].getArray(readonly=True))
+    else:
+        assert change > 1e-8
+
+
+def frictional_blocks(mu: float, method: str = "lagrange"):
+    """penetrating_blocks (test_contact) with friction and random tangential multipliers."""
+    import test_contact
+
+    original = test_contact.ContactProblem
+
+    class Frictional(original):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, friction=("coulomb", mu), **kwargs)
+
+    test_contact.ContactProblem = Frictional
+    try:
+        problem = penetrating_blocks("averaged", method)
+    finally:
+        test_contact.ContactProblem = original
+    rng = np.random.default_rng(3 + problem.comm.rank)
+    for y in problem.tangential:
+        y.setArray(rng.uniform(-1.0, 1.0, y.getLocalSize()))
+    problem._read_state_into_x()
+    return problem
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("method", ["lagrange", "penalty"])
+@pytest.mark.parametrize("mu, state", [(0.05, "slipping"), (10.0, "sticking")])
+def test_frictional_jacobian_taylor(mu, state, method):
+    """Residual of the whole frictional system: slope 2 in the stick and in the slip state
+    (the state checked on every node that is active)."""
+    problem = frictional_blocks(mu, method)
+    problem._residual(problem.snes, problem.x, problem.b)
+    friction = problem.friction_state()
+    active = problem.active[0]
+    counts = problem.comm.allreduce(
+        np.array([int(active.sum()), int(friction[state][active].sum())]), op=MPI.SUM)
+    assert counts[0] > 0 and counts[1] == counts[0]
+    assert_taylor_second_order(problem, seed=11)
+
+
+def test_bad_friction_input():
+    """Unknown laws, negative coefficients, wrong counts, unsupported options: clear errors."""
+    args = ((3, 7), "upper")
+    for friction, message in [(("viscous", 0.1), "unknown friction law"),
+                              (("coulomb", -0.1), "must be >= 0"),
+                              (0.3, "friction must be None"),
+                              ([("coulomb", 0.1)] * 2, "2 laws for 1 contact pairs")]:
+        with pytest.raises(ValueError, match=message):
+            sheared_blocks(*args, friction, 0.0, 0.0)
+    for options, message in [({"method": "augmented"}, "method='lagrange' or 'penalty'"),
+                             ({"active_set": "fixed-point"}, "active_set='semismooth'"),
+                             ({"linear_solver": "iterative"}, "linear_solver='direct'")]:
+        with pytest.raises(ValueError, match=message):
+            sheared_blocks(*args, ("coulomb", 0.1), 0.0, 0.0, **options)
+
+
+def test_friction_in_3d_is_refused():
+    tagged = meshes.patch_test_3d(ratio=(1, 1), cell_type="hexahedron")
+    V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (3,)))
+    u, v = dolfinx.fem.Function(V), ufl.TestFunction(V)
+    F = internal_work(u, v, {0: Material(E, NU, "linear")})
+    pair = ContactPair(tagged.facet_tags, tagged.markers["contact_slave"],
+                       tagged.markers["contact_master"])
+    with pytest.raises(ValueError, match="2D only"):
+        ContactProblem(F, u, [], [pair], friction=("coulomb", 0.1))
+
+
+def test_state_is_saved_and_restored_with_the_tangential_multipliers():
+    problem = sheared_blocks((3, 7), "upper", ("coulomb", 0.2), top_shift=0.02, side_shear=2.0)
+    saved = problem.save_state()
+    solved(problem)
+    y = problem.tangential[0].getArray(readonly=True).copy()
+    assert np.any(y)
+    problem.restore_state(saved)
+    assert not np.any(problem.tangential[0].getArray(readonly=True))
+    compat.set_bc_values(problem.u, problem.bcs)
+    solved(problem)
+    np.testing.assert_allclose(problem.tangential[0].getArray(readonly=True), y, rtol=1e-12)
