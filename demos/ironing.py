@@ -191,6 +191,11 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
                 ),
             }
         )
+        if problem.has_friction:
+            work = problem.friction_state()["dissipation"]
+            history[-1]["dissipation"] = comm.allreduce(float(work.sum()), op=MPI.SUM)
+            history[-1]["min_nodal_dissipation"] = comm.allreduce(
+                float(work.min(initial=np.inf)), op=MPI.MIN)
 
     output = ContactOutput(problem, args.output / "paraview") if args.output else None
     steps = max(1, round(args.steps * args.end_time / 2.0))
@@ -229,6 +234,15 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         "max_newton_iterations": max(r.iterations for r in records),
         "cutbacks": sum(r.cutbacks for r in records),
         "vertical_force_at_t1": float(np.interp(1.0, t, vertical)) if reached >= 1.0 else None,
+        "vertical_force_at_t1_5": (
+            float(np.interp(1.5, t, vertical)) if reached >= 1.5 else None),
+        "horizontal_force_at_t1_5": (
+            float(np.interp(1.5, t, horizontal)) if reached >= 1.5 else None),
+        "frictional_dissipation": (
+            float(sum(h["dissipation"] for h in history)) if problem.has_friction else None),
+        "min_nodal_dissipation": (
+            float(min((h["min_nodal_dissipation"] for h in history), default=0.0))
+            if problem.has_friction else None),
         "vertical_force_plateau_mean": float(vertical[plateau].mean()) if plateau.any() else None,
         "vertical_force_at_t2": float(vertical[-1]) if reached >= 2.0 - 1e-9 else None,
         "horizontal_force_at_t1": float(np.interp(1.0, t, horizontal)) if reached >= 1.0 else None,

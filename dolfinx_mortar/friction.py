@@ -27,11 +27,14 @@ b_j = mu max(z_j, 0) (Coulomb) or the given bound (Tresca); y_j = 0 on the
 other nodes. Stick, |v_j| < b_j: C_j = -c_t s_j, no slip. Slip: y_j = b_j
 sign(v_j), parallel to s_j, so the friction traction -y_j on the slave
 opposes its slip, and the nodal dissipation y_j u~_j is never negative. The
-semismooth Newton derivative is exact in both states; at the kink |v| = b
-the stick branch is taken (a node that has just come into contact, z = 0 and
-nothing slipped, starts held instead of sliding freely for one iteration),
-except for mu = 0, which always slips: y = 0 with no coupling at all, the
-frictionless Newton path. With the penalty method v_j = eps_t s_j
+semismooth Newton derivative is exact in both states. At the kink: a node
+that has just come into contact (b = 0, v = 0) starts held instead of sliding
+freely for one iteration, except for mu = 0, which always slips: y = 0 with no
+coupling at all, the frictionless Newton path; a node at its bound to within
+1e-6 (a slipping node at the start of the next step, where s = 0 and y = b
+to solver tolerance) slips, instead of dragging the other body along by a
+whole load increment in the first iterate (on frictional ironing that
+inverted elements). With the penalty method v_j = eps_t s_j
 (regularized stick, y = eps_t s while it sticks).
 
 Rows are scaled by h^(d-1), like the normal rows (:mod:`enforcement`).
@@ -45,6 +48,9 @@ import numpy as np
 from petsc4py import PETSc
 
 LAWS = ("coulomb", "tresca")
+
+STICK_BAND = 1e-6
+"""|v| within this fraction of the slip bound counts as slipping (see tangential_rows)."""
 
 ROTATION = np.array([[0.0, -1.0], [1.0, 0.0]])
 """R: tau = R n."""
@@ -109,9 +115,11 @@ def tangential_rows(law: FrictionLaw | None, weight: float, c_t: float, lagrange
     else:
         bound = np.full(n, law.value)
         d_bound = np.zeros(n)
-    # ties (|v| = b) stick when there is friction: a node that just came into contact
-    # (z = 0, nothing slipped yet) starts held, not free to slide
-    sticking = active & ((np.abs(v) < bound) | ((np.abs(v) == bound) & (law.value > 0.0)))
+    # a node that just came into contact (b = 0, nothing slipped: v = 0) starts held, not
+    # free to slide; one at its slip bound to rounding (a slipping node at the start of
+    # the next step) keeps slipping instead of dragging the other body along for an iterate
+    new = (bound == 0.0) & (v == 0.0) & (law.value > 0.0)
+    sticking = active & ((np.abs(v) < (1.0 - STICK_BAND) * bound) | new)
     slipping = active & ~sticking
     sign = np.sign(v)
     residual[sticking] = weight * (y - v)[sticking]

@@ -67,7 +67,8 @@ class ContactOutput:
     """Displacement and contact pressure per step, as VTX (ADIOS2 BP) for ParaView.
 
     Writes ``directory/displacement.bp`` and ``directory/contact_pressure.bp``
-    (open either in ParaView with the ADIOS2 VTX reader). Creating, writing and
+    (open either in ParaView with the ADIOS2 VTX reader), with friction also
+    ``tangential_traction.bp`` and ``friction_status.bp`` (1 slip, 2 stick). Creating, writing and
     closing are collective.
     """
 
@@ -83,10 +84,18 @@ class ContactOutput:
             dolfinx.io.VTXWriter(comm, self.directory / "displacement.bp", [problem.u]),
             dolfinx.io.VTXWriter(comm, self.directory / "contact_pressure.bp", [self.pressure]),
         ]
+        self.friction = None
+        if problem.has_friction:
+            self.friction = problem.friction_functions()
+            self._writers += [
+                dolfinx.io.VTXWriter(comm, self.directory / f"{f.name}.bp", [f])
+                for f in self.friction]
 
     def write(self, t: float) -> None:
         """Write the current displacement and pressure at time t. Collective."""
         self.problem.pressure_function(0, self.pressure)
+        if self.friction is not None:
+            self.problem.friction_functions(0, self.friction)
         for writer in self._writers:
             writer.write(t)
 

@@ -749,10 +749,28 @@ class ContactProblem:
         if function is None:
             space = dolfinx.fem.functionspace(self.V.mesh, ("Lagrange", 1))
             function = dolfinx.fem.Function(space, name="contact_pressure")
+        return self._slave_node_function(k, self.multipliers[k].getArray(readonly=True),
+                                         function)
+
+    def friction_functions(self, k: int = 0, functions: tuple | None = None) -> tuple:
+        """(tangential traction y_j, status) as P1 scalar Functions for ParaView (0 away
+        from the slave nodes; status 0 inactive, 1 slipping, 2 sticking). Collective."""
+        if functions is None:
+            space = dolfinx.fem.functionspace(self.V.mesh, ("Lagrange", 1))
+            functions = (dolfinx.fem.Function(space, name="tangential_traction"),
+                         dolfinx.fem.Function(space, name="friction_status"))
+        state = self.friction_state(k)
+        status = np.where(state["sticking"], 2.0, np.where(state["slipping"], 1.0, 0.0))
+        self._slave_node_function(k, state["traction"], functions[0])
+        self._slave_node_function(k, status, functions[1])
+        return functions
+
+    def _slave_node_function(self, k: int, values: np.ndarray, function) -> dolfinx.fem.Function:
+        """``function`` (P1 scalar) with pair k's owned slave node values, 0 elsewhere."""
         interface = self.interfaces[k]
         local = interface.owned_multiplier_blocks - self.V.dofmap.index_map.local_range[0]
         function.x.array[:] = 0.0
-        function.x.array[local] = self.multipliers[k].getArray(readonly=True)
+        function.x.array[local] = values
         function.x.scatter_forward()
         return function
 

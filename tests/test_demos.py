@@ -32,6 +32,11 @@ CONFIGURATIONS = {
         ["steps_completed", "newton_iterations", "max_force_balance_rel"],
     ),
     "mesh_tying": (["--refinements", "3"], ["l2_rate", "h1_rate", "max_l2_error"]),
+    "cattaneo_mindlin": (
+        ["--refinement", "0", "--tangential-ratio", "0.7"],
+        ["stick_half_width", "q_max", "l2_traction_error_rel", "total_tangential_force",
+         "p_max", "newton_iterations"],
+    ),
 }
 
 
@@ -70,6 +75,7 @@ def test_demo_serial_equals_parallel(name, tmp_path_factory):
 
 
 HELP_DEFAULTS = {
+    "cattaneo_mindlin": ["(default: 0.5)", "(default: frictionless)", "(default: master)"],
     "hertz": ["(default: B)", "(default: 8.0)", "(default: 2)"],
     "patch_test": ["(default: 3:2)", "(default: top)", "(default: lagrange)"],
     "ironing": ["(default: 500)", "(default: quadrilateral)", "(default: 2.0)"],

@@ -1,0 +1,323 @@
+"""Cattaneo-Mindlin: a cylinder pressed onto a block, then pulled sideways (plane strain).
+
+The geometry and materials of Hertz case B (demos/hertz.py: a half-cylinder of
+radius R = 8 on a block, both E = 200, nu = 0.3, so the normal and tangential
+problems decouple): first the force P = 10 (per unit thickness), then, at fixed
+P, a tangential force Q = ``--tangential-ratio`` mu P, both applied on the
+cylinder's flat top, with Coulomb friction mu = ``--mu`` on the contact.
+Cattaneo (1938) and Mindlin (1949): the pressure stays Hertz's,
+p = p0 sqrt(1 - x^2/a^2), a central zone |x| < c = a sqrt(1 - Q/(mu P)) sticks
+and the rest slips, with the tangential traction
+
+    q(x) = mu p0 (sqrt(1 - x^2/a^2) - (c/a) sqrt(1 - x^2/c^2))   for |x| < c,
+    q(x) = mu p(x)                                               for c <= |x| <= a.
+
+Loading without a moment about the contact point: Q enters as a uniform shear
+traction Q/(2R) on the top (at height R) together with a vertical traction
+varying linearly along the top, 3 Q R x / (2 R^3) (x in [-R, R]), whose couple
+cancels Q R; the cylinder is held only by contact and friction (no symmetry
+constraint), the block clamped at its bottom. The mortar integrals and normals
+are those of demos/hertz.py for linear elasticity (reference configuration,
+master normals, dual multipliers, semismooth Newton).
+
+``--normal-phase``: by default P is applied without friction, so that no
+tangential traction is locked in before Q, as the theory assumes; with
+friction during P (``frictional``), the finite cylinder's and block's unequal
+tangential surface displacements leave a traction of about 12 % of mu p0 in
+the contact zone (measured at refinement 2), which Q then adds to.
+
+Measured (mu = 0.2, frictionless normal phase, 2 + 4 load steps; L2 rate fitted
+over refinements 0-3; serial):
+
+    Q/(mu P)  refinement  dofs    c - c_exact      L2 error  Newton per step    wall
+    0.3       0 .. 3      1,500 .. 76,846  <= 0.92 h  32, 14, 6.2, 3.4 %  <= 5   23 s at 3
+    0.7       0 .. 3      1,500 .. 76,846  <= 0.85 h  10, 5.5, 3.0, 1.6 %  <= 6   28 s at 3
+
+fitted L2 rates 1.11 (0.3) and 0.91 (0.7); the tangential force is -Q to 2e-15;
+10 and 40 load steps give the same tractions to 4e-14.
+
+JSON keys: ``stick_half_width`` (half the extent of the sticking slave nodes),
+``stick_half_width_exact``, ``stick_error_in_elements``, ``q_max``,
+``l2_traction_error_rel`` (L2 norm over |x| < 3a of the piecewise-linear nodal
+traction minus q, relative to that of q), ``total_tangential_force`` (the
+friction force on the cylinder, -Q exactly at equilibrium) and its error,
+``total_force``, ``p_max``, ``a_contact``, ``newton_iterations`` (per step:
+``--steps`` normal ones, then ``--tangential-steps``), ``min_nodal_dissipation_rel``
+(the smallest nodal frictional work y_j u~_j of any step over the largest: >= 0
+but for rounding), ``num_dofs``, ``wall_time_s``.
+
+Outputs (``--output DIR``): cattaneo_mindlin.png (pressure and tangential
+traction against the exact curves), cattaneo_mindlin.csv, paraview/*.bp
+(displacement, pressure, tangential traction and stick/slip status per step).
+
+Run:  mpirun -n 2 python3 demos/cattaneo_mindlin.py --mu 0.2 --tangential-ratio 0.7 --refinement 2
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import pathlib
+import time
+
+import dolfinx
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+from dolfinx_mortar import cli, meshes
+from dolfinx_mortar.cli import write_summary
+from dolfinx_mortar.loading import ContactOutput, configure_logging, solve_load_steps
+from dolfinx_mortar.materials import Material, internal_work
+from dolfinx_mortar.problem import ContactPair, ContactProblem
+
+E, NU, LOAD, RADIUS = 200.0, 0.3, 10.0, 8.0
+
+
+def exact_solution(load: float, radius: float, mu: float, ratio: float) -> dict:
+    """Hertz a, p0 and the stick half-width c of Cattaneo-Mindlin (equal materials)."""
+    effective_modulus = 1.0 / (2.0 * (1.0 - NU**2) / E)
+    a = math.sqrt(4.0 * load * radius / (math.pi * effective_modulus))
+    return {"a": a, "p0": 2.0 * load / (math.pi * a), "c": a * math.sqrt(1.0 - ratio),
+            "mu": mu}
+
+
+def exact_traction(x, exact: dict) -> np.ndarray:
+    """q(x) of the module docstring."""
+    a, c, p0, mu = exact["a"], exact["c"], exact["p0"], exact["mu"]
+    full = mu * p0 * np.sqrt(np.clip(1.0 - (x / a) ** 2, 0.0, None))
+    if c <= 0.0:
+        return full
+    return full - np.where(np.abs(x) < c,
+                           mu * p0 * (c / a) * np.sqrt(np.clip(1.0 - (x / c) ** 2, 0.0, None)),
+                           0.0)
+
+
+def l2_error(x_nodes, values, exact_values, samples_per_facet: int = 64) -> tuple[float, float]:
+    """Absolute and relative L2 error of the piecewise-linear nodal values along x."""
+    total, norm = 0.0, 0.0
+    s = (np.arange(samples_per_facet) + 0.5) / samples_per_facet
+    for i in range(x_nodes.size - 1):
+        x = x_nodes[i] + s * (x_nodes[i + 1] - x_nodes[i])
+        value = values[i] + s * (values[i + 1] - values[i])
+        weight = (x_nodes[i + 1] - x_nodes[i]) / samples_per_facet
+        exact = exact_values(x)
+        total += weight * np.sum((value - exact) ** 2)
+        norm += weight * np.sum(exact**2)
+    return math.sqrt(total), math.sqrt(total / norm) if norm > 0 else math.nan
+
+
+def bulk_problem(tagged, u):
+    """(F, (normal, tangential) load Constants, bcs): the block clamped at its bottom."""
+    mesh, markers = tagged.mesh, tagged.markers
+    V = u.function_space
+    v = ufl.TestFunction(V)
+    ds = ufl.Measure("ds", domain=mesh, subdomain_data=tagged.facet_tags)
+    normal = dolfinx.fem.Constant(mesh, 0.0)
+    tangential = dolfinx.fem.Constant(mesh, 0.0)
+    x = ufl.SpatialCoordinate(mesh)
+    width = 2.0 * RADIUS
+    # -P/(2R) down, Q/(2R) along x, and 3 Q x / (2 R^2) up: no moment about the origin
+    traction = ufl.as_vector([tangential / width,
+                              -normal / width + 3.0 * tangential * x[0] / (2.0 * RADIUS**2)])
+    material = Material(E, NU, "linear")
+    F = (internal_work(u, v, {markers["cylinder"]: material, markers["block"]: material},
+                       tagged.cell_tags)
+         - ufl.inner(traction, v) * ds(markers["load"]))
+    support = tagged.facet_tags.find(markers["support"])
+    bcs = [dolfinx.fem.dirichletbc(
+        np.zeros(2), dolfinx.fem.locate_dofs_topological(V, mesh.topology.dim - 1, support), V)]
+    return F, (normal, tangential), bcs
+
+
+def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
+    parser = cli.parser(__doc__)
+    parser.add_argument(
+        "--tangential-ratio", type=float, default=0.5, help="Q / (mu P), in [0, 1)")
+    parser.add_argument(
+        "--refinement", type=int, default=1, help="halves the element sizes per level")
+    parser.add_argument("--steps", type=int, default=2, help="load steps of the normal force")
+    parser.add_argument(
+        "--tangential-steps", type=int, default=4, help="load steps of the tangential force")
+    parser.add_argument(
+        "--normal-phase", choices=("frictionless", "frictional"), default="frictionless",
+        help="friction while P is applied (the theory has no tangential traction after it)")
+    cli.add_common_arguments(parser, normals="master")
+    args = parser.parse_args(argv)
+    if args.mu is None:
+        args.mu = 0.2
+    if not args.mu > 0.0:
+        parser.error(f"--mu must be positive, got {args.mu}")
+    if not 0.0 <= args.tangential_ratio < 1.0:
+        parser.error(f"--tangential-ratio must lie in [0, 1), got {args.tangential_ratio}")
+    configure_logging(comm)
+    exact = exact_solution(LOAD, RADIUS, args.mu, args.tangential_ratio)
+    tangential_load = args.tangential_ratio * args.mu * LOAD
+    start = time.perf_counter()
+
+    tagged = meshes.hertz(case="B", refinement=args.refinement, radius=RADIUS, comm=comm,
+                          half_width=exact["a"])
+    markers = tagged.markers
+    V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (2,)))
+    u = dolfinx.fem.Function(V, name="displacement")
+    F, (normal, tangential), bcs = bulk_problem(tagged, u)
+    pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"],
+                       name="cylinder-block")
+    problem = ContactProblem(F, u, bcs, [pair], configuration="reference",
+                             **cli.problem_options(args))
+
+    cylinder_cells = tagged.cell_tags.find(markers["cylinder"])
+    indentation = (0.5 * exact["a"]) ** 2 / (2.0 * RADIUS)
+    u.interpolate(lambda x: np.vstack([0.0 * x[0], -indentation + 0.0 * x[0]]), cylinder_cells)
+    u.x.scatter_forward()
+
+    def press(t: float) -> None:
+        normal.value = t * LOAD
+
+    def pull(t: float) -> None:
+        tangential.value = t * tangential_load
+
+    dissipation = []
+
+    def record(step) -> None:
+        """The smallest nodal frictional work of the step, relative to the largest."""
+        work = problem.friction_state()["dissipation"]
+        low = comm.allreduce(float(work.min(initial=0.0)), op=MPI.MIN)
+        high = comm.allreduce(float(np.abs(work).max(initial=0.0)), op=MPI.MAX)
+        dissipation.append(low / high if high > 0 else 0.0)
+
+    output = ContactOutput(problem, args.output / "paraview") if args.output else None
+    law = problem.friction_laws[0]
+    if args.normal_phase == "frictionless":
+        problem.friction_laws[0] = None
+    records = solve_load_steps(problem, press, args.steps, output=output, on_step=record)
+    problem.friction_laws[0] = law
+    records += solve_load_steps(problem, pull, args.tangential_steps, output=output,
+                                on_step=record)
+    if output is not None:
+        output.close()
+    wall_time = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
+
+    coordinates, pressure = problem.gathered_pressure()
+    state = problem.friction_state()
+    gathered = {key: np.concatenate(comm.allgather(state[key]))
+                for key in ("traction", "sticking", "slipping")}
+    x_all = np.concatenate(comm.allgather(state["coordinates"][:, 0]))
+    order = np.argsort(x_all)
+    x_nodes = x_all[order]
+    traction, sticking, slipping = (gathered[key][order]
+                                    for key in ("traction", "sticking", "slipping"))
+    zone = np.abs(x_nodes) < 3.0 * exact["a"]
+    spacing = float(np.max(np.diff(x_nodes[zone])))
+    stuck = x_nodes[sticking]
+    stick_half_width = 0.5 * float(stuck.max() - stuck.min()) if stuck.size else 0.0
+    error, error_rel = l2_error(x_nodes[zone], traction[zone],
+                                lambda x: exact_traction(x, exact))
+    in_contact = pressure > 1e-8 * exact["p0"]
+    x_pressure = coordinates[:, 0]
+    a_contact = 0.5 * float(np.ptp(x_pressure[in_contact])) if in_contact.any() else 0.0
+    slave_force, master_force = problem.contact_forces()
+    summary = {
+        "mu": args.mu,
+        "tangential_ratio": args.tangential_ratio,
+        "load": LOAD,
+        "tangential_load": tangential_load,
+        "normal_phase": args.normal_phase,
+        **cli.problem_options(args),
+        "c_n": problem.c_n,
+        "c_t": problem.c_t,
+        "refinement": args.refinement,
+        "num_ranks": comm.size,
+        "num_dofs": V.dofmap.index_map.size_global * 2,
+        "h_contact": spacing,
+        "a_exact": exact["a"],
+        "a_contact": a_contact,
+        "p0_exact": exact["p0"],
+        "p_max": float(pressure.max()),
+        "stick_half_width": stick_half_width,
+        "stick_half_width_exact": exact["c"],
+        "stick_error_in_elements": abs(stick_half_width - exact["c"]) / spacing,
+        "num_sticking": int(sticking.sum()),
+        "num_slipping": int(slipping.sum()),
+        "q_max": float(np.max(np.abs(traction))),
+        "q_max_exact": float(np.max(np.abs(exact_traction(x_nodes[zone], exact)))),
+        "l2_traction_error": error,
+        "l2_traction_error_rel": error_rel,
+        "total_force": float(slave_force[1]),
+        "total_force_error_rel": float(abs(slave_force[1] - LOAD) / LOAD),
+        "total_tangential_force": float(slave_force[0]),
+        "total_tangential_force_error_rel": (
+            float(abs(slave_force[0] + tangential_load) / tangential_load)
+            if tangential_load > 0 else float(abs(slave_force[0]) / LOAD)),
+        "force_balance": float(np.linalg.norm(slave_force + master_force) / LOAD),
+        "newton_iterations": [r.iterations for r in records],
+        "min_nodal_dissipation_rel": float(min(dissipation)),
+        "residuals_last_step": records[-1].report.residuals,
+        "cutbacks": sum(r.cutbacks for r in records),
+        "wall_time_s": wall_time,
+        "profile": {"x": x_nodes[zone].tolist(), "traction": traction[zone].tolist(),
+                    "sticking": sticking[zone].astype(int).tolist()},
+    }
+    if comm.rank == 0:
+        print(
+            f"Cattaneo-Mindlin mu {args.mu}, Q/(mu P) {args.tangential_ratio}: stick half-width "
+            f"{stick_half_width:.4f} (exact {exact['c']:.4f}, "
+            f"{summary['stick_error_in_elements']:.2f} elements), q_max {summary['q_max']:.4f}, "
+            f"L2 traction error {100 * error_rel:.2f} %, tangential force "
+            f"{summary['total_tangential_force']:.10g} (-Q = {-tangential_load:g}), Newton "
+            f"{summary['newton_iterations']}",
+            flush=True,
+        )
+        write_summary(args.json, summary)
+        if args.output:
+            plot(args.output / "cattaneo_mindlin.png", x_nodes[zone], traction[zone],
+                 sticking[zone], coordinates[:, 0], pressure, exact, summary)
+            write_profile(args.output / "cattaneo_mindlin.csv", x_nodes[zone], traction[zone],
+                          sticking[zone], exact)
+    problem.destroy()
+    return summary
+
+
+def write_profile(path: pathlib.Path, x_nodes, traction, sticking, exact) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as stream:
+        writer = csv.writer(stream)
+        writer.writerow(["x", "tangential_traction", "sticking", "tangential_traction_exact"])
+        for x, q, stick, q_exact in zip(x_nodes, traction, sticking,
+                                        exact_traction(x_nodes, exact), strict=True):
+            writer.writerow([repr(float(x)), repr(float(q)), int(stick), repr(float(q_exact))])
+
+
+def plot(path: pathlib.Path, x_nodes, traction, sticking, x_pressure, pressure, exact,
+         summary) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    a, mu = exact["a"], exact["mu"]
+    x = np.linspace(-1.3 * a, 1.3 * a, 801)
+    fig, ax = plt.subplots(figsize=(6.5, 4))
+    ax.plot(x, mu * exact["p0"] * np.sqrt(np.clip(1 - (x / a) ** 2, 0, None)), "k:",
+            label="mu p (Hertz)")
+    ax.plot(x, exact_traction(x, exact), "k-", label="Cattaneo-Mindlin q")
+    zone = np.abs(x_pressure) < 1.3 * a
+    ax.plot(x_pressure[zone], mu * pressure[zone], ".", color="0.5", ms=3, label="mu z_j")
+    ax.plot(x_nodes, traction, "o-", ms=3, label="mortar y_j")
+    ax.plot(x_nodes[sticking], traction[sticking], "s", ms=4, mfc="none", label="sticking")
+    ax.axvline(exact["c"], color="k", lw=0.5)
+    ax.axvline(-exact["c"], color="k", lw=0.5)
+    ax.set_xlim(-1.3 * a, 1.3 * a)
+    ax.set_xlabel("x")
+    ax.set_ylabel("tangential traction")
+    ax.set_title(f"mu {summary['mu']}, Q/(mu P) {summary['tangential_ratio']}: c "
+                 f"{summary['stick_half_width']:.3f} vs {exact['c']:.3f}")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120, bbox_inches="tight")
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    main()
