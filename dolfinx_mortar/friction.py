@@ -85,36 +85,49 @@ class FrictionLaw:
 @dataclasses.dataclass
 class TangentialRows:
     """Owned tangential rows of one pair: residual C_j and its derivative
-    dC_j = slip du~_j + area dA_j + normal dz_j + own dy_j; ``sticking`` per node."""
+    dC_j = slip du~_j + gap dg~_j + area dA_j + normal dz_j + own dy_j; ``sticking``."""
 
     residual: np.ndarray
     slip: np.ndarray
+    gap: np.ndarray
     area: np.ndarray
     normal: np.ndarray
     own: np.ndarray
     sticking: np.ndarray
 
 
-def tangential_rows(law: FrictionLaw | None, weight: float, c_t: float, lagrange: bool,
+def tangential_rows(law: FrictionLaw | None, weight: float, c_t: float, c_n: float | None,
                     y: np.ndarray, z: np.ndarray, active: np.ndarray, slip: np.ndarray,
-                    area: np.ndarray) -> TangentialRows:
-    """The rows of the module docstring at the current state (weight = h^(d-1))."""
+                    gap: np.ndarray, area: np.ndarray) -> TangentialRows:
+    """The rows of the module docstring at the current state (weight = h^(d-1)).
+
+    ``c_n`` given (Lagrange multipliers): the Coulomb bound is mu max(0, z_j - c_n g^_j),
+    the normal complementarity quantity (equal to mu z_j once the gap is closed), as in
+    Hueber, Stadler and Wohlmuth and Gitterle et al.; None (penalty): mu max(0, z_j).
+    """
     n = y.size
     residual = weight * y
-    d_slip, d_area, d_normal = np.zeros(n), np.zeros(n), np.zeros(n)
+    d_slip, d_gap, d_area, d_normal = (np.zeros(n) for _ in range(4))
     d_own = np.full(n, weight)
     sticking = np.zeros(n, dtype=bool)
     if law is None or not np.any(active):
-        return TangentialRows(residual, d_slip, d_area, d_normal, d_own, sticking)
+        return TangentialRows(residual, d_slip, d_gap, d_area, d_normal, d_own, sticking)
+    lagrange = c_n is not None
     a = np.where(active, area, 1.0)
     s = slip / a
     v = (y if lagrange else 0.0) + c_t * s
+    # the bound b and its derivatives over z, g~ and A
+    db_dz, db_dgap, db_darea = np.zeros(n), np.zeros(n), np.zeros(n)
     if law.kind == "coulomb":
-        bound = law.value * np.maximum(z, 0.0)
-        d_bound = np.where(z > 0.0, law.value, 0.0)
+        pressure = z - c_n * gap / a if lagrange else z
+        bound = law.value * np.maximum(pressure, 0.0)
+        pressing = pressure > 0.0
+        db_dz[pressing] = law.value
+        if lagrange:
+            db_dgap[pressing] = -law.value * c_n / a[pressing]
+            db_darea[pressing] = law.value * c_n * (gap / a**2)[pressing]
     else:
         bound = np.full(n, law.value)
-        d_bound = np.zeros(n)
     # a node that just came into contact (b = 0, nothing slipped: v = 0) starts held, not
     # free to slide; one at its slip bound to rounding (a slipping node at the start of
     # the next step) keeps slipping instead of dragging the other body along for an iterate
@@ -127,8 +140,10 @@ def tangential_rows(law: FrictionLaw | None, weight: float, c_t: float, lagrange
     d_area[sticking] = weight * c_t * (slip / a**2)[sticking]
     d_own[sticking] = 0.0 if lagrange else weight
     residual[slipping] = weight * (y - bound * sign)[slipping]
-    d_normal[slipping] = -weight * (d_bound * sign)[slipping]
-    return TangentialRows(residual, d_slip, d_area, d_normal, d_own, sticking)
+    d_normal[slipping] = -weight * (db_dz * sign)[slipping]
+    d_gap[slipping] = -weight * (db_dgap * sign)[slipping]
+    d_area[slipping] = -weight * (db_darea * sign)[slipping]
+    return TangentialRows(residual, d_slip, d_gap, d_area, d_normal, d_own, sticking)
 
 
 def tangential_coefficients(force_coefficients: np.ndarray) -> np.ndarray:

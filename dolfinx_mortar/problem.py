@@ -252,7 +252,8 @@ class ContactProblem:
             self.comm, self.interfaces[0].num_owned_dofs,
             counts + (counts if self.has_friction else []))
         self.multipliers = [i.create_multiplier_vector() for i in self.interfaces]
-        coefficient_names = ("gap", "area") + (("slip", "slip_area") if self.has_friction else ())
+        coefficient_names = ("gap", "area") + (
+            ("slip", "slip_gap", "slip_area") if self.has_friction else ())
         self._row_coefficients = [
             {name: i.create_multiplier_vector() for name in coefficient_names}
             for i in self.interfaces
@@ -524,9 +525,10 @@ class ContactProblem:
         """Pair k's owned tangential rows (:mod:`dolfinx_mortar.friction`)."""
         return friction_rules.tangential_rows(
             self.friction_laws[k], self.enforcement.scales.face, self.c_t,
-            self.method == "lagrange", self.tangential[k].getArray(readonly=True),
+            self.c_n if self.method == "lagrange" else None,
+            self.tangential[k].getArray(readonly=True),
             self.multipliers[k].getArray(readonly=True), self.active[k], self.slips[k],
-            self.areas[k])
+            self.gaps[k], self.areas[k])
 
     def _covered(self, k: int) -> np.ndarray:
         interface = self.interfaces[k]

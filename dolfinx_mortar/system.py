@@ -228,9 +228,10 @@ class ContactSystem:
             y, tangential, du_table = friction
             y_nodes = interface.node_values(y)
             vectors["slip"].getArray()[:] = tangential.slip
+            vectors["slip_gap"].getArray()[:] = tangential.gap
             vectors["slip_area"].getArray()[:] = tangential.area
-            slip_nodes = interface.node_values(vectors["slip"])
-            slip_area_nodes = interface.node_values(vectors["slip_area"])
+            slip_nodes, slip_gap_nodes, slip_area_nodes = (
+                interface.node_values(vectors[name]) for name in ("slip", "slip_gap", "slip_area"))
         if contributing.size == 0:
             return None
         stencil, gdim = interface.stencil, interface.gdim
@@ -251,8 +252,8 @@ class ContactSystem:
             from . import friction as friction_module
 
             rotation = friction_module.ROTATION
-            y_pair, slip_pair, slip_area_pair = (
-                v[slave_nodes] for v in (y_nodes, slip_nodes, slip_area_nodes))
+            y_pair, slip_pair, slip_gap_pair, slip_area_pair = (
+                v[slave_nodes] for v in (y_nodes, slip_nodes, slip_gap_nodes, slip_area_nodes))
             # -sum_j y_j d(R coefficient_jk)/dx, (R coefficient)[c] = sum_e R[c, e] coefficient[e]
             for a in range(ns):
                 for c in range(gdim):
@@ -268,7 +269,8 @@ class ContactSystem:
             du_master = du_table[stencil.master_nodes[contributing]]
             multiplier_rows += [
                 friction_module.slip_terms(stencil, j, du_slave, du_master, slip_pair[:, j])
-                + [(stencil.AREA + j, slip_area_pair[:, j])] for j in js]
+                + [(stencil.GAP + j, slip_gap_pair[:, j]), (stencil.AREA + j, slip_area_pair[:, j])]
+                for j in js]
             num_multipliers = 2 * ns
         terms = slave_terms + master_terms + multiplier_rows
         forces, columns = (ns + nm) * gdim, stencil.width * gdim

@@ -32,6 +32,10 @@ CONFIGURATIONS = {
         ["steps_completed", "newton_iterations", "max_force_balance_rel"],
     ),
     "mesh_tying": (["--refinements", "3"], ["l2_rate", "h1_rate", "max_l2_error"]),
+    "friction_patch": (
+        ["--ratio", "3:7", "--slave", "lower", "--shear-ratio", "2"],
+        ["max_pressure_deviation_rel", "num_slipping", "newton_iterations"],
+    ),
     "cattaneo_mindlin": (
         ["--refinement", "0", "--tangential-ratio", "0.7"],
         ["stick_half_width", "q_max", "l2_traction_error_rel", "total_tangential_force",
@@ -75,6 +79,7 @@ def test_demo_serial_equals_parallel(name, tmp_path_factory):
 
 
 HELP_DEFAULTS = {
+    "friction_patch": ["(default: 3:7)", "(default: upper)", "(default: 2.0)"],
     "cattaneo_mindlin": ["(default: 0.5)", "(default: frictionless)", "(default: master)"],
     "hertz": ["(default: B)", "(default: 8.0)", "(default: 2)"],
     "patch_test": ["(default: 3:2)", "(default: top)", "(default: lagrange)"],

@@ -13,54 +13,21 @@ from dolfinx_mortar import compat, meshes
 from dolfinx_mortar.materials import Material, internal_work
 from dolfinx_mortar.problem import ContactPair, ContactProblem
 
-E, NU, PRESSURE = 1000.0, 0.3, 10.0
-SHEAR_MODULUS = E / (2.0 * (1.0 + NU))
+
+def load_demo(name: str):
+    import importlib.util
+    import pathlib
+
+    path = pathlib.Path(__file__).parents[1] / "demos" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"demo_{name}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
-def sheared_blocks(ratio, slave: str, friction, top_shift: float, side_shear: float,
-                   cell_type: str = "triangle", **options):
-    """Two blocks [0, 1] x [0, 0.5] and [0, 1] x [0.5, 1] (meshes.tied_blocks, non-matching),
-    pressed by PRESSURE on the top and sheared: the bottom held, the top moved by
-    ``top_shift`` along x (both with the Poisson expansion of the uniform state), a
-    vertical shear traction ``side_shear`` on the sides. With side_shear = the interface
-    shear, the exact solution is uniform: sigma_yy = -PRESSURE, sigma_xy = side_shear,
-    sigma_xx = 0."""
-    tagged = meshes.tied_blocks(ratio=ratio, cell_type=cell_type)
-    mesh = tagged.mesh
-    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
-    u, v = dolfinx.fem.Function(V), ufl.TestFunction(V)
-    fdim = mesh.topology.dim - 1
-    where = {1: lambda x: np.isclose(x[0], 0.0), 2: lambda x: np.isclose(x[0], 1.0),
-             3: lambda x: np.isclose(x[1], 0.0), 4: lambda x: np.isclose(x[1], 1.0)}
-    facets = [dolfinx.mesh.locate_entities_boundary(mesh, fdim, f) for f in where.values()]
-    values = np.concatenate([np.full(f.size, tag, dtype=np.int32)
-                             for tag, f in zip(where, facets, strict=True)])
-    order = np.argsort(np.concatenate(facets))
-    boundary = dolfinx.mesh.meshtags(mesh, fdim, np.concatenate(facets)[order], values[order])
-    ds = ufl.Measure("ds", domain=mesh, subdomain_data=boundary)
-    shear = dolfinx.fem.Constant(mesh, float(side_shear))
-    pressure = dolfinx.fem.Constant(mesh, PRESSURE)
-    F = (internal_work(u, v, {0: Material(E, NU, "linear")})
-         - (-shear * v[1] * ds(1) + shear * v[1] * ds(2) - pressure * v[1] * ds(4)))
-    V0, V1 = V.sub(0), V.sub(1)
-    X = V0.collapse()[0]
-    bottom_y = dolfinx.fem.locate_dofs_topological(V1, fdim, facets[2])
-    bottom_x, top = (dolfinx.fem.locate_dofs_topological((V0, X), fdim, facets[i])
-                     for i in (2, 3))
-    # u_x = eps_xx x (+ top_shift on the top), eps_xx the plane-strain Poisson expansion
-    expansion = NU * (1.0 + NU) * PRESSURE / E
-    bottom_values, top_values = dolfinx.fem.Function(X), dolfinx.fem.Function(X)
-    bottom_values.interpolate(lambda x: expansion * x[0])
-    top_values.interpolate(lambda x: top_shift + expansion * x[0])
-    bcs = [dolfinx.fem.dirichletbc(0.0, bottom_y, V1),
-           dolfinx.fem.dirichletbc(bottom_values, bottom_x, V0),
-           dolfinx.fem.dirichletbc(top_values, top, V0)]
-    upper, lower = tagged.markers["upper_interface"], tagged.markers["lower_interface"]
-    pair = (ContactPair(tagged.facet_tags, upper, lower) if slave == "upper"
-            else ContactPair(tagged.facet_tags, lower, upper))
-    problem = ContactProblem(F, u, bcs, [pair], configuration="reference", friction=friction,
-                             **options)
-    return problem
+PATCH = load_demo("friction_patch")
+sheared_blocks = PATCH.sheared_blocks
+E, NU, PRESSURE, SHEAR_MODULUS = PATCH.E, PATCH.NU, PATCH.PRESSURE, PATCH.SHEAR_MODULUS
 
 
 def solved(problem):
@@ -71,44 +38,28 @@ def solved(problem):
 
 @pytest.mark.parallel
 @pytest.mark.parametrize("slave", ["upper", "lower"])
-@pytest.mark.parametrize("ratio", [(3, 7), (7, 3)])
-def test_full_slip_gives_mu_times_pressure_at_every_node(ratio, slave):
-    """mu = 0.2: the top pulled 0.02 beyond what the interface holds; every slave node
-    slips with y_j = mu z_j = 2 and z_j = 10, the uniform exact solution."""
-    mu = 0.2
-    problem = sheared_blocks(ratio, slave, ("coulomb", mu), top_shift=0.02,
-                             side_shear=mu * PRESSURE)
-    report = solved(problem)
-    state = problem.friction_state()
-    active = problem.active[0]
-    z = problem.multipliers[0].getArray(readonly=True)
-    assert problem.comm.allreduce(int(active.sum()), op=MPI.SUM) == \
-        problem.interfaces[0].num_global_multipliers
-    np.testing.assert_allclose(z, PRESSURE, rtol=1e-10)
-    np.testing.assert_allclose(state["traction"], mu * PRESSURE, rtol=1e-10)
-    assert not state["sticking"].any() and state["slipping"].all()
-    # slip: the top's shift less the elastic shear of both blocks (height 1)
-    expected_slip = 0.02 - mu * PRESSURE / SHEAR_MODULUS
-    np.testing.assert_allclose(state["slip"], expected_slip, rtol=1e-8)
-    assert np.all(state["dissipation"] > 0.0)
-    assert report.iterations <= 10
+@pytest.mark.parametrize("ratio", ["3:7", "7:3"])
+@pytest.mark.parametrize("cell", ["triangle", "quadrilateral"])
+def test_full_slip_gives_mu_times_pressure_at_every_node(ratio, slave, cell):
+    """demos/friction_patch.py, R = 3: every slave node slips with y_j = mu z_j = 2,
+    z_j = 10 and the slip 2 mu p H / G (measured deviations <= 1e-13)."""
+    summary = PATCH.main(["--ratio", ratio, "--slave", slave, "--shear-ratio", "3",
+                          "--cell-type", cell])
+    assert summary["num_slipping"] == summary["num_active"] == summary["num_slave_nodes"]
+    for key in ("pressure", "traction", "slip"):
+        assert summary[f"max_{key}_deviation_rel"] < 1e-10, key
+    assert summary["newton_iterations"] <= 10
 
 
 @pytest.mark.parallel
 @pytest.mark.parametrize("slave", ["upper", "lower"])
-def test_below_the_limit_the_blocks_stick(slave):
-    """mu = 0.5 and a shear of 3 < mu p = 5: slip 0 to solver tolerance at every node,
-    y_j = 3 (the uniform shear) and z_j = 10."""
-    shear = 3.0
-    problem = sheared_blocks((3, 7), slave, ("coulomb", 0.5), top_shift=shear / SHEAR_MODULUS,
-                             side_shear=shear)
-    solved(problem)
-    state = problem.friction_state()
-    assert state["sticking"].all()
-    np.testing.assert_allclose(problem.multipliers[0].getArray(readonly=True), PRESSURE,
-                               rtol=1e-10)
-    np.testing.assert_allclose(state["traction"], shear, rtol=1e-10)
-    assert np.max(np.abs(state["slip"]), initial=0.0) < 1e-12 * shear / SHEAR_MODULUS + 1e-14
+@pytest.mark.parametrize("ratio", ["3:7", "7:3"])
+def test_below_the_limit_the_blocks_stick(ratio, slave):
+    """R = 0.6: every node sticks, slip 0 to rounding, y_j = 0.6 mu p, z_j = p."""
+    summary = PATCH.main(["--ratio", ratio, "--slave", slave, "--shear-ratio", "0.6"])
+    assert summary["num_sticking"] == summary["num_active"] == summary["num_slave_nodes"]
+    for key in ("pressure", "traction", "slip"):
+        assert summary[f"max_{key}_deviation_rel"] < 1e-10, key
 
 
 def test_tresca_bound_is_the_slip_traction():
@@ -186,13 +137,16 @@ def frictional_blocks(mu: float, method: str = "lagrange"):
 def test_frictional_jacobian_taylor(state, method):
     """Residual of the whole frictional system: slope 2 in the stick and in the slip state.
     mu is set from the state, so that every active node is in ``state`` with a margin of
-    2 from the kink: bound = mu z_j against |v_j| (module docstring of friction)."""
+    2 from the kink: bound = mu (z_j - c_n g^_j) (penalty: mu z_j) against |v_j| (module
+    docstring of friction)."""
     from dolfinx_mortar.friction import FrictionLaw
 
     problem = frictional_blocks(1.0, method)
     problem._residual(problem.snes, problem.x, problem.b)
     active = problem.active[0]
     z = problem.multipliers[0].getArray(readonly=True)[active]
+    if method == "lagrange":  # the bound is mu (z - c_n g^) there
+        z = z - problem.c_n * problem.gaps[0][active] / problem.areas[0][active]
     s = problem.friction_state()["slip"][active]
     v = (problem.tangential[0].getArray(readonly=True)[active] if method == "lagrange"
          else 0.0) + problem.c_t * s
@@ -252,16 +206,6 @@ def test_state_is_saved_and_restored_with_the_tangential_multipliers():
     np.testing.assert_allclose(problem.tangential[0].getArray(readonly=True), y, rtol=1e-12)
 
 
-def load_demo(name: str):
-    import importlib.util
-    import pathlib
-
-    path = pathlib.Path(__file__).parents[1] / "demos" / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(f"demo_{name}", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
 
 @pytest.mark.parametrize("ratio", [0.3, 0.7])
 def test_cattaneo_mindlin_stick_zone_and_tangential_force(ratio):
@@ -299,3 +243,25 @@ def test_a_monotone_pull_does_not_depend_on_the_number_of_steps():
     q = [np.array(r["profile"]["traction"]) for r in runs]
     scale = 0.2 * runs[0]["p0_exact"]
     assert np.max(np.abs(q[0] - q[1])) < 1e-8 * scale
+
+
+@pytest.mark.parallel
+@pytest.mark.timeout(600)
+def test_frictional_ironing_serial_equals_parallel():
+    """Shallow ironing with mu = 0.3 into the sliding phase (100 steps over [0, 2], to
+    t = 1.1): every step converges, forces balance to 1e-8, the frictional work is >= 0
+    at every node (to rounding), and N ranks give the serial forces to 1e-8."""
+    module = load_demo("ironing")
+    args = ["--mu", "0.3", "--steps", "100", "--end-time", "1.1"]
+    serial = module.main(list(args), comm=MPI.COMM_SELF)
+    parallel = module.main(list(args), comm=MPI.COMM_WORLD)
+    for summary in (serial, parallel):
+        assert summary["end_time"] == pytest.approx(1.1)
+        assert summary["max_force_balance_rel"] < 1e-8
+        assert max(summary["newton_iterations"]) <= 10
+        largest = max(h["dissipation"] for h in summary["history"])
+        assert largest > 0.0 and summary["min_nodal_dissipation"] > -1e-10 * largest
+    assert serial["newton_iterations"] == parallel["newton_iterations"]
+    for a, b in zip(serial["history"], parallel["history"], strict=True):
+        for key in ("block_force_x", "block_force_y"):
+            assert b[key] == pytest.approx(a[key], rel=1e-8, abs=1e-8 * abs(a["block_force_y"]))

@@ -1,0 +1,160 @@
+"""Friction patch test: two non-matching blocks pressed and sheared, with an exact uniform answer.
+
+The unit square cut at y = 0.5 into two separately meshed blocks
+(dolfinx_mortar.meshes.tied_blocks, ``--ratio`` elements along the interface),
+plane strain, E = 1000, nu = 0.3, linear elasticity, Coulomb friction mu =
+``--mu`` on the interface. Pressure p = 10 on the top; the bottom held and the
+top moved along x, both with the Poisson expansion eps_xx x of the uniform
+state; on the sides a vertical shear traction tau. With ``--shear-ratio`` R:
+
+* R < 1: tau = R mu p and the top moved by tau H / G (H = 1): the blocks stick
+  and the state is uniform, sigma_xy = tau: tangential multipliers y_j = tau,
+  pressure z_j = p, slip 0;
+* R >= 1: tau = mu p and the top moved by R mu p H / G: the interface slips by
+  (R - 1) mu p H / G with y_j = mu p at every node.
+
+Segment-based mortar integration reproduces both to rounding on non-matching
+meshes and for either slave side (``--slave upper|lower``).
+
+Outputs (``--output DIR``): paraview/*.bp (displacement, pressure, tangential
+traction, stick/slip status); ``--json FILE`` writes the summary with the keys
+``max_pressure_deviation_rel``, ``max_traction_deviation_rel``
+(|y_j - exact| / (mu p)), ``max_slip_deviation_rel`` (|s_j - exact| / (mu p H /
+G)), ``num_sticking``, ``num_slipping``, ``newton_iterations``.
+
+Run:  mpirun -n 3 python3 demos/friction_patch.py --ratio 3:7 --slave lower --shear-ratio 2
+"""
+
+from __future__ import annotations
+
+import dolfinx
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+from dolfinx_mortar import cli, meshes
+from dolfinx_mortar.cli import write_summary
+from dolfinx_mortar.loading import ContactOutput
+from dolfinx_mortar.materials import Material, internal_work
+from dolfinx_mortar.problem import ContactPair, ContactProblem
+
+E, NU, PRESSURE = 1000.0, 0.3, 10.0
+SHEAR_MODULUS = E / (2.0 * (1.0 + NU))
+
+
+def sheared_blocks(ratio, slave: str, friction, top_shift: float, side_shear: float,
+                   cell_type: str = "triangle", comm: MPI.Intracomm = MPI.COMM_WORLD,
+                   **options) -> ContactProblem:
+    """Two blocks [0, 1] x [0, 0.5] and [0, 1] x [0.5, 1] (meshes.tied_blocks, non-matching),
+    pressed by PRESSURE on the top and sheared: the bottom held, the top moved by
+    ``top_shift`` along x (both with the Poisson expansion of the uniform state), a
+    vertical shear traction ``side_shear`` on the sides. With side_shear = the interface
+    shear, the exact solution is uniform: sigma_yy = -PRESSURE, sigma_xy = side_shear,
+    sigma_xx = 0."""
+    tagged = meshes.tied_blocks(ratio=ratio, cell_type=cell_type, comm=comm)
+    mesh = tagged.mesh
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    u, v = dolfinx.fem.Function(V), ufl.TestFunction(V)
+    fdim = mesh.topology.dim - 1
+    where = {1: lambda x: np.isclose(x[0], 0.0), 2: lambda x: np.isclose(x[0], 1.0),
+             3: lambda x: np.isclose(x[1], 0.0), 4: lambda x: np.isclose(x[1], 1.0)}
+    facets = [dolfinx.mesh.locate_entities_boundary(mesh, fdim, f) for f in where.values()]
+    values = np.concatenate([np.full(f.size, tag, dtype=np.int32)
+                             for tag, f in zip(where, facets, strict=True)])
+    order = np.argsort(np.concatenate(facets))
+    boundary = dolfinx.mesh.meshtags(mesh, fdim, np.concatenate(facets)[order], values[order])
+    ds = ufl.Measure("ds", domain=mesh, subdomain_data=boundary)
+    shear = dolfinx.fem.Constant(mesh, float(side_shear))
+    pressure = dolfinx.fem.Constant(mesh, PRESSURE)
+    F = (internal_work(u, v, {0: Material(E, NU, "linear")})
+         - (-shear * v[1] * ds(1) + shear * v[1] * ds(2) - pressure * v[1] * ds(4)))
+    V0, V1 = V.sub(0), V.sub(1)
+    X = V0.collapse()[0]
+    bottom_y = dolfinx.fem.locate_dofs_topological(V1, fdim, facets[2])
+    bottom_x, top = (dolfinx.fem.locate_dofs_topological((V0, X), fdim, facets[i])
+                     for i in (2, 3))
+    # u_x = eps_xx x (+ top_shift on the top), eps_xx the plane-strain Poisson expansion
+    expansion = NU * (1.0 + NU) * PRESSURE / E
+    bottom_values, top_values = dolfinx.fem.Function(X), dolfinx.fem.Function(X)
+    bottom_values.interpolate(lambda x: expansion * x[0])
+    top_values.interpolate(lambda x: top_shift + expansion * x[0])
+    bcs = [dolfinx.fem.dirichletbc(0.0, bottom_y, V1),
+           dolfinx.fem.dirichletbc(bottom_values, bottom_x, V0),
+           dolfinx.fem.dirichletbc(top_values, top, V0)]
+    upper, lower = tagged.markers["upper_interface"], tagged.markers["lower_interface"]
+    pair = (ContactPair(tagged.facet_tags, upper, lower) if slave == "upper"
+            else ContactPair(tagged.facet_tags, lower, upper))
+    problem = ContactProblem(F, u, bcs, [pair], configuration="reference", friction=friction,
+                             **options)
+    return problem
+
+
+
+def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
+    parser = cli.parser(__doc__)
+    parser.add_argument("--ratio", default="3:7", help="lower:upper interface elements")
+    parser.add_argument("--slave", choices=("upper", "lower"), default="upper",
+                        help="which block's interface is the slave")
+    parser.add_argument("--shear-ratio", type=float, default=2.0,
+                        help="R: below 1 the blocks stick, from 1 on they slip")
+    parser.add_argument("--cell-type", choices=("triangle", "quadrilateral"),
+                        default="triangle", help="cells")
+    cli.add_common_arguments(parser)
+    args = parser.parse_args(argv)
+    if args.mu is None:
+        args.mu = 0.2
+    try:
+        ratio = tuple(int(n) for n in args.ratio.split(":"))
+    except ValueError:
+        parser.error(f"--ratio must be A:B with integers, got {args.ratio!r}")
+    if not args.mu > 0.0 or not args.shear_ratio >= 0.0:
+        parser.error("--mu must be positive and --shear-ratio >= 0")
+    limit = args.mu * PRESSURE
+    shear = min(args.shear_ratio, 1.0) * limit
+    options = cli.problem_options(args)
+    problem = sheared_blocks(ratio, args.slave, options.pop("friction"),
+                             args.shear_ratio * limit / SHEAR_MODULUS, shear, args.cell_type,
+                             comm, **options)
+    report = problem.solve()
+    if not report.converged:
+        raise RuntimeError(f"the friction patch test did not converge: {report}")
+    if args.output:
+        output = ContactOutput(problem, args.output / "paraview")
+        output.write(1.0)
+        output.close()
+    state = problem.friction_state()
+    z = problem.multipliers[0].getArray(readonly=True)
+    slip = max(args.shear_ratio - 1.0, 0.0) * limit / SHEAR_MODULUS
+
+    def largest(values) -> float:
+        return comm.allreduce(float(np.max(np.abs(values), initial=0.0)), op=MPI.MAX)
+
+    summary = {
+        "ratio": args.ratio,
+        "slave": args.slave,
+        "mu": args.mu,
+        "shear_ratio": args.shear_ratio,
+        **options,
+        "num_ranks": comm.size,
+        "max_pressure_deviation_rel": largest(z - PRESSURE) / PRESSURE,
+        "max_traction_deviation_rel": largest(state["traction"] - shear) / limit,
+        "max_slip_deviation_rel": largest(state["slip"] - slip) * SHEAR_MODULUS / limit,
+        "num_active": problem.num_active(),
+        "num_sticking": comm.allreduce(int(state["sticking"].sum()), op=MPI.SUM),
+        "num_slipping": comm.allreduce(int(state["slipping"].sum()), op=MPI.SUM),
+        "num_slave_nodes": problem.interfaces[0].num_global_multipliers,
+        "newton_iterations": report.iterations,
+    }
+    if comm.rank == 0:
+        print(f"friction patch test, R = {args.shear_ratio}: {summary['num_sticking']} "
+              f"sticking, {summary['num_slipping']} slipping of {summary['num_slave_nodes']}; "
+              f"deviations: pressure {summary['max_pressure_deviation_rel']:.1e}, traction "
+              f"{summary['max_traction_deviation_rel']:.1e}, slip "
+              f"{summary['max_slip_deviation_rel']:.1e}; Newton {report.iterations}", flush=True)
+        write_summary(args.json, summary)
+    problem.destroy()
+    return summary
+
+
+if __name__ == "__main__":
+    main()
