@@ -29,12 +29,12 @@ the contact zone (measured at refinement 2), which Q then adds to.
 Measured (mu = 0.2, frictionless normal phase, 2 + 4 load steps; L2 rate fitted
 over refinements 0-3; serial):
 
-    Q/(mu P)  refinement  dofs    c - c_exact      L2 error  Newton per step    wall
-    0.3       0 .. 3      1,500 .. 76,846  <= 0.92 h  32, 14, 6.2, 3.4 %  <= 5   23 s at 3
-    0.7       0 .. 3      1,500 .. 76,846  <= 0.85 h  10, 5.5, 3.0, 1.6 %  <= 6   28 s at 3
+    Q/(mu P)  dofs (ref. 0 .. 3)  |c - c_exact| / h   L2 error (ref. 0 .. 3)   Newton
+    0.3       1,500 .. 76,846     <= 0.92            32, 14, 6.2, 3.4 %       <= 5
+    0.7       1,500 .. 76,846     <= 0.85            10, 5.5, 3.0, 1.6 %      <= 5
 
-fitted L2 rates 1.11 (0.3) and 0.91 (0.7); the tangential force is -Q to 2e-15;
-10 and 40 load steps give the same tractions to 4e-14.
+fitted L2 rates 1.11 (0.3) and 0.91 (0.7); the tangential force is -Q to 1.4e-14;
+10 and 40 load steps give the same tractions to 5e-14 of mu p0.
 
 JSON keys: ``stick_half_width`` (half the extent of the sticking slave nodes),
 ``stick_half_width_exact``, ``stick_error_in_elements``, ``q_max``,

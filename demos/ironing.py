@@ -348,7 +348,8 @@ def plot(path, t, vertical, horizontal, compare=None, label="", frictional=False
                 label=f"horizontal, {label}")
     if frictional:
         for k, (name, values) in enumerate(FRICTIONAL_REFERENCES.items()):
-            ax.plot([1.0, 1.5], values, "kx+1234"[k], ms=7, ls="none", label=name)
+            ax.plot([1.0, 1.5], values, "ox+^"[k], color="k", mfc="none", ms=7, ls="none",
+                    label=name)
     else:
         for key, value in REFERENCE.items():
             time_ = 1.0 if key.endswith("t1") else 2.0 if key.endswith("t2") else 1.5
@@ -356,7 +357,7 @@ def plot(path, t, vertical, horizontal, compare=None, label="", frictional=False
         ax.axhline(REFERENCE_PLATEAU, color="k", ls="--", lw=0.8, label="reference plateau")
     ax.set_xlabel("t")
     ax.set_ylabel("force per unit thickness")
-    ax.legend()
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0))
     ax.grid(alpha=0.3)
     fig.savefig(path, dpi=120, bbox_inches="tight")
     plt.close(fig)
