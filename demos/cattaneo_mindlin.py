@@ -186,11 +186,11 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
                             comm.allreduce(float(np.abs(work).max(initial=0.0)), op=MPI.MAX)))
 
     output = ContactOutput(problem, args.output / "paraview") if args.output else None
-    law = problem.friction_laws[0]
+    law = problem.friction.laws[0]
     if args.normal_phase == "frictionless":
-        problem.friction_laws[0] = None
+        problem.friction.laws[0] = None
     records = solve_load_steps(problem, press, args.steps, output=output, on_step=record)
-    problem.friction_laws[0] = law
+    problem.friction.laws[0] = law
     records += solve_load_steps(problem, pull, args.tangential_steps, output=output,
                                 on_step=record)
     if output is not None:

@@ -206,3 +206,92 @@ def check_options(gdim: int, method: str, active_set: str, condensation: bool,
     if condensation or linear_solver != "direct":
         raise ValueError("friction needs linear_solver='direct' without condensation (the "
                          "condensed system does not hold the tangential rows yet)")
+
+
+class Friction:
+    """The frictional part of a contact problem: per pair a law, the tangential multipliers
+    y (one ghosted vector, laid out like the normal ones), the weighted slips u~ of the
+    owned slave nodes since the solve started, and du = u - u_start at each node table.
+
+    Args:
+        laws: one :class:`FrictionLaw` or None (frictionless) per pair.
+        interfaces: the pairs' mortar interfaces.
+        u: the displacement; slips are measured from its value now until
+            :meth:`start` is called again (at each solve).
+        c_t: the tangential complementarity parameter (or penalty).
+        c_n: the normal complementarity parameter with Lagrange multipliers, None with
+            penalty (the bound uses z itself then).
+        weight: the row scale h^(d-1).
+    """
+
+    def __init__(self, laws: list, interfaces: list, u, c_t: float, c_n: float | None,
+                 weight: float):
+        self.laws = laws
+        self.interfaces = interfaces
+        self.c_t, self.c_n, self.weight = c_t, c_n, weight
+        self.multipliers = [i.create_multiplier_vector() for i in interfaces]
+        self.slips = [np.zeros(i.num_owned_multipliers) for i in interfaces]
+        self.increments: list[np.ndarray | None] = [None] * len(interfaces)
+        self._start = u.x.array.copy()
+
+    def start(self, u) -> None:
+        """Measure slips from u (the state a solve starts from)."""
+        self._start = u.x.array.copy()
+
+    def update_slip(self, k: int, u, vector: PETSc.Vec) -> None:
+        """u~_j of pair k's owned slave nodes at u, summed over the pairs through the ghosted
+        multiplier-layout ``vector`` (collective)."""
+        interface = self.interfaces[k]
+        q = interface.quantities
+        table = interface.node_field(u.x.array - self._start)
+        self.increments[k] = table
+        rows = interface._rows(q)
+        stencil = interface.stencil
+        du = np.concatenate([table[stencil.slave_nodes[rows]], table[stencil.master_nodes[rows]]],
+                            axis=1)
+        values = pair_slip(interface._force_coefficient_values(q, rows), du)
+        vector.zeroEntries()
+        vector.setValues(interface.pair_multipliers[rows].reshape(-1).astype(PETSc.IntType),
+                         values.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
+        vector.assemble()
+        self.slips[k] = vector.getArray(readonly=True).copy()
+
+    def rows(self, k: int, z: np.ndarray, active: np.ndarray, gap: np.ndarray,
+             area: np.ndarray) -> TangentialRows:
+        """Pair k's owned tangential rows at the current state."""
+        return tangential_rows(self.laws[k], self.weight, self.c_t, self.c_n,
+                               self.multipliers[k].getArray(readonly=True), z, active,
+                               self.slips[k], gap, area)
+
+    def add_forces(self, vector: PETSc.Vec) -> None:
+        """Add -T^T y of every pair to ``vector`` (displacement layout)."""
+        for interface, y in zip(self.interfaces, self.multipliers, strict=True):
+            add_tangential_force(interface, y, vector)
+
+    def forces(self, k: int, rows: np.ndarray, coefficients: np.ndarray) -> tuple:
+        """(slave, master) friction force of pair k's pairs ``rows`` on this rank, from B's
+        coefficients of those rows."""
+        interface = self.interfaces[k]
+        y = interface.node_values(self.multipliers[k])[interface.pair_slave_nodes[rows]]
+        tangent = tangential_coefficients(coefficients)
+        ns = interface.stencil.ns
+        return (np.einsum("nj,njkc->c", y, tangent[:, :, :ns]),
+                np.einsum("nj,njlc->c", y, tangent[:, :, ns:]))
+
+    def state(self, k: int, rows: TangentialRows, active: np.ndarray,
+              area: np.ndarray) -> dict:
+        """Pair k's nodal state (see ContactProblem.friction_state)."""
+        y = self.multipliers[k].getArray(readonly=True).copy()
+        safe_area = np.where(active, area, 1.0)
+        return {
+            "coordinates": self.interfaces[k].owned_multiplier_coordinates.copy(),
+            "traction": y,
+            "slip": np.where(active, self.slips[k] / safe_area, 0.0),
+            "sticking": rows.sticking.copy(),
+            "slipping": active & ~rows.sticking,
+            "dissipation": y * self.slips[k],
+        }
+
+    def destroy(self) -> None:
+        for y in self.multipliers:
+            y.destroy()

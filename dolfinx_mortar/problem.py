@@ -195,8 +195,10 @@ class ContactProblem:
             raise ValueError("active_set='fixed-point' applies to method='lagrange' only")
         if not pairs:
             raise ValueError("ContactProblem needs at least one ContactPair")
-        self.friction_laws = friction_rules.laws_per_pair(friction, len(pairs))
-        self.has_friction = any(law is not None for law in self.friction_laws)
+        friction_laws = friction_rules.laws_per_pair(friction, len(pairs))
+        self.has_friction = any(law is not None for law in friction_laws)
+        self.friction: friction_rules.Friction | None = None
+        """The frictional state (:class:`~dolfinx_mortar.friction.Friction`), if any."""
         if self.has_friction:
             friction_rules.check_options(u.function_space.mesh.geometry.dim, method, active_set,
                                    condensation, linear_solver)
@@ -258,11 +260,6 @@ class ContactProblem:
             {name: i.create_multiplier_vector() for name in coefficient_names}
             for i in self.interfaces
         ]
-        self.tangential = ([i.create_multiplier_vector() for i in self.interfaces]
-                           if self.has_friction else [])
-        self.slips: list[np.ndarray] = [np.zeros(n) for n in counts]
-        self._increments: list[np.ndarray | None] = [None] * len(self.interfaces)
-        self._start_u = u.x.array.copy()
         self.active: list[np.ndarray] = [
             np.zeros(i.num_owned_multipliers, dtype=bool) for i in self.interfaces
         ]
@@ -291,6 +288,10 @@ class ContactProblem:
         if c_t is None:
             c_t = self.penalty if method == "penalty" else self.c_n
         self.c_t = float(c_t)
+        if self.has_friction:
+            self.friction = friction_rules.Friction(
+                friction_laws, self.interfaces, u, self.c_t,
+                self.c_n if method == "lagrange" else None, scales.face)
         self.enforcement = enforcement.create(
             method, active_set, scales,
             [i.num_owned_multipliers for i in self.interfaces], c_n=self.c_n,
@@ -466,6 +467,11 @@ class ContactProblem:
         for field, z in enumerate(self.multipliers + self.tangential, start=1):
             array[self.layout.owned(field)] = z.getArray(readonly=True)
 
+    @property
+    def tangential(self) -> list[PETSc.Vec]:
+        """The tangential multipliers y of each pair (none without friction)."""
+        return self.friction.multipliers if self.friction is not None else []
+
     def _write_x_into_state(self, x: PETSc.Vec) -> None:
         array = x.getArray(readonly=True)
         owned = self.layout.num_u[self.comm.rank]
@@ -498,37 +504,15 @@ class ContactProblem:
             self.gaps[k] = gap_vector.getArray(readonly=True).copy()
             self.areas[k] = area_vector.getArray(readonly=True).copy()
             self.active[k] = self._decide_active(k)
-            if self.has_friction:
-                self._update_slip(k)
+            if self.friction is not None:
+                self.friction.update_slip(k, self.u, self._row_coefficients[k]["slip"])
         self.timings["contact search"] += searching
         self.timings["mortar integration"] += time.perf_counter() - start - searching
 
-    def _update_slip(self, k: int) -> None:
-        """The weighted slips u~_j of pair k since the solve started (collective)."""
-        interface = self.interfaces[k]
-        q = interface.quantities
-        table = interface.node_field(self.u.x.array - self._start_u)
-        self._increments[k] = table
-        rows = interface._rows(q)
-        stencil = interface.stencil
-        du = np.concatenate([table[stencil.slave_nodes[rows]], table[stencil.master_nodes[rows]]],
-                            axis=1)
-        values = friction_rules.pair_slip(interface._force_coefficient_values(q, rows), du)
-        vector = self._row_coefficients[k]["slip"]
-        vector.zeroEntries()
-        vector.setValues(interface.pair_multipliers[rows].reshape(-1).astype(PETSc.IntType),
-                         values.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
-        vector.assemble()
-        self.slips[k] = vector.getArray(readonly=True).copy()
-
     def _tangential_rows(self, k: int) -> friction_rules.TangentialRows:
         """Pair k's owned tangential rows (:mod:`dolfinx_mortar.friction`)."""
-        return friction_rules.tangential_rows(
-            self.friction_laws[k], self.enforcement.scales.face, self.c_t,
-            self.c_n if self.method == "lagrange" else None,
-            self.tangential[k].getArray(readonly=True),
-            self.multipliers[k].getArray(readonly=True), self.active[k], self.slips[k],
-            self.gaps[k], self.areas[k])
+        return self.friction.rows(k, self.multipliers[k].getArray(readonly=True),
+                                  self.active[k], self.gaps[k], self.areas[k])
 
     def _covered(self, k: int) -> np.ndarray:
         interface = self.interfaces[k]
@@ -582,8 +566,8 @@ class ContactProblem:
         start = time.perf_counter()
         for interface, z in zip(self.interfaces, self.multipliers, strict=True):
             interface.contact_force(z, b_u)
-        for interface, y in zip(self.interfaces, self.tangential, strict=False):
-            friction_rules.add_tangential_force(interface, y, b_u)
+        if self.friction is not None:
+            self.friction.add_forces(b_u)
         compat.set_bc(b_u, self.bcs, self.u.x.petsc_vec, -self._dirichlet_scale)
         array = b.getArray()
         array[self.layout.owned_u] = b_u.getArray(readonly=True)
@@ -601,7 +585,8 @@ class ContactProblem:
         """The monolithic Jacobian (:class:`~dolfinx_mortar.system.ContactSystem`)."""
         tangential = None
         if self.has_friction:
-            tangential = Tangential(self.tangential, self._tangential_rows, self._increments)
+            tangential = Tangential(self.tangential, self._tangential_rows,
+                                    self.friction.increments)
         rebuilt, contact, bulk = self.system.assemble(
             self.multipliers, self._row_coefficients, self._multiplier_rows, tangential)
         if rebuilt and hasattr(self, "snes"):
@@ -620,7 +605,8 @@ class ContactProblem:
         """
         start = time.perf_counter()
         before = dict(self.timings)
-        self._start_u = self.u.x.array.copy()
+        if self.friction is not None:
+            self.friction.start(self.u)
         self._read_state_into_x()
         report = self.enforcement.solve(self)
         total = time.perf_counter() - start
@@ -711,11 +697,9 @@ class ContactProblem:
         ns = interface.stencil.ns
         slave = np.einsum("nj,njkc->c", z_pair, coefficients[:, :, :ns])
         master = np.einsum("nj,njlc->c", z_pair, coefficients[:, :, ns:])
-        if self.has_friction:
-            y_pair = interface.node_values(self.tangential[k])[interface.pair_slave_nodes[rows]]
-            tangent = friction_rules.tangential_coefficients(coefficients)
-            slave = slave + np.einsum("nj,njkc->c", y_pair, tangent[:, :, :ns])
-            master = master + np.einsum("nj,njlc->c", y_pair, tangent[:, :, ns:])
+        if self.friction is not None:
+            slave_friction, master_friction = self.friction.forces(k, rows, coefficients)
+            slave, master = slave + slave_friction, master + master_friction
         return (self.comm.allreduce(slave, op=MPI.SUM), self.comm.allreduce(master, op=MPI.SUM))
 
     def friction_state(self, k: int = 0) -> dict:
@@ -727,21 +711,9 @@ class ContactProblem:
         ``sticking`` and ``slipping`` (active nodes in each state) and ``dissipation``
         y_j u~_j (the frictional work of the step at the node, >= 0).
         """
-        if not self.has_friction:
+        if self.friction is None:
             raise RuntimeError("friction_state: this problem has no friction")
-        interface = self.interfaces[k]
-        rows = self._tangential_rows(k)
-        active = self.active[k]
-        y = self.tangential[k].getArray(readonly=True).copy()
-        area = np.where(active, self.areas[k], 1.0)
-        return {
-            "coordinates": interface.owned_multiplier_coordinates.copy(),
-            "traction": y,
-            "slip": np.where(active, self.slips[k] / area, 0.0),
-            "sticking": rows.sticking.copy(),
-            "slipping": active & ~rows.sticking,
-            "dissipation": y * self.slips[k],
-        }
+        return self.friction.state(k, self._tangential_rows(k), self.active[k], self.areas[k])
 
     def pressure_function(self, k: int = 0, function: dolfinx.fem.Function | None = None):
         """A P1 scalar Function with the contact pressure at the slave nodes (0 elsewhere).
@@ -811,6 +783,8 @@ class ContactProblem:
         self.b.destroy()
         for interface in self.interfaces:
             interface.destroy()
+        if self.friction is not None:
+            self.friction.destroy()
 
 
 class ContactWarning(UserWarning):

@@ -157,7 +157,7 @@ def test_frictional_jacobian_taylor(state, method):
     else:
         mu = 2.0 * comm.allreduce(float(np.max(np.abs(v), initial=0.0)), op=MPI.MAX) / \
             comm.allreduce(float(np.min(z, initial=np.inf)), op=MPI.MIN)
-    problem.friction_laws[0] = FrictionLaw("coulomb", mu)
+    problem.friction.laws[0] = FrictionLaw("coulomb", mu)
     problem._residual(problem.snes, problem.x, problem.b)
     friction = problem.friction_state()
     counts = comm.allreduce(
