@@ -265,3 +265,20 @@ def test_frictional_ironing_serial_equals_parallel():
     for a, b in zip(serial["history"], parallel["history"], strict=True):
         for key in ("block_force_x", "block_force_y"):
             assert b[key] == pytest.approx(a[key], rel=1e-8, abs=1e-8 * abs(a["block_force_y"]))
+
+
+def test_frictional_semismooth_newton_converges_quadratically():
+    """Neo-Hookean Hertz (refinement 1) with mu = 0.3: at most 10 Newton iterations per
+    step, and once the contact and stick/slip sets have settled r_{k+1}/r_0 <= 10
+    (r_k/r_0)^2."""
+    summary = load_demo("hertz").main(
+        ["--refinement", "1", "--steps", "2", "--material", "neo-hookean", "--mu", "0.3"],
+        comm=MPI.COMM_SELF)
+    assert max(summary["newton_iterations"]) <= 10
+    for residuals in summary["residuals_per_step"]:
+        q = np.array(residuals) / residuals[0]
+        asymptotic = [(a, b) for a, b, rb in zip(q[:-1], q[1:], residuals[1:], strict=True)
+                      if a < 0.1 and rb > 1e-11]
+        assert asymptotic, residuals
+        for a, b in asymptotic:
+            assert b <= 10.0 * a**2, residuals
