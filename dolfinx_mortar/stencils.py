@@ -288,8 +288,9 @@ class Surface3Stencil(PairStencil):
             table_rows, star_facets = self._star_table
             nodal = normals_module.averaged_nodal_normals(node_x[table_rows], star_facets)
             slave_normals = nodal.normals[self._pair_star_rows]
-            # d n_j / d x over the star, in the order of the star slots of the stencil
-            self._normal_jacobian = nodal.jacobian[self._pair_star_rows]  # (n, ns, 3, s, 3)
+            # d n_j / d x over the star, in the order of the star slots of the stencil; per
+            # unique slave node, gathered per pair only for the rows that contribute
+            self._normal_jacobian = nodal.jacobian  # (nodes, 3, s, 3)
         else:
             slave_normals = np.zeros_like(slave_x)
             self._normal_jacobian = None
@@ -298,14 +299,47 @@ class Surface3Stencil(PairStencil):
             basis=basis, num_gauss_points=num_gauss_points, crosspoint=crosspoint,
             slave_facet=self.slave_facets)
 
+    def _kernel_gradients(self, q, rows: np.ndarray, terms) -> np.ndarray:
+        return np.ascontiguousarray(self._row_gradients(q, rows, terms).transpose(0, 2, 1))
+
+    def _row_gradients(self, q, rows: np.ndarray, terms) -> np.ndarray:
+        """(len(terms), len(rows), num_variables): the base class's kernel gradients with
+        the pair axis first, without first copying every output's gradient into one array
+        (in 3D they are ~1,600 numbers a pair)."""
+        nv = self.num_variables
+        parts, starts = [], []
+        start = 0
+        for item in (q.Dn, q.Mn, q.area, q.gap):
+            size = int(np.prod(item.value.shape[1:]))
+            if isinstance(item, RowSubsetDual) and item.rows is rows:
+                parts.append(item.grad_rows.reshape(rows.size, size, nv))
+            else:
+                parts.append(item.grad[rows].reshape(rows.size, size, nv))
+            starts.append(start)
+            start += size
+        result = np.zeros((len(terms), rows.size, nv))
+        for p, row in enumerate(terms):
+            for o, weight in row:
+                part = int(np.searchsorted(starts, o, side="right")) - 1
+                result[p] += parts[part][:, o - starts[part], :] * np.reshape(weight, (-1, 1))
+        return result
+
     def combined_gradients(self, q, rows, terms) -> np.ndarray:
-        kernel = self._kernel_gradients(q, rows, terms)  # (T, nv, rows)
+        kernel = self._row_gradients(q, rows, terms)  # (T, rows, nv)
         direct = 3 * (self.ns + self.nm)
+        chain = bool(self.max_star) and self._normal_jacobian is not None
         result = np.zeros((len(terms), 3 * self.width, rows.size))
-        result[:, :direct] = kernel[:, :direct]
-        if self.max_star and self._normal_jacobian is not None:
-            by_normal = kernel[:, direct:].reshape(len(terms), self.ns, 3, rows.size)
-            J = self._normal_jacobian[rows]  # (rows, ns, 3 (a), s, 3 (b))
-            chained = np.einsum("tjar,rjasb->tjsbr", by_normal, J, optimize=True)
-            result[:, direct:] = chained.reshape(len(terms), 3 * self.ns * self.max_star, rows.size)
+        width = 3 * self.max_star
+        # in blocks of rows: the transposes to the pair axis last stay in cache
+        for start in range(0, rows.size, 512):
+            block = slice(start, min(rows.size, start + 512))
+            result[:, :direct, block] = kernel[:, block, :direct].transpose(0, 2, 1)
+            for j in range(self.ns if chain else 0):
+                # d n_j[a] / d x[star, b] of the rows (rows, a, s b), one product per row
+                J = self._normal_jacobian[self._pair_star_rows[rows[block], j]].reshape(
+                    -1, 3, width)
+                by_normal = kernel[:, block, direct + 3 * j:direct + 3 * j + 3].transpose(1, 0, 2)
+                chained = np.ascontiguousarray(by_normal) @ J  # (rows, T, s b)
+                result[:, direct + j * width:direct + (j + 1) * width, block] = chained.transpose(
+                    1, 2, 0)
         return result

@@ -15,7 +15,11 @@ Per candidate pair (Puso and Laursen 2004; Popp, Gee and Wall 2009):
    the master facet along n0 (closed form for triangles, Newton for
    bilinear quadrilaterals);
 5. D, M, Dn, Mn, the nodal areas and the weighted gaps integrated with the
-   cell areas in the plane as weights.
+   cell areas in the plane as weights. For a triangle on a triangle both
+   inverse maps are affine, so every integrand factor is affine on a cell and
+   the Gauss sum is a fixed trilinear form in the factors' values at the
+   cell corners: they are evaluated (with derivatives) only at the polygon's
+   centre and vertices (:func:`_affine_integrals`), the same sum to rounding.
 
 Element-based integration (``integration="element"``) instead takes the
 Gauss points of the slave facet, projects each along the normal field onto
@@ -55,6 +59,7 @@ _FACING_TOLERANCE = 1e-8
 _AREA_TOLERANCE = 1e-14
 _MAX_VERTICES = 8
 _CHUNK = 2048
+_BATCH = 512  # overlapping pairs integrated at once (their work arrays stay in cache)
 
 # symmetric triangle rules on the reference triangle (barycentric points, weights sum to 1)
 _TRIANGLE_RULES = {
@@ -361,44 +366,28 @@ def pair_quantities(
         "gap": np.zeros((n, ns)), "area": np.zeros((n, ns)),
     }
     names = ("Dn", "Mn", "gap", "area")
-    gradients: dict[str, list] = {name: [] for name in names}
-    all_rows = []
     valid = np.zeros(n, dtype=bool)
     overlap = np.zeros(n)
-    on_master = None
-    if integration == "element":
-        points, point_weights = _facet_rule(ns, rule)
-        on_master = _element_points_on_master(
-            slave_x, master_x, slave_normals, normals, points,
-            np.arange(n) if slave_facet is None else np.asarray(slave_facet).reshape(-1))
-    for start in range(0, n, _CHUNK):
-        stop = min(n, start + _CHUNK)
-        if on_master is None:
-            part = _integrate(slave_x[start:stop], master_x[start:stop],
-                              slave_normals[start:stop], crosspoint[start:stop],
-                              normals, basis, rule)
-        else:
-            part = _integrate_element(slave_x[start:stop], master_x[start:stop],
-                                      slave_normals[start:stop], crosspoint[start:stop],
-                                      normals, basis, points, point_weights,
-                                      on_master[start:stop])
-        if part is None:
-            continue
-        rows, quantities, fraction = part
-        rows = rows + start
-        all_rows.append(rows)
-        valid[rows] = True
-        overlap[rows] = fraction
-        for name in values:
-            values[name][rows] = quantities[name].value
-        for name in names:
-            gradients[name].append(quantities[name].grad)
-    rows = np.concatenate(all_rows) if all_rows else np.zeros(0, dtype=np.int64)
+    if integration == "segment":
+        rows, fraction, batches = _screen_segments(slave_x, master_x, slave_normals, normals)
+        valid[rows], overlap[rows] = True, fraction
+        grads = {name: np.empty((rows.size,) + values[name].shape[1:] + (nvar,))
+                 for name in names}
+        for batch, labels, count, master_node, master_edge_start in batches:
+            quantities = _polygon_integrals(
+                slave_x[batch], master_x[batch], slave_normals[batch], crosspoint[batch],
+                normals, basis, rule, labels, count, master_node, master_edge_start)
+            position = np.searchsorted(rows, batch)
+            for name in values:
+                values[name][batch] = quantities[name].value
+            for name in names:
+                grads[name][position] = quantities[name].grad
+    else:
+        rows, grads = _element_parts(slave_x, master_x, slave_normals, crosspoint, normals,
+                                     basis, rule, slave_facet, values, valid, overlap)
 
     def subset(name: str) -> RowSubsetDual:
-        shape = (0,) + values[name].shape[1:] + (nvar,)
-        grads = np.concatenate(gradients[name]) if gradients[name] else np.zeros(shape)
-        return RowSubsetDual(values[name], rows, grads)
+        return RowSubsetDual(values[name], rows, grads[name])
 
     return PairQuantities3(
         D=values["D"], M=values["M"], Dn=subset("Dn"), Mn=subset("Mn"), gap=subset("gap"),
@@ -463,41 +452,91 @@ def _auxiliary_plane(xs: Dual, xm: Dual, nodal: Dual, normals: str):
     return node_normals, x0, n0, e1, e2, plane(xs), plane(xm)
 
 
-def _integrate(slave_x, master_x, slave_normals, crosspoint, normals, basis, rule):
+def _element_parts(slave_x, master_x, slave_normals, crosspoint, normals, basis, rule,
+                   slave_facet, values, valid, overlap):
+    """Element-based integration in chunks: fills ``values``, ``valid`` and ``overlap``;
+    returns the contributing rows and their gradients."""
+    n, ns, _ = slave_x.shape
+    nvar = 3 * (2 * ns + master_x.shape[1])
+    points, point_weights = _facet_rule(ns, rule)
+    on_master = _element_points_on_master(
+        slave_x, master_x, slave_normals, normals, points,
+        np.arange(n) if slave_facet is None else np.asarray(slave_facet).reshape(-1))
+    names = ("Dn", "Mn", "gap", "area")
+    gradients: dict[str, list] = {name: [] for name in names}
+    all_rows = []
+    for start in range(0, n, _CHUNK):
+        stop = min(n, start + _CHUNK)
+        part = _integrate_element(slave_x[start:stop], master_x[start:stop],
+                                  slave_normals[start:stop], crosspoint[start:stop],
+                                  normals, basis, points, point_weights,
+                                  on_master[start:stop])
+        if part is None:
+            continue
+        rows, quantities, fraction = part
+        rows = rows + start
+        all_rows.append(rows)
+        valid[rows] = True
+        overlap[rows] = fraction
+        for name in values:
+            values[name][rows] = quantities[name].value
+        for name in names:
+            gradients[name].append(quantities[name].grad)
+    rows = np.concatenate(all_rows) if all_rows else np.zeros(0, dtype=np.int64)
+    grads = {name: np.concatenate(gradients[name]) if gradients[name]
+             else np.zeros((0,) + values[name].shape[1:] + (nvar,)) for name in names}
+    return rows, grads
+
+
+def _screen_segments(slave_x, master_x, slave_normals, normals):
+    """The clip topology of every pair on values, in chunks: (rows, fraction, batches).
+
+    ``rows`` (sorted) are the pairs that face and overlap, ``fraction`` their clipped
+    area over the slave facet area; ``batches`` splits them by the vertex count of their
+    clip polygons (no padded cells) into batches of at most ``_BATCH`` pairs:
+    (rows, labels, count, master_node, master_edge_start).
+    """
+    n, _, _ = slave_x.shape
     nm = master_x.shape[1]
-    # the clip topology on values, for every pair; derivatives only where it contributes
-    _, _, n0, _, _, S, Mp = _auxiliary_plane(
-        *_pair_variables(slave_x, master_x, slave_normals, False), normals)
-    facing = np.einsum("ij,ij->i", n0.value, _master_normal(master_x)) < -_FACING_TOLERANCE
-    slave_area = np.abs(_polygon_area(S.value))
-    labels, count, positions = _clip(S.value, Mp.value[:, ::-1])
+    kept = []
+    for start in range(0, n, _CHUNK):
+        stop = min(n, start + _CHUNK)
+        _, _, n0, _, _, S, Mp = _auxiliary_plane(
+            *_pair_variables(slave_x[start:stop], master_x[start:stop],
+                             slave_normals[start:stop], False), normals)
+        facing = np.einsum("ij,ij->i", n0.value,
+                           _master_normal(master_x[start:stop])) < -_FACING_TOLERANCE
+        slave_area = np.abs(_polygon_area(S.value))
+        labels, count, positions = _clip(S.value, Mp.value[:, ::-1])
+        clip_area = _padded_area(positions, count)
+        contributing = facing & (count >= 3) & (clip_area > _AREA_TOLERANCE * slave_area)
+        local = np.flatnonzero(contributing)
+        kept.append((local + start, labels[local], count[local],
+                     clip_area[local] / slave_area[local]))
+    if not kept:
+        return np.zeros(0, dtype=np.int64), np.zeros(0), []
+    rows = np.concatenate([part[0] for part in kept])
+    labels = np.concatenate([part[1] for part in kept])
+    count = np.concatenate([part[2] for part in kept])
+    fraction = np.concatenate([part[3] for part in kept])
     # the master polygon was reversed to be counter-clockwise: map labels back
     master_node = (nm - 1 - labels[..., 2]) % nm
     master_edge_start = (nm - 2 - labels[..., 2]) % nm  # reversed edge j = (nm-1-j) -> (nm-2-j)
-    clip_area = _padded_area(positions, count)
-    contributing = facing & (count >= 3) & (clip_area > _AREA_TOLERANCE * slave_area)
-    if not contributing.any():
-        return None
-    # pairs grouped by their clip polygon's vertex count: no padded cells
-    all_rows, parts = [], []
-    for vertices in np.unique(count[contributing]):
-        rows = np.flatnonzero(contributing & (count == vertices))
-        all_rows.append(rows)
-        parts.append(_polygon_integrals(
-            slave_x[rows], master_x[rows], slave_normals[rows], crosspoint[rows], normals,
-            basis, rule, labels[rows, :vertices], count[rows], master_node[rows, :vertices],
-            master_edge_start[rows, :vertices]))
-    rows = np.concatenate(all_rows)
-    quantities = {name: Dual(np.concatenate([part[name].value for part in parts]),
-                             np.concatenate([part[name].grad for part in parts]))
-                  for name in parts[0]}
-    return rows, quantities, clip_area[rows] / slave_area[rows]
+    batches = []
+    for vertices in np.unique(count):
+        group = np.flatnonzero(count == vertices)
+        for start in range(0, group.size, _BATCH):
+            index = group[start:start + _BATCH]
+            batches.append((rows[index], labels[index, :vertices], count[index],
+                            master_node[index, :vertices], master_edge_start[index, :vertices]))
+    return rows, fraction, batches
 
 
 def _polygon_integrals(slave_x, master_x, slave_normals, crosspoint, normals, basis, rule,
-                       labels, count, master_node, master_edge_start):
+                       labels, count, master_node, master_edge_start, pointwise=False):
     """D, M, Dn, Mn, gap and area of pairs whose clip polygons (labels (m, V, 3)) have V
-    vertices each, as Duals over the pair variables."""
+    vertices each, as Duals over the pair variables (a triangle on a triangle from the
+    corners of the fan cells, :func:`_affine_integrals`, unless ``pointwise``)."""
     m, ns, _ = slave_x.shape
     nm = master_x.shape[1]
     nvar = 3 * (2 * ns + nm)
@@ -533,6 +572,9 @@ def _polygon_integrals(slave_x, master_x, slave_normals, crosspoint, normals, ba
     edge_a, edge_b = vertex - c, v_next - c
     cell_area = _cross2(edge_a, edge_b) * 0.5 * present  # (m, Vn)
     bary, rule_weights = _TRIANGLE_RULES[rule]
+    if ns == 3 and nm == 3 and not pointwise:
+        return _affine_integrals(cell_area, centre, vertex, S, Mp, node_normals, xs, xm, basis,
+                                 crosspoint, bary, rule_weights)
     # Gauss points (m, Vn, q, 2) in the plane
     q = rule_weights.size
     P = (_expand(c, 2) * bary[None, None, :, 0, None]
@@ -546,7 +588,14 @@ def _polygon_integrals(slave_x, master_x, slave_normals, crosspoint, normals, ba
     N = shape_functions(xi, ns)
     Nm = shape_functions(eta, nm)
 
-    # multiplier basis
+    Phi = _multiplier_basis(N, xs, basis, crosspoint, W.shape)
+    normal_at = sum(_expand(node_normals[:, j], 1) * _expand(N[j], -1) for j in range(ns))
+    return _mortar_integrals(W, Phi, N, Nm, normal_at, xs, xm)
+
+
+def _multiplier_basis(N, xs: Dual, basis: str, crosspoint: np.ndarray, shape) -> list:
+    """Phi_j (m, g) at the points where the slave shape functions are N (list of Duals)."""
+    ns = len(N)
     if basis == "dual":
         A = _dual_coefficients(xs, ns)
         Phi = [sum(N[k] * _expand(A[:, j, k], 1) for k in range(ns)) for j in range(ns)]
@@ -557,10 +606,89 @@ def _polygon_integrals(slave_x, master_x, slave_normals, crosspoint, normals, ba
         others = (~cross).sum(axis=1)
         shared = sum(Phi[j] * cross[:, j, None].astype(float) for j in range(ns))
         share = np.where(others > 0, 1.0 / np.maximum(others, 1), 0.0)[:, None]
-        Phi = [dual.where(np.broadcast_to(cross[:, j, None], W.shape), Phi[j] * 0.0,
+        Phi = [dual.where(np.broadcast_to(cross[:, j, None], shape), Phi[j] * 0.0,
                           Phi[j] + shared * share) for j in range(ns)]
+    return Phi
+
+
+def _affine_integrals(cell_area: Dual, centre: Dual, vertex: Dual, S: Dual, Mp: Dual,
+                      node_normals: Dual, xs: Dual, xm: Dual, basis: str,
+                      crosspoint: np.ndarray, bary: np.ndarray, rule_weights: np.ndarray) -> dict:
+    """The integrals of :func:`_mortar_integrals` for a triangle on a triangle.
+
+    Both inverse maps are affine, so every point quantity (Phi_j, N_k, N_l, the normal
+    field) is affine on a fan cell: the Gauss rule's sum over a cell is a fixed
+    multilinear form in the quantities' values at the cell's three corners. These are
+    evaluated (with derivatives) at the V + 1 points centre and vertices only, instead of
+    at every Gauss point; the result is the same quadrature sum, to rounding.
+    """
+    m, V = cell_area.shape
+    ns, nm = S.shape[1], Mp.shape[1]
+    points = Dual(np.concatenate([centre.value[:, None], vertex.value], axis=1),
+                  np.concatenate([centre.grad[:, None], vertex.grad], axis=1))  # (m, V+1, 2)
+    xi = _inverse_map(_expand(S, 1), points, ns)
+    eta = _inverse_map(_expand(Mp, 1), points, nm)
+    N = shape_functions(xi, ns)
+    Nm = shape_functions(eta, nm)
+    Phi = _multiplier_basis(N, xs, basis, crosspoint, points.shape[:2])
     normal_at = sum(_expand(node_normals[:, j], 1) * _expand(N[j], -1) for j in range(ns))
-    return _mortar_integrals(W, Phi, N, Nm, normal_at, xs, xm)
+    # with a constant 1 after N_k, N_l and the normal field, one sum gives D, Dn and the
+    # areas (the barycentric weights of a point sum to 1) and one M and Mn
+    phi = dual.stack(Phi, axis=-1)
+    factors = [(phi.value, phi.grad)]
+    for stacked in (dual.stack(N, axis=-1), dual.stack(Nm, axis=-1), normal_at):
+        factors.append((np.concatenate([stacked.value, np.ones(stacked.shape[:-1] + (1,))],
+                                       axis=-1), stacked.grad))
+    T = np.einsum("g,ga,gb,gd->abd", rule_weights, bary, bary, bary)
+    slave = _cell_sum(cell_area, [factors[0], factors[1], factors[3]], T)  # (m, ns, ns+1, 4)
+    master = _cell_sum(cell_area, [factors[0], factors[2], factors[3]], T)  # (m, ns, nm+1, 4)
+    D, Dn, area = slave[:, :, :ns, 3], slave[:, :, :ns, :3], slave[:, :, ns, 3]
+    M, Mn = master[:, :, :nm, 3], master[:, :, :nm, :3]
+    gap = (dual.sum_(dual.sum_(Mn * _expand(xm, 1), axis=-1), axis=-1)
+           - dual.sum_(dual.sum_(Dn * _expand(xs, 1), axis=-1), axis=-1))
+    return {"D": D, "M": M, "Dn": Dn, "Mn": Mn, "gap": gap, "area": area}
+
+
+def _cell_sum(W: Dual, factors: list, T: np.ndarray) -> Dual:
+    """sum_c W_c sum_abd T_abd F_1[a] F_2[b] F_3[d] (m, k_1, k_2, k_3), F_i[a] at corner a
+    of cell c.
+
+    ``factors`` are (value (m, V+1, k_i), grad (m, V+1, g_i, nv)) at the fan's centre (0)
+    and vertices (1..V), the columns from g_i on constant; cell c has the corners
+    (centre, vertex c, vertex c+1). Each gradient is contracted once at the V + 1 points,
+    with what multiplies it summed over the cells at each point.
+    """
+    m, V = W.shape
+    cells = np.arange(V)
+    corner = np.stack([np.zeros(V, dtype=np.int64), 1 + cells, 1 + (cells + 1) % V], axis=1)
+    values = [value[:, corner] for value, _ in factors]  # (m, V, 3, k_i)
+    sizes = [value.shape[-1] for value, _ in factors]
+    nv = W.grad.shape[-1]
+    k1, k2, k3 = sizes
+    # T is symmetric (a sum of w_g b_a b_b b_d): contracted one factor at a time by matmuls
+    F1t, F2t = values[0].transpose(0, 1, 3, 2), values[1].transpose(0, 1, 3, 2)
+    U3 = (T.reshape(9, 3) @ values[2]).reshape(m, V, 3, 3, k3)  # sum_d T_abd F3_dk
+    U2 = (T.reshape(9, 3) @ values[1]).reshape(m, V, 3, 3, k2)  # sum_b T_adb F2_bj
+    X = F2t[:, :, None] @ U3  # (m, V, a, j, k): sum_bd T_abd F2_bj F3_dk
+    product = (F1t @ X.reshape(m, V, 3, k2 * k3)).reshape(m, V, k1 * k2 * k3)
+    value = np.einsum("mc,mcp->mp", W.value, product).reshape(m, *sizes)
+    w = W.value[:, :, None, None, None]
+    R = (w * X,  # (m, V, a, j, k)
+         w * (F1t @ U3.reshape(m, V, 3, 3 * k3)).reshape(m, V, k1, 3, k3).transpose(0, 1, 3, 2, 4),
+         w * (F1t @ U2.reshape(m, V, 3, 3 * k2)).reshape(m, V, k1, 3, k2).transpose(0, 1, 3, 2, 4))
+    grad = (product.transpose(0, 2, 1) @ W.grad).reshape(m, *sizes, nv)
+    for i, (_, dF) in enumerate(factors):
+        others = [j for j in range(3) if j != i]
+        Ri = R[i].reshape(m, V, 3, -1)  # (m, V, corner, the other two factors' columns)
+        # summed onto the points: centre from every cell, vertex c from cells c and c-1
+        Rp = np.empty((m, V + 1, Ri.shape[-1]))
+        Rp[:, 0] = Ri[:, :, 0].sum(axis=1)
+        Rp[:, 1:] = Ri[:, :, 1] + np.roll(Ri[:, :, 2], 1, axis=1)
+        g = dF.shape[2]
+        term = Rp.transpose(0, 2, 1) @ dF.reshape(m, V + 1, g * nv)
+        term = term.reshape(m, *[sizes[j] for j in others], g, nv)
+        grad[(slice(None),) * (1 + i) + (slice(0, g),)] += np.moveaxis(term, -2, 1 + i)
+    return Dual(value, grad)
 
 
 def _stacked(items, nvar: int) -> tuple[np.ndarray, np.ndarray]:
