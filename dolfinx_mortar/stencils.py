@@ -121,19 +121,28 @@ class PairStencil:
 
     def _kernel_gradients(self, q, rows: np.ndarray, terms) -> np.ndarray:
         """(len(terms), num_variables, len(rows)) on the kernel's own variables."""
+        return np.ascontiguousarray(self._row_gradients(q, rows, terms).transpose(0, 2, 1))
+
+    def _row_gradients(self, q, rows: np.ndarray, terms) -> np.ndarray:
+        """(len(terms), len(rows), num_variables): per row of ``terms``, the weighted sum of
+        the outputs' gradients over the kernel's own variables, without first copying
+        every output's gradient into one array (in 3D they are ~1,600 numbers a pair)."""
         nv = self.num_variables
-        parts = []
+        parts, starts = [], []
+        start = 0
         for item in (q.Dn, q.Mn, q.area, q.gap):
             size = int(np.prod(item.value.shape[1:]))
             if isinstance(item, RowSubsetDual) and item.rows is rows:
                 parts.append(item.grad_rows.reshape(rows.size, size, nv))
             else:
                 parts.append(item.grad[rows].reshape(rows.size, size, nv))
-        flat = np.concatenate(parts, axis=1)
-        result = np.zeros((len(terms), nv, rows.size))
+            starts.append(start)
+            start += size
+        result = np.zeros((len(terms), rows.size, nv))
         for p, row in enumerate(terms):
             for o, weight in row:
-                result[p] += (flat[:, o, :] * np.reshape(weight, (-1, 1))).T
+                part = int(np.searchsorted(starts, o, side="right")) - 1
+                result[p] += parts[part][:, o - starts[part], :] * np.reshape(weight, (-1, 1))
         return result
 
     def combined_gradients(self, q, rows: np.ndarray, terms) -> np.ndarray:
@@ -298,31 +307,6 @@ class Surface3Stencil(PairStencil):
             slave_x, master_x, slave_normals, normals=normals, integration=integration,
             basis=basis, num_gauss_points=num_gauss_points, crosspoint=crosspoint,
             slave_facet=self.slave_facets)
-
-    def _kernel_gradients(self, q, rows: np.ndarray, terms) -> np.ndarray:
-        return np.ascontiguousarray(self._row_gradients(q, rows, terms).transpose(0, 2, 1))
-
-    def _row_gradients(self, q, rows: np.ndarray, terms) -> np.ndarray:
-        """(len(terms), len(rows), num_variables): the base class's kernel gradients with
-        the pair axis first, without first copying every output's gradient into one array
-        (in 3D they are ~1,600 numbers a pair)."""
-        nv = self.num_variables
-        parts, starts = [], []
-        start = 0
-        for item in (q.Dn, q.Mn, q.area, q.gap):
-            size = int(np.prod(item.value.shape[1:]))
-            if isinstance(item, RowSubsetDual) and item.rows is rows:
-                parts.append(item.grad_rows.reshape(rows.size, size, nv))
-            else:
-                parts.append(item.grad[rows].reshape(rows.size, size, nv))
-            starts.append(start)
-            start += size
-        result = np.zeros((len(terms), rows.size, nv))
-        for p, row in enumerate(terms):
-            for o, weight in row:
-                part = int(np.searchsorted(starts, o, side="right")) - 1
-                result[p] += parts[part][:, o - starts[part], :] * np.reshape(weight, (-1, 1))
-        return result
 
     def combined_gradients(self, q, rows, terms) -> np.ndarray:
         kernel = self._row_gradients(q, rows, terms)  # (T, rows, nv)
