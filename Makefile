@@ -5,7 +5,7 @@ PYTEST := python3 -m pytest -p no:cacheprovider --color=no
 MPI_TIMEOUT := timeout --signal=INT --kill-after=60 3600
 RESULTS := results
 
-.PHONY: demo test test-tools test-serial test-parallel lint format stress benchmark benchmark-quick clean
+.PHONY: demo test test-tools test-serial test-parallel lint format stress benchmark benchmark-quick benchmark-3d benchmark-3d-quick clean
 
 demo:
 	$(RUN) mpirun -n 2 python3 demos/hertz.py --output $(RESULTS)/hertz --json $(RESULTS)/hertz/summary.json
@@ -39,6 +39,14 @@ benchmark:
 
 benchmark-quick:
 	$(RUN) python3 -m dolfinx_mortar.benchmarks --quick --output $(RESULTS)/benchmarks-quick
+
+# 3D: patch test, Hertz sphere (refinements 0..3), direct vs iterative on 1 and 2 ranks
+# (the largest meshes take hours: --stop-at HH:MM skips what would not end in time)
+benchmark-3d:
+	$(RUN) python3 -m dolfinx_mortar.benchmarks --dim 3 --output $(RESULTS)/benchmarks-3d
+
+benchmark-3d-quick:
+	$(RUN) python3 -m dolfinx_mortar.benchmarks --dim 3 --quick --output $(RESULTS)/benchmarks-3d-quick
 
 clean:
 	rm -rf $(RESULTS) .pytest_cache
