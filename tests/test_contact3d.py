@@ -305,7 +305,8 @@ def test_penetration_report_finds_nodes_behind_a_3d_surface():
 def test_ironing_3d_small_run_balances_and_gives_the_serial_answer():
     """The extruded die pressed 0.1 into the extruded block (two hexahedra through the
     thickness): every step converges, die and block forces balance, the die-top reaction
-    equals the contact force, and N ranks give the serial forces to 1e-8."""
+    equals the contact force, and N ranks give the serial forces to 1e-8 (and the serial
+    Newton iterations to one)."""
     args = ["--dim", "3", "--layers", "2", "--steps", "40", "--end-time", "0.3"]
     serial = demo("ironing").main(list(args), comm=MPI.COMM_SELF)
     parallel = demo("ironing").main(list(args), comm=MPI.COMM_WORLD)
@@ -318,7 +319,12 @@ def test_ironing_3d_small_run_balances_and_gives_the_serial_answer():
     assert -last[0]["block_force_y"] > 1e7
     for key in ("block_force_x", "block_force_y"):
         assert last[1][key] == pytest.approx(last[0][key], rel=1e-8, abs=1e-8 * 1e8)
-    assert parallel["newton_iterations"] == serial["newton_iterations"]
+    # the same Newton path but for rounding: PETSc sums off-process matrix and vector
+    # contributions in the order the messages arrive, and one make-test run on 3 loaded
+    # ranks (of about 10 runs) took 8 iterations instead of 7 in step 5 (same forces)
+    assert len(parallel["newton_iterations"]) == len(serial["newton_iterations"])
+    for a, b in zip(serial["newton_iterations"], parallel["newton_iterations"], strict=True):
+        assert abs(a - b) <= 1, (serial["newton_iterations"], parallel["newton_iterations"])
 
 
 @pytest.mark.parallel
