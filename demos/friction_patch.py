@@ -44,13 +44,13 @@ SHEAR_MODULUS = E / (2.0 * (1.0 + NU))
 
 def sheared_blocks(ratio, slave: str, friction, top_shift: float, side_shear: float,
                    cell_type: str = "triangle", comm: MPI.Intracomm = MPI.COMM_WORLD,
-                   **options) -> ContactProblem:
+                   split_at: float | None = None, **options) -> ContactProblem:
     """Two blocks [0, 1] x [0, 0.5] and [0, 1] x [0.5, 1] (meshes.tied_blocks, non-matching),
     pressed by PRESSURE on the top and sheared: the bottom held, the top moved by
     ``top_shift`` along x (both with the Poisson expansion of the uniform state), a
     vertical shear traction ``side_shear`` on the sides. With side_shear = the interface
     shear, the exact solution is uniform: sigma_yy = -PRESSURE, sigma_xy = side_shear,
-    sigma_xx = 0."""
+    sigma_xx = 0. ``split_at``: the slave surface as two pairs, cut at that x."""
     tagged = meshes.tied_blocks(ratio=ratio, cell_type=cell_type, comm=comm)
     mesh = tagged.mesh
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
@@ -82,9 +82,20 @@ def sheared_blocks(ratio, slave: str, friction, top_shift: float, side_shear: fl
            dolfinx.fem.dirichletbc(bottom_values, bottom_x, V0),
            dolfinx.fem.dirichletbc(top_values, top, V0)]
     upper, lower = tagged.markers["upper_interface"], tagged.markers["lower_interface"]
-    pair = (ContactPair(tagged.facet_tags, upper, lower) if slave == "upper"
-            else ContactPair(tagged.facet_tags, lower, upper))
-    problem = ContactProblem(F, u, bcs, [pair], configuration="reference", friction=friction,
+    slave_tag, master_tag = (upper, lower) if slave == "upper" else (lower, upper)
+    tags = tagged.facet_tags
+    if split_at is None:
+        pairs = [ContactPair(tags, slave_tag, master_tag)]
+    else:  # the slave surface cut at x = split_at into two pairs
+        values = tags.values.copy()
+        on_slave = np.flatnonzero(values == slave_tag)
+        right = int(max(tagged.markers.values())) + 1
+        midpoints = dolfinx.mesh.compute_midpoints(mesh, fdim, tags.indices[on_slave])
+        values[on_slave[midpoints[:, 0] > split_at]] = right
+        tags = dolfinx.mesh.meshtags(mesh, fdim, tags.indices, values)
+        pairs = [ContactPair(tags, slave_tag, master_tag, name="left"),
+                 ContactPair(tags, right, master_tag, name="right")]
+    problem = ContactProblem(F, u, bcs, pairs, configuration="reference", friction=friction,
                              **options)
     return problem
 

@@ -284,3 +284,28 @@ def test_frictional_semismooth_newton_converges_quadratically():
         assert asymptotic, residuals
         for a, b in asymptotic:
             assert b <= 10.0 * a**2, residuals
+
+
+@pytest.mark.parallel
+def test_friction_per_pair():
+    """The slave surface as two pairs (cut at x = 0.5). The same law on both: the one-pair
+    full-slip answer, y_j = mu p at every node of both pairs. Coulomb on the right pair
+    only: the left pair's tangential multipliers stay exactly 0, the right pair's slipping
+    nodes carry y_j = mu z_j."""
+    mu, shift = 0.2, 3 * 0.2 * PRESSURE / SHEAR_MODULUS
+    law = ("coulomb", mu)
+    both = sheared_blocks((3, 7), "upper", [law, law], shift, mu * PRESSURE, split_at=0.5)
+    solved(both)
+    for k in range(2):
+        assert both.comm.allreduce(int(both.active[k].sum()), op=MPI.SUM) > 0
+        state = both.friction_state(k)
+        assert state["slipping"].all()
+        np.testing.assert_allclose(state["traction"], mu * PRESSURE, rtol=1e-10)
+    mixed = sheared_blocks((3, 7), "upper", [None, law], shift, mu * PRESSURE, split_at=0.5)
+    solved(mixed)
+    assert not np.any(mixed.friction_state(0)["traction"])
+    state = mixed.friction_state(1)
+    z = mixed.multipliers[1].getArray(readonly=True)
+    slipping = state["slipping"]
+    assert mixed.comm.allreduce(int(slipping.sum()), op=MPI.SUM) > 0
+    np.testing.assert_allclose(np.abs(state["traction"][slipping]), mu * z[slipping], rtol=1e-10)
