@@ -142,10 +142,10 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     parser.add_argument(
         "--normal-phase", choices=("frictionless", "frictional"), default="frictionless",
         help="friction while P is applied (the theory has no tangential traction after it)")
-    cli.add_common_arguments(parser, normals="master")
+    cli.add_common_arguments(parser, normals="master", mu=0.2)
     args = parser.parse_args(argv)
-    if args.mu is None:
-        args.mu = 0.2
+    if args.tresca is not None:
+        parser.error("this demo is about Coulomb friction: use --mu, not --tresca")
     if not args.mu > 0.0:
         parser.error(f"--mu must be positive, got {args.mu}")
     if not 0.0 <= args.tangential_ratio < 1.0:

@@ -110,10 +110,10 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
                         help="R: below 1 the blocks stick, from 1 on they slip")
     parser.add_argument("--cell-type", choices=("triangle", "quadrilateral"),
                         default="triangle", help="cells")
-    cli.add_common_arguments(parser)
+    cli.add_common_arguments(parser, mu=0.2)
     args = parser.parse_args(argv)
-    if args.mu is None:
-        args.mu = 0.2
+    if args.tresca is not None:
+        parser.error("this demo is about Coulomb friction: use --mu, not --tresca")
     try:
         ratio = tuple(int(n) for n in args.ratio.split(":"))
     except ValueError:

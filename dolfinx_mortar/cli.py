@@ -65,6 +65,7 @@ def add_common_arguments(
     parser: argparse.ArgumentParser,
     normals: str | None = "averaged",
     normals_help: str = "normals of the contact constraints",
+    mu: float | None = None,
 ) -> None:
     """The solver options every contact demo shares (method, integration, normals, ...).
 
@@ -73,6 +74,7 @@ def add_common_arguments(
         normals: Default of ``--normals`` (None lets the demo decide; say how in
             ``normals_help``).
         normals_help: Help text of ``--normals``.
+        mu: Default of ``--mu`` (None: frictionless).
     """
     parser.add_argument(
         "--method",
@@ -139,8 +141,9 @@ def add_common_arguments(
     )
     friction = parser.add_mutually_exclusive_group()
     friction.add_argument(
-        "--mu", type=float, default=None,
-        help="Coulomb friction coefficient (default: frictionless)")
+        "--mu", type=float, default=mu,
+        help="Coulomb friction coefficient (default: "
+        + ("frictionless" if mu is None else f"{mu:g}") + ")")
     friction.add_argument(
         "--tresca", type=float, default=None, help="Tresca friction: the slip bound, a pressure"
     )

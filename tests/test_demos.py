@@ -79,11 +79,12 @@ def test_demo_serial_equals_parallel(name, tmp_path_factory):
 
 
 HELP_DEFAULTS = {
-    "friction_patch": ["(default: 3:7)", "(default: upper)", "(default: 2.0)"],
-    "cattaneo_mindlin": ["(default: 0.5)", "(default: frictionless)", "(default: master)"],
+    "friction_patch": ["(default: 3:7)", "(default: upper)", "(default: 2.0)", "(default: 0.2)"],
+    "cattaneo_mindlin": ["(default: 0.5)", "(default: 0.2)", "(default: master)"],
     "hertz": ["(default: B)", "(default: 8.0)", "(default: 2)"],
     "patch_test": ["(default: 3:2)", "(default: top)", "(default: lagrange)"],
-    "ironing": ["(default: 500)", "(default: quadrilateral)", "(default: 2.0)"],
+    "ironing": ["(default: 500)", "(default: quadrilateral)", "(default: 2.0)",
+                "(default: frictionless)"],
     "mesh_tying": [
         "(None: 5 in 2D, 4 in 3D)",
         "(None: 3:4 in 2D, 2:3 in 3D)",

@@ -309,3 +309,12 @@ def test_friction_per_pair():
     slipping = state["slipping"]
     assert mixed.comm.allreduce(int(slipping.sum()), op=MPI.SUM) > 0
     np.testing.assert_allclose(np.abs(state["traction"][slipping]), mu * z[slipping], rtol=1e-10)
+
+
+@pytest.mark.parametrize("demo", ["cattaneo_mindlin", "friction_patch"])
+def test_coulomb_demos_refuse_tresca(demo, capsys):
+    """A Tresca bound given to a Coulomb demo is a usage error, not silently ignored."""
+    with pytest.raises(SystemExit) as exit_info:
+        load_demo(demo).main(["--tresca", "1.0"], comm=MPI.COMM_SELF)
+    assert exit_info.value.code == 2
+    assert "--tresca" in capsys.readouterr().err
