@@ -314,9 +314,7 @@ def plot(path: pathlib.Path, x_nodes, traction, sticking, x_pressure, pressure, 
                  f"{summary['stick_half_width']:.3f} vs {exact['c']:.3f}")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120, bbox_inches="tight")
-    plt.close(fig)
+    cli.save_figure(fig, path)
 
 
 if __name__ == "__main__":

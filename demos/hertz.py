@@ -358,9 +358,7 @@ def plot(path: pathlib.Path, x_nodes, pressure, exact, summary) -> None:
     ax.set_title(f"Hertz case {summary['case']}: p_max {summary['p_max']:.3f} vs p0 {p0:.3f}")
     ax.legend()
     ax.grid(alpha=0.3)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120, bbox_inches="tight")
-    plt.close(fig)
+    cli.save_figure(fig, path)
 
 
 if __name__ == "__main__":

@@ -402,9 +402,7 @@ def plot(path: pathlib.Path, r_nodes, pressure, exact, summary) -> None:
     )
     ax.legend(loc="lower left")
     ax.grid(alpha=0.3)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120, bbox_inches="tight")
-    plt.close(fig)
+    cli.save_figure(fig, path)
 
 
 if __name__ == "__main__":

@@ -359,8 +359,7 @@ def plot(path, t, vertical, horizontal, compare=None, label="", frictional=False
     ax.set_ylabel("force per unit thickness")
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0))
     ax.grid(alpha=0.3)
-    fig.savefig(path, dpi=120, bbox_inches="tight")
-    plt.close(fig)
+    cli.save_figure(fig, path)
 
 
 if __name__ == "__main__":

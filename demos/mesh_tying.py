@@ -320,9 +320,7 @@ def plot(path: pathlib.Path, h, runs: list[dict], summary: dict, args) -> None:
     )
     ax.legend()
     ax.grid(True, which="both", alpha=0.3)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120, bbox_inches="tight")
-    plt.close(fig)
+    cli.save_figure(fig, path)
 
 
 if __name__ == "__main__":

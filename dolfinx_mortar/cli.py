@@ -184,6 +184,15 @@ def friction_option(args: argparse.Namespace):
     return None
 
 
+def save_figure(fig, path: pathlib.Path) -> None:
+    """Write a demo's matplotlib figure to ``path`` (its folder made if needed) and close it."""
+    import matplotlib.pyplot as plt
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120, bbox_inches="tight")
+    plt.close(fig)
+
+
 def write_summary(path: pathlib.Path | None, summary: Mapping[str, Any]) -> None:
     """The ``--json`` option: write ``summary`` to ``path`` if given (call on one rank)."""
     if path:
