@@ -1,41 +1,52 @@
-"""Coulomb and Tresca friction with tangential multipliers (2D).
+"""Coulomb and Tresca friction with tangential multipliers (2D and 3D).
 
-Per slave node j the multiplier is the vector lambda_j = z_j n_j + y_j tau_j,
-with tau_j = R n_j the nodal normal turned by +90 degrees. The contact force
-is -sum_j D_jk lambda_j on slave node k and +sum_j M_jl lambda_j on master
-node l, so the displacement rows become
+Per slave node j the multiplier is the vector lambda_j = z_j n_j + sum_a y_j^a tau_j^a
+(a < d - 1). The contact force is -sum_j D_jk lambda_j on slave node k and
++sum_j M_jl lambda_j on master node l, so the displacement rows become
 
-    R_u = F(u) - B^T z - T^T y,   T_j = -(R Dn)_j on slave dofs, +(R Mn)_j on master dofs,
+    R_u = F(u) - B^T z - sum_a (T^a)^T y^a,
 
-and everything T needs comes from the kernel's Dn and Mn (R is constant):
-no new mortar integrals. The weighted slip of the slave against the master
-over the current solve is
+with T^a_j the tangential counterpart of B_j:
 
-    u~_j = tau_j . (sum_k D_jk du_k - sum_l M_jl du_l) = -T_j du,   du = u - u_start,
+- 2D: tau_j = R n_j, the normal turned by +90 degrees, and T_j = -(R Dn)_j on
+  slave dofs, +(R Mn)_j on master dofs: everything comes from the kernel's Dn
+  and Mn (R is constant), no new mortar integrals.
+- 3D: a frame tau^1_j, tau^2_j of the tangent plane of the averaged nodal
+  normal n_j (tau^1 the unit projection of a fixed axis e of the interface onto
+  that plane, tau^2 = n x tau^1), and T^a_j = -D_jk tau^a_j on slave dofs,
+  +M_jl tau^a_j on master dofs (Gitterle, Popp, Gee and Wall 2010). D and M
+  come from the kernel with their gradients; the frame's derivative is chained
+  through d n_j / dx over the node's facet star.
+
+The weighted slip of the slave against the master over the current solve is
+
+    u~^a_j = -T^a_j du,   du = u - u_start,
 
 with u_start the state the solve started from (the previous converged step;
 a cut-back restores it), and s_j = u~_j / A_j its nodal value (a length). It
 is exact for a rigid translation; a rigid rotation by theta within one step
-adds theta g~_j, which vanishes on active nodes, where the gap is closed.
+adds a term proportional to theta and the gap, which vanishes on active nodes.
 
 The conditions, on active nodes (a projection, or Alart-Curnier, form of the
 complementarity function of Hueber, Stadler and Wohlmuth, 2008):
 
-    C_j = y_j - P_b(v_j),   v_j = y_j + c_t s_j,   P_b = projection onto [-b, b],
+    C_j = y_j - P_b(v_j),   v_j = y_j + c_t s_j,
 
-b_j = mu max(z_j, 0) (Coulomb) or the given bound (Tresca); y_j = 0 on the
-other nodes. Stick, |v_j| < b_j: C_j = -c_t s_j, no slip. Slip: y_j = b_j
-sign(v_j), parallel to s_j, so the friction traction -y_j on the slave
-opposes its slip, and the nodal dissipation y_j u~_j is never negative. The
-semismooth Newton derivative is exact in both states. At the kink: a node
-that has just come into contact (b = 0, v = 0) starts held instead of sliding
-freely for one iteration, except for mu = 0, which always slips: y = 0 with no
-coupling at all, the frictionless Newton path; a node at its bound to within
-1e-6 (a slipping node at the start of the next step, where s = 0 and y = b
-to solver tolerance) slips, instead of dragging the other body along by a
-whole load increment in the first iterate (on frictional ironing that
-inverted elements). With the penalty method v_j = eps_t s_j
-(regularized stick, y = eps_t s while it sticks).
+P_b the projection onto the interval [-b, b] (2D) or the disc of radius b
+(3D), b_j = mu max(0, z_j - c_n g^_j) (Coulomb) or the given bound (Tresca);
+y_j = 0 on the other nodes. Stick, |v_j| < b_j: C_j = -c_t s_j, no slip.
+Slip: y_j = b_j v_j / |v_j|, parallel to s_j, so the friction traction -y_j on
+the slave opposes its slip and the nodal dissipation y_j . u~_j is never
+negative. The semismooth Newton derivative is exact in both states (in 3D the
+slip derivative b/|v| (I - v v^T/|v|^2) dv + v/|v| db couples the two
+components of a node). At the kink: a node that has just come into contact
+(b = 0, v = 0) starts held instead of sliding freely for one iteration,
+except for mu = 0, which always slips: y = 0 with no coupling at all, the
+frictionless Newton path; a node at its bound to within 1e-6 (a slipping node
+at the start of the next step, where s = 0 and |y| = b to solver tolerance)
+slips, instead of dragging the other body along by a whole load increment in
+the first iterate (on frictional ironing that inverted elements). With the
+penalty method v_j = eps_t s_j (regularized stick, y = eps_t s while it sticks).
 
 Rows are scaled by h^(d-1), like the normal rows (:mod:`enforcement`).
 """
@@ -45,6 +56,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from mpi4py import MPI
 from petsc4py import PETSc
 
 LAWS = ("coulomb", "tresca")
@@ -53,7 +65,11 @@ STICK_BAND = 1e-6
 """|v| within this fraction of the slip bound counts as slipping (see tangential_rows)."""
 
 ROTATION = np.array([[0.0, -1.0], [1.0, 0.0]])
-"""R: tau = R n."""
+"""R: tau = R n (2D)."""
+
+FRAME_DEGENERACY = 1e-3
+"""3D: an active node whose normal is this close to parallel (|(I - n n^T) e|) to the
+interface's frame axis e has no usable tangent frame."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -84,8 +100,9 @@ class FrictionLaw:
 
 @dataclasses.dataclass
 class TangentialRows:
-    """Owned tangential rows of one pair: residual C_j and its derivative
-    dC_j = slip du~_j + gap dg~_j + area dA_j + normal dz_j + own dy_j; ``sticking``."""
+    """Owned tangential rows of one pair, m = d - 1 components per node: residual C_j
+    (n, m) and its derivative dC_j = slip du~_j + gap dg~_j + area dA_j + normal dz_j
+    + own dy_j (slip, own: (n, m, m); gap, area, normal: (n, m)); ``sticking`` (n,)."""
 
     residual: np.ndarray
     slip: np.ndarray
@@ -101,20 +118,23 @@ def tangential_rows(law: FrictionLaw | None, weight: float, c_t: float, c_n: flo
                     gap: np.ndarray, area: np.ndarray) -> TangentialRows:
     """The rows of the module docstring at the current state (weight = h^(d-1)).
 
-    ``c_n`` given (Lagrange multipliers): the Coulomb bound is mu max(0, z_j - c_n g^_j),
-    the normal complementarity quantity (equal to mu z_j once the gap is closed), as in
-    Hueber, Stadler and Wohlmuth and Gitterle et al.; None (penalty): mu max(0, z_j).
+    y and slip are (n, m). ``c_n`` given (Lagrange multipliers): the Coulomb bound is
+    mu max(0, z_j - c_n g^_j), the normal complementarity quantity (equal to mu z_j once
+    the gap is closed), as in Hueber, Stadler and Wohlmuth and Gitterle et al.; None
+    (penalty): mu max(0, z_j).
     """
-    n = y.size
+    n, m = y.shape
+    identity = np.eye(m)
     residual = weight * y
-    d_slip, d_gap, d_area, d_normal = (np.zeros(n) for _ in range(4))
-    d_own = np.full(n, weight)
+    d_slip = np.zeros((n, m, m))
+    d_gap, d_area, d_normal = (np.zeros((n, m)) for _ in range(3))
+    d_own = np.broadcast_to(weight * identity, (n, m, m)).copy()
     sticking = np.zeros(n, dtype=bool)
     if law is None or not np.any(active):
         return TangentialRows(residual, d_slip, d_gap, d_area, d_normal, d_own, sticking)
     lagrange = c_n is not None
     a = np.where(active, area, 1.0)
-    s = slip / a
+    s = slip / a[:, None]
     v = (y if lagrange else 0.0) + c_t * s
     # the bound b and its derivatives over z, g~ and A
     db_dz, db_dgap, db_darea = np.zeros(n), np.zeros(n), np.zeros(n)
@@ -128,59 +148,180 @@ def tangential_rows(law: FrictionLaw | None, weight: float, c_t: float, c_n: flo
             db_darea[pressing] = law.value * c_n * (gap / a**2)[pressing]
     else:
         bound = np.full(n, law.value)
+    size = np.abs(v[:, 0]) if m == 1 else np.linalg.norm(v, axis=1)
     # a node that just came into contact (b = 0, nothing slipped: v = 0) starts held, not
     # free to slide; one at its slip bound to rounding (a slipping node at the start of
     # the next step) keeps slipping instead of dragging the other body along for an iterate
-    new = (bound == 0.0) & (v == 0.0) & (law.value > 0.0)
-    sticking = active & ((np.abs(v) < (1.0 - STICK_BAND) * bound) | new)
+    new = (bound == 0.0) & (size == 0.0) & (law.value > 0.0)
+    sticking = active & ((size < (1.0 - STICK_BAND) * bound) | new)
     slipping = active & ~sticking
-    sign = np.sign(v)
+    moving = size > 0.0
+    direction = np.zeros((n, m))
+    if m == 1:
+        direction[:, 0] = np.sign(v[:, 0])
+    else:
+        direction[moving] = v[moving] / size[moving, None]
     residual[sticking] = weight * (y - v)[sticking]
-    d_slip[sticking] = -weight * c_t / a[sticking]
-    d_area[sticking] = weight * c_t * (slip / a**2)[sticking]
-    d_own[sticking] = 0.0 if lagrange else weight
-    residual[slipping] = weight * (y - bound * sign)[slipping]
-    d_normal[slipping] = -weight * (db_dz * sign)[slipping]
-    d_gap[slipping] = -weight * (db_dgap * sign)[slipping]
-    d_area[slipping] = -weight * (db_darea * sign)[slipping]
+    d_slip[sticking] = -weight * c_t / a[sticking, None, None] * identity
+    d_area[sticking] = weight * c_t * (slip / a[:, None] ** 2)[sticking]
+    d_own[sticking] = 0.0 if lagrange else weight * identity
+    residual[slipping] = weight * (y - bound[:, None] * direction)[slipping]
+    d_normal[slipping] = -weight * (db_dz[:, None] * direction)[slipping]
+    d_gap[slipping] = -weight * (db_dgap[:, None] * direction)[slipping]
+    d_area[slipping] = -weight * (db_darea[:, None] * direction)[slipping]
+    if m > 1:
+        # d(b v/|v|) = v/|v| db + b/|v| (I - v v^T/|v|^2) dv, dv = dy + c_t (du~/A - u~ dA/A^2)
+        turning = slipping & moving
+        ratio = np.where(turning, bound / np.where(moving, size, 1.0), 0.0)
+        P = ratio[:, None, None] * (identity - direction[:, :, None] * direction[:, None, :])
+        if lagrange:
+            d_own[turning] -= weight * P[turning]
+        d_slip[turning] = -weight * c_t * P[turning] / a[turning, None, None]
+        d_area[turning] += weight * c_t * np.einsum(
+            "nab,nb->na", P, slip / a[:, None] ** 2)[turning]
     return TangentialRows(residual, d_slip, d_gap, d_area, d_normal, d_own, sticking)
 
 
-def tangential_coefficients(force_coefficients: np.ndarray) -> np.ndarray:
-    """T's values (rows, j, nodes, 2) from B's (-Dn slave, +Mn master): R applied to each."""
-    return force_coefficients @ ROTATION.T
+def tangent_frames(normals: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """3D nodal frames (..., 2, 3) and their derivatives d tau^a[c] / d n[e] (..., 2, 3, 3).
 
-
-def pair_slip(force_coefficients: np.ndarray, du: np.ndarray) -> np.ndarray:
-    """(rows, j): each pair's part of u~_j = -T_j du, du (rows, facet nodes, 2)."""
-    return -np.einsum("njkc,nkc->nj", tangential_coefficients(force_coefficients), du)
-
-
-def slip_terms(stencil, j: int, du_slave: np.ndarray, du_master: np.ndarray,
-               weight: np.ndarray) -> list:
-    """Combined-gradient terms of weight * u~_j over the pair's kernel outputs at fixed du.
-
-    u~_j = sum_k Dn_jk . (R^T du_k) - sum_l Mn_jl . (R^T du_l); du_* are (rows, nodes, 2).
+    tau^1 = w / |w|, w = (I - n n^T) e, tau^2 = n x tau^1: smooth in n away from n = +-e.
     """
-    rotated_slave = du_slave @ ROTATION
-    rotated_master = du_master @ ROTATION
-    terms = [(stencil.dn(j, k, c), weight * rotated_slave[:, k, c])
-             for k in range(stencil.ns) for c in range(2)]
-    terms += [(stencil.mn(j, m, c), -weight * rotated_master[:, m, c])
-              for m in range(stencil.nm) for c in range(2)]
-    return terms
+    e = np.asarray(axis, dtype=float)
+    along = normals @ e
+    w = e - along[..., None] * normals
+    size = np.maximum(np.linalg.norm(w, axis=-1), 1e-300)
+    tau1 = w / size[..., None]
+    tau2 = np.cross(normals, tau1)
+    eye = np.eye(3)
+    # dw/dn = -n e^T - (n . e) I; d tau1 = (I - tau1 tau1^T) dw / |w|
+    dw = -normals[..., :, None] * e - along[..., None, None] * eye
+    projector = eye - tau1[..., :, None] * tau1[..., None, :]
+    dtau1 = projector @ dw / size[..., None, None]
+    # d(n x tau1) = dn x tau1 + n x dtau1 = -[tau1]x dn + [n]x dtau1
+    dtau2 = -_cross_matrix(tau1) + _cross_matrix(normals) @ dtau1
+    return np.stack([tau1, tau2], axis=-2), np.stack([dtau1, dtau2], axis=-3)
 
 
-def add_tangential_force(interface, y: PETSc.Vec, vector: PETSc.Vec) -> None:
-    """Add -T^T y to ``vector`` (displacement layout), as ``contact_force`` adds -B^T z."""
-    q = interface._require()
-    rows = interface._rows(q)
-    y_pair = interface.node_values(y)[interface.pair_slave_nodes[rows]]
-    tangent = tangential_coefficients(interface._force_coefficient_values(q, rows))
-    force = -np.einsum("nj,njkc->nkc", y_pair, tangent)
-    vector.setValues(interface._force_columns()[rows].reshape(-1).astype(PETSc.IntType),
-                     force.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
-    vector.assemble()
+def frame_degeneracy(normals: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """|(I - n n^T) e| per normal: 1 when n is normal to the axis, 0 when parallel."""
+    along = normals @ np.asarray(axis, dtype=float)
+    return np.sqrt(np.maximum(1.0 - along**2, 0.0))
+
+
+def _cross_matrix(a: np.ndarray) -> np.ndarray:
+    """[a]x (..., 3, 3): [a]x b = a x b."""
+    result = np.zeros(a.shape + (3,))
+    result[..., 0, 1], result[..., 0, 2] = -a[..., 2], a[..., 1]
+    result[..., 1, 0], result[..., 1, 2] = a[..., 2], -a[..., 0]
+    result[..., 2, 0], result[..., 2, 1] = -a[..., 1], a[..., 0]
+    return result
+
+
+def frame_axis(interface) -> np.ndarray:
+    """The coordinate axis least aligned with the slave surface's facet normals (the
+    largest |n . e| over the undeformed facets, over all ranks, is smallest): the axis
+    of the interface's 3D tangent frames (collective)."""
+    corners = interface.slave.reference_coordinates[interface.slave.facets]
+    if corners.shape[0]:
+        if corners.shape[1] == 3:
+            normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        else:
+            normals = np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1])
+        normals /= np.linalg.norm(normals, axis=1)[:, None]
+        largest = np.abs(normals).max(axis=0)
+    else:
+        largest = np.zeros(3)
+    largest = np.ascontiguousarray(largest, dtype=np.float64)
+    interface.comm.Allreduce(MPI.IN_PLACE, largest, op=MPI.MAX)
+    return np.eye(3)[int(np.argmin(largest))]
+
+
+class PairTangents:
+    """The tangential coefficients of some pairs of one interface and the combined-gradient
+    terms of their derivatives (2D: R applied to Dn, Mn; 3D: D, M and the nodal frames).
+
+    Attributes:
+        coefficients: T (rows, m, j, ns + nm nodes, gdim): -tau D on slave nodes,
+            +tau M on master nodes.
+    """
+
+    def __init__(self, interface, q, rows: np.ndarray, axis: np.ndarray | None):
+        self.stencil = stencil = interface.stencil
+        self.gdim = interface.gdim
+        self.components = self.gdim - 1
+        if self.gdim == 2:
+            forces = interface._force_coefficient_values(q, rows)  # -Dn slave, +Mn master
+            self.coefficients = (forces @ ROTATION.T)[:, None]
+            return
+        self.frames, self.frame_derivatives = tangent_frames(stencil.slave_normals(rows), axis)
+        self.D, self.M = q.D[rows], q.M[rows]
+        weights = np.concatenate([-self.D, self.M], axis=2)  # (rows, j, nodes)
+        tau = self.frames.transpose(0, 2, 1, 3)  # (rows, a, j, 3)
+        self.coefficients = weights[:, None, :, :, None] * tau[:, :, :, None, :]
+
+    def slip(self, du: np.ndarray) -> np.ndarray:
+        """(rows, m, j): each pair's part of u~^a_j = -T^a_j du, du (rows, nodes, gdim)."""
+        return -np.einsum("rajkc,rkc->raj", self.coefficients, du)
+
+    def force(self, y: np.ndarray) -> np.ndarray:
+        """(rows, nodes, gdim): -T^T y of each pair, y (rows, m, j)."""
+        return -np.einsum("raj,rajkc->rkc", y, self.coefficients)
+
+    def force_terms(self, y: np.ndarray) -> tuple[list, list]:
+        """Combined-gradient terms of the force rows' d(-T^T y)/dx at fixed y (rows, m, j):
+        (per slave node and component, per master node and component)."""
+        stencil, gdim, js = self.stencil, self.gdim, range(self.stencil.ns)
+        if gdim == 2:
+            R = ROTATION
+            slave = [[(stencil.dn(j, a, e), R[c, e] * y[:, 0, j]) for j in js for e in range(2)
+                      if R[c, e]] for a in range(stencil.ns) for c in range(2)]
+            master = [[(stencil.mn(j, a, e), -R[c, e] * y[:, 0, j]) for j in js
+                       for e in range(2) if R[c, e]] for a in range(stencil.nm) for c in range(2)]
+            return slave, master
+        # -T^T y = sum_j (D_jk on slave, -M_jl on master) y_j . tau_j
+        traction = np.einsum("raj,rjac->rjc", y, self.frames)  # sum_a y^a tau^a
+        turning = np.einsum("raj,rjace->rjce", y, self.frame_derivatives)
+        slave = [[(stencil.d(j, k), traction[:, j, c]) for j in js]
+                 + [(stencil.normal(j, e), self.D[:, j, k] * turning[:, j, c, e])
+                    for j in js for e in range(3)]
+                 for k in range(stencil.ns) for c in range(3)]
+        master = [[(stencil.m(j, l), -traction[:, j, c]) for j in js]
+                  + [(stencil.normal(j, e), -self.M[:, j, l] * turning[:, j, c, e])
+                     for j in js for e in range(3)]
+                  for l in range(stencil.nm) for c in range(3)]
+        return slave, master
+
+    def slip_terms(self, j: int, a: int, du_slave: np.ndarray, du_master: np.ndarray,
+                   weight: np.ndarray) -> list:
+        """Combined-gradient terms of weight * u~^a_j at fixed du (du_*: (rows, nodes, gdim))."""
+        stencil = self.stencil
+        if self.gdim == 2:
+            # u~_j = sum_k Dn_jk . (R^T du_k) - sum_l Mn_jl . (R^T du_l)
+            rotated_slave = du_slave @ ROTATION
+            rotated_master = du_master @ ROTATION
+            terms = [(stencil.dn(j, k, c), weight * rotated_slave[:, k, c])
+                     for k in range(stencil.ns) for c in range(2)]
+            return terms + [(stencil.mn(j, m, c), -weight * rotated_master[:, m, c])
+                            for m in range(stencil.nm) for c in range(2)]
+        # u~^a_j = tau^a_j . r_j, r_j = sum_k D_jk du_k - sum_l M_jl du_l
+        tau = self.frames[:, j, a]
+        r = (np.einsum("rk,rkc->rc", self.D[:, j], du_slave)
+             - np.einsum("rl,rlc->rc", self.M[:, j], du_master))
+        turning = np.einsum("rc,rce->re", r, self.frame_derivatives[:, j, a])
+        terms = [(stencil.d(j, k), weight * np.einsum("rc,rc->r", tau, du_slave[:, k]))
+                 for k in range(stencil.ns)]
+        terms += [(stencil.m(j, l), -weight * np.einsum("rc,rc->r", tau, du_master[:, l]))
+                  for l in range(stencil.nm)]
+        return terms + [(stencil.normal(j, e), weight * turning[:, e]) for e in range(3)]
+
+
+def coefficient_names(components: int) -> tuple[str, ...]:
+    """The ghosted multiplier-layout vectors that carry the tangential rows' coefficients
+    to ghost slave nodes: slip_ab (dC^a/du~^b), slip_gap_a, slip_area_a."""
+    pairs = range(components)
+    return (tuple(f"slip_{a}{b}" for a in pairs for b in pairs)
+            + tuple(f"slip_gap_{a}" for a in pairs) + tuple(f"slip_area_{a}" for a in pairs))
 
 
 def laws_per_pair(friction, num_pairs: int) -> list[FrictionLaw | None]:
@@ -194,10 +335,11 @@ def laws_per_pair(friction, num_pairs: int) -> list[FrictionLaw | None]:
 
 
 def check_options(gdim: int, method: str, active_set: str, condensation: bool,
-                  linear_solver: str) -> None:
+                  linear_solver: str, normals: str) -> None:
     """Raise for the combinations friction does not support (yet)."""
-    if gdim != 2:
-        raise ValueError("friction is implemented in 2D only; 3D contact is frictionless for now")
+    if gdim == 3 and normals != "averaged":
+        raise ValueError("friction in 3D needs normals='averaged' (the tangent frames are "
+                         f"built on the averaged nodal normals), got normals={normals!r}")
     if method not in ("lagrange", "penalty"):
         raise ValueError(f"friction works with method='lagrange' or 'penalty', got {method!r}")
     if active_set != "semismooth":
@@ -210,8 +352,9 @@ def check_options(gdim: int, method: str, active_set: str, condensation: bool,
 
 class Friction:
     """The frictional part of a contact problem: per pair a law, the tangential multipliers
-    y (one ghosted vector, laid out like the normal ones), the weighted slips u~ of the
-    owned slave nodes since the solve started, and du = u - u_start at each node table.
+    y^a (m = d - 1 ghosted vectors, laid out like the normal ones), the weighted slips u~
+    of the owned slave nodes since the solve started, and du = u - u_start at each node
+    table.
 
     Args:
         laws: one :class:`FrictionLaw` or None (frictionless) per pair.
@@ -229,69 +372,151 @@ class Friction:
         self.laws = laws
         self.interfaces = interfaces
         self.c_t, self.c_n, self.weight = c_t, c_n, weight
-        self.multipliers = [i.create_multiplier_vector() for i in interfaces]
-        self.slips = [np.zeros(i.num_owned_multipliers) for i in interfaces]
+        self.gdim = interfaces[0].gdim
+        self.components = self.gdim - 1
+        self.multipliers = [[i.create_multiplier_vector() for _ in range(self.components)]
+                            for i in interfaces]
+        self.slips = [np.zeros((i.num_owned_multipliers, self.components)) for i in interfaces]
         self.increments: list[np.ndarray | None] = [None] * len(interfaces)
+        self.axes = [frame_axis(i) if self.gdim == 3 else None for i in interfaces]
+        for interface in interfaces:
+            interface.scalar_gradients = self.gdim == 3
         self._start = u.x.array.copy()
+
+    @property
+    def vectors(self) -> list[PETSc.Vec]:
+        """Every y^a, pair by pair (the order of the layout's tangential fields)."""
+        return [y for pair in self.multipliers for y in pair]
 
     def start(self, u) -> None:
         """Measure slips from u (the state a solve starts from)."""
         self._start = u.x.array.copy()
 
+    def tangents(self, k: int, rows: np.ndarray) -> PairTangents:
+        """Pair k's tangential coefficients of the pairs ``rows`` at the last evaluation."""
+        interface = self.interfaces[k]
+        return PairTangents(interface, interface.quantities, rows, self.axes[k])
+
+    def pair_multipliers(self, k: int, rows: np.ndarray) -> np.ndarray:
+        """(rows, m, j): y^a at the slave nodes of pair k's pairs ``rows``."""
+        interface = self.interfaces[k]
+        nodes = interface.pair_slave_nodes[rows]
+        return np.stack([interface.node_values(y)[nodes] for y in self.multipliers[k]], axis=1)
+
     def update_slip(self, k: int, u, vector: PETSc.Vec) -> None:
         """u~_j of pair k's owned slave nodes at u, summed over the pairs through the ghosted
         multiplier-layout ``vector`` (collective)."""
         interface = self.interfaces[k]
-        q = interface.quantities
         table = interface.node_field(u.x.array - self._start)
         self.increments[k] = table
-        rows = interface._rows(q)
+        rows = interface._rows(interface.quantities)
         stencil = interface.stencil
         du = np.concatenate([table[stencil.slave_nodes[rows]], table[stencil.master_nodes[rows]]],
                             axis=1)
-        values = pair_slip(interface._force_coefficient_values(q, rows), du)
-        vector.zeroEntries()
-        vector.setValues(interface.pair_multipliers[rows].reshape(-1).astype(PETSc.IntType),
-                         values.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
-        vector.assemble()
-        self.slips[k] = vector.getArray(readonly=True).copy()
+        values = self.tangents(k, rows).slip(du)  # (rows, m, j)
+        indices = interface.pair_multipliers[rows].reshape(-1).astype(PETSc.IntType)
+        for a in range(self.components):
+            vector.zeroEntries()
+            vector.setValues(indices, values[:, a].reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
+            vector.assemble()
+            self.slips[k][:, a] = vector.getArray(readonly=True)
 
     def rows(self, k: int, z: np.ndarray, active: np.ndarray, gap: np.ndarray,
              area: np.ndarray) -> TangentialRows:
         """Pair k's owned tangential rows at the current state."""
-        return tangential_rows(self.laws[k], self.weight, self.c_t, self.c_n,
-                               self.multipliers[k].getArray(readonly=True), z, active,
+        y = np.stack([v.getArray(readonly=True) for v in self.multipliers[k]], axis=1)
+        if self.gdim == 3 and self.laws[k] is not None:
+            self._check_frames(k, active)
+        return tangential_rows(self.laws[k], self.weight, self.c_t, self.c_n, y, z, active,
                                self.slips[k], gap, area)
+
+    def _check_frames(self, k: int, active: np.ndarray) -> None:
+        """Raise (on every rank) if an active node's normal is parallel to the frame axis."""
+        interface = self.interfaces[k]
+        bad = 0
+        rows = (np.zeros(0, dtype=int) if interface.quantities is None
+                else interface._rows(interface.quantities))
+        if rows.size:
+            normals = interface.stencil.slave_normals(rows)
+            degenerate = frame_degeneracy(normals, self.axes[k]) < FRAME_DEGENERACY
+            local = interface.pair_multipliers[rows] - interface.multiplier_offset
+            mine = (local >= 0) & (local < interface.num_owned_multipliers)
+            local = np.where(mine, local, 0)
+            bad = int(np.count_nonzero(degenerate & mine & active[local]))
+        if interface.comm.allreduce(bad, op=MPI.SUM):
+            raise RuntimeError(
+                f"friction: {bad} active slave node(s) have a normal parallel to the tangent "
+                f"frame's axis {self.axes[k]} (chosen as the coordinate axis least aligned "
+                "with the undeformed slave surface); a slave surface whose normals turn by "
+                "90 degrees is not supported by the 3D frames yet")
 
     def add_forces(self, vector: PETSc.Vec) -> None:
         """Add -T^T y of every pair to ``vector`` (displacement layout)."""
-        for interface, y in zip(self.interfaces, self.multipliers, strict=True):
-            add_tangential_force(interface, y, vector)
+        for k, interface in enumerate(self.interfaces):
+            interface._require()
+            rows = interface._rows(interface.quantities)
+            force = self.tangents(k, rows).force(self.pair_multipliers(k, rows))
+            vector.setValues(interface._force_columns()[rows].reshape(-1).astype(PETSc.IntType),
+                             force.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
+            vector.assemble()
 
-    def forces(self, k: int, rows: np.ndarray, coefficients: np.ndarray) -> tuple:
-        """(slave, master) friction force of pair k's pairs ``rows`` on this rank, from B's
-        coefficients of those rows."""
-        interface = self.interfaces[k]
-        y = interface.node_values(self.multipliers[k])[interface.pair_slave_nodes[rows]]
-        tangent = tangential_coefficients(coefficients)
-        ns = interface.stencil.ns
-        return (np.einsum("nj,njkc->c", y, tangent[:, :, :ns]),
-                np.einsum("nj,njlc->c", y, tangent[:, :, ns:]))
+    def forces(self, k: int, rows: np.ndarray) -> tuple:
+        """(slave, master) friction force T^T y on each side (the load the residual's -T^T y
+        balances, as B^T z for the pressure) of pair k's pairs ``rows`` on this rank."""
+        force = -self.tangents(k, rows).force(self.pair_multipliers(k, rows))
+        ns = self.interfaces[k].stencil.ns
+        return force[:, :ns].sum(axis=(0, 1)), force[:, ns:].sum(axis=(0, 1))
 
     def state(self, k: int, rows: TangentialRows, active: np.ndarray,
               area: np.ndarray) -> dict:
-        """Pair k's nodal state (see ContactProblem.friction_state)."""
-        y = self.multipliers[k].getArray(readonly=True).copy()
+        """Pair k's nodal state (see ContactProblem.friction_state); in 2D ``traction`` and
+        ``slip`` are (n,), in 3D (n, 2) in the nodes' tangent frames, and ``frames``
+        (n, 2, 3) holds those (collective in 3D)."""
+        y = np.stack([v.getArray(readonly=True) for v in self.multipliers[k]], axis=1)
         safe_area = np.where(active, area, 1.0)
-        return {
+        slip = np.where(active[:, None], self.slips[k] / safe_area[:, None], 0.0)
+        squeeze = (lambda a: a[:, 0]) if self.components == 1 else (lambda a: a)
+        state = {
             "coordinates": self.interfaces[k].owned_multiplier_coordinates.copy(),
-            "traction": y,
-            "slip": np.where(active, self.slips[k] / safe_area, 0.0),
+            "traction": squeeze(y.copy()),
+            "slip": squeeze(slip),
             "sticking": rows.sticking.copy(),
             "slipping": active & ~rows.sticking,
-            "dissipation": y * self.slips[k],
+            "dissipation": np.einsum("na,na->n", y, self.slips[k]),
         }
+        if self.gdim == 3:
+            state["frames"] = self.nodal_frames(k)
+        return state
+
+    def nodal_frames(self, k: int) -> np.ndarray:
+        """(owned slave nodes, 2, 3): the tangent frames of pair k's owned slave nodes at the
+        last evaluation (zero at nodes in no candidate pair). Collective."""
+        interface = self.interfaces[k]
+        q = interface.quantities
+        if q is None:
+            indices, normals = np.zeros(0, dtype=PETSc.IntType), np.zeros((0, 3))
+        else:
+            rows = interface._rows(q)
+            indices = interface.pair_multipliers[rows].reshape(-1).astype(PETSc.IntType)
+            normals = interface.stencil.slave_normals(rows).reshape(-1, 3)
+        vector = interface.create_multiplier_vector()
+        sums = []
+        for values in [normals[:, c] for c in range(3)] + [np.ones(indices.size)]:
+            vector.zeroEntries()
+            vector.setValues(indices, values, addv=PETSc.InsertMode.ADD_VALUES)
+            vector.assemble()
+            sums.append(vector.getArray(readonly=True).copy())
+        vector.destroy()
+        count = sums[3]
+        seen = count > 0
+        mean = np.zeros((count.size, 3))
+        mean[seen] = np.stack(sums[:3], axis=1)[seen] / count[seen, None]
+        frames = np.zeros((count.size, 2, 3))
+        if np.any(seen):
+            unit = mean[seen] / np.linalg.norm(mean[seen], axis=1)[:, None]
+            frames[seen] = tangent_frames(unit, self.axes[k])[0]
+        return frames
 
     def destroy(self) -> None:
-        for y in self.multipliers:
+        for y in self.vectors:
             y.destroy()

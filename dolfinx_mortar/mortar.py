@@ -61,6 +61,16 @@ def _owner_of_blocks(index_map, local_blocks: np.ndarray, rank: int) -> np.ndarr
     return owners
 
 
+def _frozen_3d(reference, constant) -> dict:
+    """The 3D fields of reference quantities held constant (D, M and the nodal normals)."""
+    if not hasattr(reference, "normals_vary"):
+        return {}
+    frozen = {"normals_vary": False}
+    if reference.D_dual is not None:
+        frozen.update(D_dual=constant(reference.D), M_dual=constant(reference.M))
+    return frozen
+
+
 def _contributing_rows(q: kernels.PairQuantities) -> np.ndarray | None:
     """The pairs outside which every quantity of ``q`` is zero, if ``q`` says so."""
     items = (q.Dn, q.Mn, q.area, q.gap)
@@ -181,6 +191,8 @@ class MortarInterface:
         self._crosspoint_blocks = np.zeros(0, dtype=np.int64)
         self._pair_dofs: np.ndarray | None = None
         self.stencil: stencils.PairStencil | None = None
+        self.scalar_gradients = False
+        """3D: the kernel also keeps the gradients of D and M (friction sets it)."""
 
     # -- multipliers -------------------------------------------------------
 
@@ -344,9 +356,10 @@ class MortarInterface:
         return self.quantities
 
     def _evaluate(self, node_x: np.ndarray) -> kernels.PairQuantities:
+        extra = {"scalar_gradients": True} if self.scalar_gradients else {}
         return self.stencil.evaluate(
             node_x, normals=self.normals, integration=self.integration, basis=self.basis,
-            num_gauss_points=self.num_gauss_points, crosspoint=self.pair_crosspoint)
+            num_gauss_points=self.num_gauss_points, crosspoint=self.pair_crosspoint, **extra)
 
     def _with_current_gap(self, reference: kernels.PairQuantities) -> kernels.PairQuantities:
         """Reference integrals, constant in u; the gap linear in the current positions."""
@@ -367,7 +380,8 @@ class MortarInterface:
                 return Dual(value, np.broadcast_to(0.0, value.shape + (nv,)))
 
             return dataclasses.replace(reference, Dn=constant(Dn), Mn=constant(Mn),
-                                       area=constant(reference.area.value), gap=Dual(gap, grad))
+                                       area=constant(reference.area.value), gap=Dual(gap, grad),
+                                       **_frozen_3d(reference, constant))
         # every quantity is zero outside the pairs that contribute: keep them apart
         grad = np.zeros((rows.size, ns, nv))
         grad[:, :, stencil.slave_variables] = -Dn[rows].reshape(-1, ns, ns * self.gdim)
@@ -379,7 +393,8 @@ class MortarInterface:
 
         return dataclasses.replace(reference, Dn=constant(Dn), Mn=constant(Mn),
                                    area=constant(reference.area.value),
-                                   gap=RowSubsetDual(gap, rows, grad))
+                                   gap=RowSubsetDual(gap, rows, grad),
+                                   **_frozen_3d(reference, constant))
 
     def _exchange_plan(self, slave_x: np.ndarray, master_x: np.ndarray,
                        slave_origin: np.ndarray | None = None,

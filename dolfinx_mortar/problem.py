@@ -135,8 +135,8 @@ class ContactProblem:
             ``<prefix>condensed_``, e.g. ``pc_type: hypre`` for BoomerAMG).
         friction: ``None`` (frictionless, the default), ``("coulomb", mu)``,
             ``("tresca", bound)`` (a pressure), or a list of these, one per
-            pair (:mod:`dolfinx_mortar.friction`; 2D, direct linear solver,
-            with ``lagrange`` semismooth or ``penalty``).
+            pair (:mod:`dolfinx_mortar.friction`; direct linear solver, with
+            ``lagrange`` semismooth or ``penalty``; in 3D with averaged normals).
         c_t: the tangential complementarity parameter (pressure / length;
             default c_n), or with ``penalty`` the tangential penalty (default
             the normal one). Like c_n it changes the Newton path, never the
@@ -201,7 +201,7 @@ class ContactProblem:
         """The frictional state (:class:`~dolfinx_mortar.friction.Friction`), if any."""
         if self.has_friction:
             friction_rules.check_options(u.function_space.mesh.geometry.dim, method, active_set,
-                                   condensation, linear_solver)
+                                         condensation, linear_solver, normals)
         for value, name in ((c_n, "c_n"), (penalty, "penalty"), (c_t, "c_t")):
             if value is not None and not value > 0:
                 raise ValueError(f"{name} must be positive, got {value}")
@@ -250,12 +250,12 @@ class ContactProblem:
             interface.set_crosspoints(fully_fixed)
 
         counts = [i.num_owned_multipliers for i in self.interfaces]
+        components = (self.V.mesh.geometry.dim - 1) if self.has_friction else 0
         self.layout = BlockLayout(
             self.comm, self.interfaces[0].num_owned_dofs,
-            counts + (counts if self.has_friction else []))
+            counts + [c for c in counts for _ in range(components)])
         self.multipliers = [i.create_multiplier_vector() for i in self.interfaces]
-        coefficient_names = ("gap", "area") + (
-            ("slip", "slip_gap", "slip_area") if self.has_friction else ())
+        coefficient_names = ("gap", "area") + friction_rules.coefficient_names(components)
         self._row_coefficients = [
             {name: i.create_multiplier_vector() for name in coefficient_names}
             for i in self.interfaces
@@ -299,7 +299,7 @@ class ContactProblem:
             max_outer_iterations=max_outer_iterations)
         self.system = ContactSystem(self.V, self.layout, self.interfaces, self._K, self.J_form,
                                     self.bcs, self._fixed_dofs, self._dirichlet_scale,
-                                    friction=self.has_friction)
+                                    tangential_components=components)
         self.timings = {
             "bulk assembly": 0.0,
             "contact search": 0.0,
@@ -469,8 +469,8 @@ class ContactProblem:
 
     @property
     def tangential(self) -> list[PETSc.Vec]:
-        """The tangential multipliers y of each pair (none without friction)."""
-        return self.friction.multipliers if self.friction is not None else []
+        """The tangential multipliers y^a, pair by pair (d - 1 each; none without friction)."""
+        return self.friction.vectors if self.friction is not None else []
 
     def _write_x_into_state(self, x: PETSc.Vec) -> None:
         array = x.getArray(readonly=True)
@@ -505,7 +505,7 @@ class ContactProblem:
             self.areas[k] = area_vector.getArray(readonly=True).copy()
             self.active[k] = self._decide_active(k)
             if self.friction is not None:
-                self.friction.update_slip(k, self.u, self._row_coefficients[k]["slip"])
+                self.friction.update_slip(k, self.u, self._row_coefficients[k]["slip_00"])
         self.timings["contact search"] += searching
         self.timings["mortar integration"] += time.perf_counter() - start - searching
 
@@ -574,8 +574,9 @@ class ContactProblem:
         for k in range(len(self.interfaces)):
             array[self.layout.owned(k + 1)] = self._multiplier_rows(k)[0]
             if self.has_friction:
-                field = self.system.tangential_field(k)
-                array[self.layout.owned(field)] = self._tangential_rows(k).residual
+                residual = self._tangential_rows(k).residual
+                for a in range(residual.shape[1]):
+                    array[self.layout.owned(self.system.tangential_field(k, a))] = residual[:, a]
         self.timings["mortar integration"] += time.perf_counter() - start
 
     def _jacobian(self, snes, x, A, P) -> None:
@@ -585,8 +586,8 @@ class ContactProblem:
         """The monolithic Jacobian (:class:`~dolfinx_mortar.system.ContactSystem`)."""
         tangential = None
         if self.has_friction:
-            tangential = Tangential(self.tangential, self._tangential_rows,
-                                    self.friction.increments)
+            tangential = Tangential(self._tangential_rows, self.friction.increments,
+                                    self.friction.pair_multipliers, self.friction.tangents)
         rebuilt, contact, bulk = self.system.assemble(
             self.multipliers, self._row_coefficients, self._multiplier_rows, tangential)
         if rebuilt and hasattr(self, "snes"):
@@ -698,18 +699,21 @@ class ContactProblem:
         slave = np.einsum("nj,njkc->c", z_pair, coefficients[:, :, :ns])
         master = np.einsum("nj,njlc->c", z_pair, coefficients[:, :, ns:])
         if self.friction is not None:
-            slave_friction, master_friction = self.friction.forces(k, rows, coefficients)
+            slave_friction, master_friction = self.friction.forces(k, rows)
             slave, master = slave + slave_friction, master + master_friction
         return (self.comm.allreduce(slave, op=MPI.SUM), self.comm.allreduce(master, op=MPI.SUM))
 
     def friction_state(self, k: int = 0) -> dict:
-        """Pair k's frictional state at this rank's owned slave nodes (not collective).
+        """Pair k's frictional state at this rank's owned slave nodes (not collective in 2D,
+        collective in 3D).
 
         Keys: ``coordinates`` (reference), ``traction`` y_j (the tangential multiplier:
         the friction traction on the slave is -y_j tau_j), ``slip`` u~_j / A_j (the slip
         of the slave against the master since the last solve started, a length),
         ``sticking`` and ``slipping`` (active nodes in each state) and ``dissipation``
-        y_j u~_j (the frictional work of the step at the node, >= 0).
+        y_j . u~_j (the frictional work of the step at the node, >= 0). In 3D traction
+        and slip are (n, 2), components in the nodes' tangent frames ``frames``
+        (n, 2, 3) (:mod:`dolfinx_mortar.friction`).
         """
         if self.friction is None:
             raise RuntimeError("friction_state: this problem has no friction")
@@ -728,14 +732,18 @@ class ContactProblem:
 
     def friction_functions(self, k: int = 0, functions: tuple | None = None) -> tuple:
         """(tangential traction y_j, status) as P1 scalar Functions for ParaView (0 away
-        from the slave nodes; status 0 inactive, 1 slipping, 2 sticking). Collective."""
+        from the slave nodes; in 3D the traction's magnitude |y_j|; status 0 inactive,
+        1 slipping, 2 sticking). Collective."""
         if functions is None:
             space = dolfinx.fem.functionspace(self.V.mesh, ("Lagrange", 1))
             functions = (dolfinx.fem.Function(space, name="tangential_traction"),
                          dolfinx.fem.Function(space, name="friction_status"))
         state = self.friction_state(k)
         status = np.where(state["sticking"], 2.0, np.where(state["slipping"], 1.0, 0.0))
-        self._slave_node_function(k, state["traction"], functions[0])
+        traction = state["traction"]
+        if traction.ndim == 2:
+            traction = np.linalg.norm(traction, axis=1)
+        self._slave_node_function(k, traction, functions[0])
         self._slave_node_function(k, status, functions[1])
         return functions
 

@@ -19,7 +19,9 @@ slave normals). Everything above sees ``slots`` and ``width``, never
   (:mod:`~dolfinx_mortar.normals`).
 
 Outputs of a pair are numbered as in 2D: ``Dn`` (j, k, c) first, then
-``Mn`` (j, l, c), ``area`` (j), ``gap`` (j) (:meth:`PairStencil.output`).
+``Mn`` (j, l, c), ``area`` (j), ``gap`` (j); in 3D, when the kernel kept them
+(friction), ``D`` (j, k), ``M`` (j, l) and the slave nodal normals (j, c)
+follow (:meth:`PairStencil.dn` and its siblings).
 """
 
 from __future__ import annotations
@@ -105,11 +107,39 @@ class PairStencil:
     def GAP(self) -> int:  # noqa: N802
         return self.AREA + self.ns
 
+    @property
+    def D(self) -> int:  # noqa: N802
+        return self.GAP + self.ns
+
+    @property
+    def M(self) -> int:  # noqa: N802
+        return self.D + self.ns * self.ns
+
+    @property
+    def NORMAL(self) -> int:  # noqa: N802
+        return self.M + self.ns * self.nm
+
     def dn(self, j: int, k: int, c: int) -> int:
         return self.DN + (j * self.ns + k) * self.gdim + c
 
     def mn(self, j: int, l: int, c: int) -> int:  # noqa: E741
         return self.MN + (j * self.nm + l) * self.gdim + c
+
+    def d(self, j: int, k: int) -> int:
+        return self.D + j * self.ns + k
+
+    def m(self, j: int, l: int) -> int:  # noqa: E741
+        return self.M + j * self.nm + l
+
+    def normal(self, j: int, c: int) -> int:
+        """The output number of component c of slave node j's nodal normal (a kernel
+        variable: its gradient is one on that variable)."""
+        return self.NORMAL + j * self.gdim + c
+
+    def _normal_variable(self, q, index: int) -> int | None:
+        """The kernel variable of nodal normal component ``index`` (j gdim + c), None where
+        the normals are not variables."""
+        return None
 
     # kernel variables of the slave and master coordinates (reference configuration)
     slave_variables: np.ndarray
@@ -130,7 +160,10 @@ class PairStencil:
         nv = self.num_variables
         parts, starts = [], []
         start = 0
-        for item in (q.Dn, q.Mn, q.area, q.gap):
+        items = [q.Dn, q.Mn, q.area, q.gap]
+        if getattr(q, "D_dual", None) is not None:
+            items += [q.D_dual, q.M_dual]
+        for item in items:
             size = int(np.prod(item.value.shape[1:]))
             if isinstance(item, RowSubsetDual) and item.rows is rows:
                 parts.append(item.grad_rows.reshape(rows.size, size, nv))
@@ -141,6 +174,13 @@ class PairStencil:
         result = np.zeros((len(terms), rows.size, nv))
         for p, row in enumerate(terms):
             for o, weight in row:
+                if o >= self.NORMAL:
+                    variable = self._normal_variable(q, o - self.NORMAL)
+                    if variable is not None:
+                        result[p, :, variable] += weight
+                    continue
+                if o >= start:
+                    raise ValueError(f"output {o} was not kept by the kernel")
                 part = int(np.searchsorted(starts, o, side="right")) - 1
                 result[p] += parts[part][:, o - starts[part], :] * np.reshape(weight, (-1, 1))
         return result
@@ -245,6 +285,7 @@ class Surface3Stencil(PairStencil):
         self._star_table = star_table          # (node table rows of the unique slave nodes, facets)
         self._pair_star_rows = pair_star_rows  # (n, ns) row of each pair's slave node in it
         self._normal_jacobian: np.ndarray | None = None
+        self._nodal_normals: np.ndarray | None = None
 
     @classmethod
     def build(cls, node_blocks, node_x, all_slave_facets, local_slave_facets, all_master_facets,
@@ -286,8 +327,20 @@ class Surface3Stencil(PairStencil):
     def master_slots(self) -> np.ndarray:
         return np.arange(self.ns, self.ns + self.nm)
 
+    def slave_normals(self, rows: np.ndarray) -> np.ndarray:
+        """(rows, ns, 3) the averaged unit nodal normals of the pairs' slave nodes at the
+        last evaluation (the kernel's normal variables)."""
+        if self._nodal_normals is None:
+            raise ValueError("nodal normals exist with normals='averaged' only")
+        return self._nodal_normals[self._pair_star_rows[rows]]
+
+    def _normal_variable(self, q, index: int) -> int | None:
+        if self._nodal_normals is None or not getattr(q, "normals_vary", True):
+            return None
+        return 3 * (self.ns + self.nm) + index
+
     def evaluate(self, node_x: np.ndarray, *, normals, integration, basis, num_gauss_points,
-                 crosspoint):
+                 crosspoint, scalar_gradients=False):
         from . import normals as normals_module
         from .kernels import surface3
 
@@ -300,13 +353,15 @@ class Surface3Stencil(PairStencil):
             # d n_j / d x over the star, in the order of the star slots of the stencil; per
             # unique slave node, gathered per pair only for the rows that contribute
             self._normal_jacobian = nodal.jacobian  # (nodes, 3, s, 3)
+            self._nodal_normals = nodal.normals
         else:
             slave_normals = np.zeros_like(slave_x)
             self._normal_jacobian = None
+            self._nodal_normals = None
         return surface3.pair_quantities(
             slave_x, master_x, slave_normals, normals=normals, integration=integration,
             basis=basis, num_gauss_points=num_gauss_points, crosspoint=crosspoint,
-            slave_facet=self.slave_facets)
+            slave_facet=self.slave_facets, scalar_gradients=scalar_gradients)
 
     def combined_gradients(self, q, rows, terms) -> np.ndarray:
         kernel = self._row_gradients(q, rows, terms)  # (T, rows, nv)

@@ -6,9 +6,10 @@ and the 2 slave multipliers, columns the 12 pair dofs and the 2 multipliers.
 Dirichlet rows and the multiplier rows' own diagonal (delta of the
 enforcement) go on the diagonal. With friction (:mod:`dolfinx_mortar.friction`)
 each pair also has a tangential multiplier field (fields P + 1 .. 2P of the
-layout, P pairs): the dense blocks grow by the slave nodes' tangential rows
-and columns (2D: 12 x 16), and each tangential row gets its own diagonal and
-one entry on its node's normal multiplier. The matrix and its pattern are
+layout in 2D, P + 1 .. 3P in 3D: d - 1 per pair): the dense blocks grow by the
+slave nodes' tangential rows and columns (2D: 12 x 16), and each tangential
+row gets its own diagonal, one entry on its node's normal multiplier and, in
+3D, one on the node's other tangential multiplier. The matrix and its pattern are
 rebuilt only when a new search changed the pairs, not on every search.
 """
 
@@ -31,13 +32,15 @@ if typing.TYPE_CHECKING:
 
 
 class Tangential(typing.NamedTuple):
-    """What the matrix needs of friction: per pair the tangential multipliers, a callable
-    k -> :class:`~dolfinx_mortar.friction.TangentialRows`, and du = u - u_start at the
-    node table."""
+    """What the matrix needs of friction: a callable k -> :class:`~dolfinx_mortar.friction.
+    TangentialRows`, du = u - u_start at each pair's node table, and callables
+    (k, rows) -> the pairs' y^a (rows, m, j) and (k, rows) -> their
+    :class:`~dolfinx_mortar.friction.PairTangents`."""
 
-    multipliers: list
     rows: typing.Callable
     increments: list
+    pair_multipliers: typing.Callable
+    tangents: typing.Callable
 
 
 class ContactSystem:
@@ -52,14 +55,16 @@ class ContactSystem:
         fixed_dofs: the local Dirichlet dofs (may include a few owned elsewhere).
         dirichlet_scale: the diagonal of Dirichlet rows (force units, module
             docstring of :mod:`dolfinx_mortar.enforcement`).
-        friction: whether the layout has the tangential multiplier fields.
+        tangential_components: tangential multiplier fields per pair (d - 1 with
+            friction, 0 without).
     """
 
     def __init__(self, V: dolfinx.fem.FunctionSpace, layout: BlockLayout,
                  interfaces: list[MortarInterface], K: PETSc.Mat, J_form, bcs: list,
-                 fixed_dofs: np.ndarray, dirichlet_scale: float, friction: bool = False):
+                 fixed_dofs: np.ndarray, dirichlet_scale: float, tangential_components: int = 0):
         self.comm = layout.comm
-        self.friction = friction
+        self.components = tangential_components
+        self.friction = tangential_components > 0
         self.layout = layout
         self.interfaces = interfaces
         self.J_form = J_form
@@ -85,9 +90,9 @@ class ContactSystem:
     def mat(self) -> PETSc.Mat:
         return self.matrix.mat
 
-    def tangential_field(self, k: int) -> int:
-        """The layout field of pair k's tangential multipliers."""
-        return len(self.interfaces) + 1 + k
+    def tangential_field(self, k: int, a: int = 0) -> int:
+        """The layout field of pair k's tangential multipliers y^a."""
+        return len(self.interfaces) + 1 + k * self.components + a
 
     def assemble(self, multipliers: list[PETSc.Vec], coefficient_vectors: list[dict],
                  rows: typing.Callable[[int], Rows],
@@ -97,11 +102,11 @@ class ContactSystem:
         Args:
             multipliers: the multiplier vectors, one per pair.
             coefficient_vectors: per pair, ghosted multiplier vectors "gap" and "area"
-                (and "slip", "slip_area" with friction) to scatter the row
-                coefficients to ghost slave nodes.
+                (and those of :func:`~dolfinx_mortar.friction.coefficient_names` with
+                friction) to scatter the row coefficients to ghost slave nodes.
             rows: pair k -> the enforcement's rows (residual, alpha, beta, delta).
-            tangential: with friction, the tangential multipliers, their rows and
-                the slip increments at the node table, per pair.
+            tangential: with friction, the tangential rows, slip increments,
+                multipliers and coefficients (:class:`Tangential`).
 
         Returns:
             (whether the matrix was rebuilt, seconds on contact, seconds on the bulk).
@@ -119,7 +124,7 @@ class ContactSystem:
         for k in range(len(self.interfaces)):
             friction = None
             if self.friction:
-                friction = (tangential.multipliers[k], friction_rows[k], tangential.increments[k])
+                friction = (tangential, friction_rows[k])
             blocks = self._contact_blocks(k, multipliers[k], coefficient_vectors[k],
                                           row_values[k], friction)
             if blocks is not None:
@@ -140,7 +145,12 @@ class ContactSystem:
         diagonal = [np.full(self.fixed_rows.size, self.dirichlet_scale)] + [
             r[3] for r in row_values]
         if self.friction:
-            diagonal += [r.own for r in friction_rows] + [r.normal for r in friction_rows]
+            # (the order of _update_pattern's diagonal rows and point entries)
+            m = self.components
+            diagonal += [r.own[:, a, a] for r in friction_rows for a in range(m)]
+            diagonal += [r.normal[:, a] for r in friction_rows for a in range(m)]
+            diagonal += [r.own[:, a, b] for r in friction_rows for a in range(m)
+                         for b in range(m) if a != b]
         diagonal = np.concatenate(diagonal)
         matrix = self.matrix.mat
         self.matrix.add(group_values, groups, diagonal)
@@ -162,8 +172,8 @@ class ContactSystem:
         force_dofs[np.isin(force_dofs, self._fixed_all)] = -1
         pair_z = layout.z(interface.pair_multipliers, k + 1)
         multipliers = [pair_z]
-        if self.friction:
-            multipliers.append(layout.z(interface.pair_multipliers, self.tangential_field(k)))
+        multipliers += [layout.z(interface.pair_multipliers, self.tangential_field(k, a))
+                        for a in range(self.components)]
         rows = np.concatenate([force_dofs] + multipliers, axis=1)
         cols = np.concatenate([layout.u(interface.pair_dofs)] + multipliers, axis=1)
         return rows, cols
@@ -192,9 +202,18 @@ class ContactSystem:
         diagonal_rows = [self.fixed_rows] + normal_rows
         point_entries = None
         if self.friction:
-            tangential_rows = [layout.z(o, self.tangential_field(k)) for k, o in enumerate(owned)]
-            diagonal_rows += tangential_rows
-            point_entries = (np.concatenate(tangential_rows), np.concatenate(normal_rows))
+            m = self.components
+            tangential_rows = [[layout.z(o, self.tangential_field(k, a)) for a in range(m)]
+                               for k, o in enumerate(owned)]
+            diagonal_rows += [t for rows in tangential_rows for t in rows]
+            # each tangential row on its node's normal multiplier, then on its other ones
+            others = [(rows[a], rows[b]) for rows in tangential_rows for a in range(m)
+                      for b in range(m) if a != b]
+            point_entries = (
+                np.concatenate([t for rows in tangential_rows for t in rows]
+                               + [r for r, _ in others]),
+                np.concatenate([normal_rows[k] for k, rows in enumerate(tangential_rows)
+                                for _ in rows] + [c for _, c in others]))
         if self.matrix is not None:
             self.matrix.destroy()
         bulk_pattern, local_to_global = self._bulk
@@ -209,7 +228,8 @@ class ContactSystem:
         """Pair k's dense blocks and which candidate pairs they belong to (m,).
 
         d(-B^T z)/du, d(-B^T z)/dz = -B^T, d C/du (2D: 8 x 12, 8 x 2, 2 x 12); with
-        friction also d(-T^T y)/du, -T^T and the tangential rows' d C_t/du. Only the
+        friction also d(-T^T y)/du, -T^T and the tangential rows' d C_t/du
+        (:class:`~dolfinx_mortar.friction.PairTangents`). Only the
         pairs that contribute, from the factorized gradients (no full dual numbers).
         None before the first evaluation (no pairs yet).
         """
@@ -225,13 +245,18 @@ class ContactSystem:
         alpha_nodes = interface.node_values(vectors["gap"])
         beta_nodes = interface.node_values(vectors["area"])
         if friction is not None:
-            y, tangential, du_table = friction
-            y_nodes = interface.node_values(y)
-            vectors["slip"].getArray()[:] = tangential.slip
-            vectors["slip_gap"].getArray()[:] = tangential.gap
-            vectors["slip_area"].getArray()[:] = tangential.area
-            slip_nodes, slip_gap_nodes, slip_area_nodes = (
-                interface.node_values(vectors[name]) for name in ("slip", "slip_gap", "slip_area"))
+            tangential, tangential_rows = friction
+            m = self.components
+            names = {}
+            for a in range(m):
+                for b in range(m):
+                    names[f"slip_{a}{b}"] = tangential_rows.slip[:, a, b]
+                names[f"slip_gap_{a}"] = tangential_rows.gap[:, a]
+                names[f"slip_area_{a}"] = tangential_rows.area[:, a]
+            row_nodes = {}
+            for name, owned_values in names.items():
+                vectors[name].getArray()[:] = owned_values
+                row_nodes[name] = interface.node_values(vectors[name])
         if contributing.size == 0:
             return None
         stencil, gdim = interface.stencil, interface.gdim
@@ -249,29 +274,24 @@ class ContactSystem:
                             (stencil.AREA + j, beta_pair[:, j])] for j in js]
         num_multipliers = ns
         if friction is not None:
-            from . import friction as friction_module
-
-            rotation = friction_module.ROTATION
-            y_pair, slip_pair, slip_gap_pair, slip_area_pair = (
-                v[slave_nodes] for v in (y_nodes, slip_nodes, slip_gap_nodes, slip_area_nodes))
-            # -sum_j y_j d(R coefficient_jk)/dx, (R coefficient)[c] = sum_e R[c, e] coefficient[e]
-            for a in range(ns):
-                for c in range(gdim):
-                    slave_terms[a * gdim + c] += [
-                        (stencil.dn(j, a, e), rotation[c, e] * y_pair[:, j])
-                        for j in js for e in range(gdim) if rotation[c, e]]
-            for a in range(nm):
-                for c in range(gdim):
-                    master_terms[a * gdim + c] += [
-                        (stencil.mn(j, a, e), -rotation[c, e] * y_pair[:, j])
-                        for j in js for e in range(gdim) if rotation[c, e]]
+            tangents = tangential.tangents(k, contributing)
+            y_pair = tangential.pair_multipliers(k, contributing)  # (pairs, a, j)
+            slave_extra, master_extra = tangents.force_terms(y_pair)
+            for row, extra in zip(slave_terms + master_terms, slave_extra + master_extra,
+                                  strict=True):
+                row += extra
+            coefficient = {name: values[slave_nodes] for name, values in row_nodes.items()}
+            du_table = tangential.increments[k]
             du_slave = du_table[slave_nodes]
             du_master = du_table[stencil.master_nodes[contributing]]
+            # row (a, j): sum_b dC^a/du~^b du~^b_j + dC^a/dg~ dg~_j + dC^a/dA dA_j
             multiplier_rows += [
-                friction_module.slip_terms(stencil, j, du_slave, du_master, slip_pair[:, j])
-                + [(stencil.GAP + j, slip_gap_pair[:, j]), (stencil.AREA + j, slip_area_pair[:, j])]
-                for j in js]
-            num_multipliers = 2 * ns
+                [term for b in range(m) for term in tangents.slip_terms(
+                    j, b, du_slave, du_master, coefficient[f"slip_{a}{b}"][:, j])]
+                + [(stencil.GAP + j, coefficient[f"slip_gap_{a}"][:, j]),
+                   (stencil.AREA + j, coefficient[f"slip_area_{a}"][:, j])]
+                for a in range(m) for j in js]
+            num_multipliers = (1 + m) * ns
         terms = slave_terms + master_terms + multiplier_rows
         forces, columns = (ns + nm) * gdim, stencil.width * gdim
         values = np.zeros((forces + num_multipliers, columns + num_multipliers,
@@ -281,14 +301,19 @@ class ContactSystem:
         values[:forces, columns:columns + ns] = -coefficients.reshape(
             contributing.size, ns, forces).transpose(2, 1, 0)
         if friction is not None:
-            tangent = friction_module.tangential_coefficients(coefficients)  # (m, j, k, c)
-            values[:forces, columns + ns:] = -tangent.reshape(
-                contributing.size, ns, forces).transpose(2, 1, 0)
-            # u~_j = -T_j du: its direct derivative -T_j on the facet nodes' columns
+            T = tangents.coefficients  # (pairs, a, j, nodes, c)
             slots = np.concatenate([stencil.slave_slots, stencil.master_slots])
             force_columns = (slots[:, None] * gdim + np.arange(gdim)).reshape(-1)
-            direct = -tangent.reshape(contributing.size, ns, forces) * slip_pair[:, :, None]
-            values[forces + ns:, force_columns] += direct.transpose(1, 2, 0)
+            for a in range(m):
+                tangent = T[:, a].reshape(contributing.size, ns, forces)
+                block = columns + (1 + a) * ns
+                values[:forces, block:block + ns] = -tangent.transpose(2, 1, 0)
+                # u~^a_j = -T^a_j du: its direct derivative -T^a_j on the facet nodes' columns
+                for b in range(m):
+                    weight = coefficient[f"slip_{b}{a}"]  # dC^b/du~^a, (pairs, j)
+                    direct = -tangent * weight[:, :, None]
+                    row = forces + (1 + b) * ns
+                    values[row:row + ns, force_columns] += direct.transpose(1, 2, 0)
         return values, contributing
 
     def destroy(self) -> None:

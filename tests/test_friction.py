@@ -1,4 +1,4 @@
-"""Coulomb and Tresca friction (2D): exact patch tests, Taylor tests, mu = 0, bad input."""
+"""Coulomb and Tresca friction (2D; 3D in test_friction3d): exact patch tests, Taylor tests, mu = 0, bad input."""
 
 from __future__ import annotations
 
@@ -182,15 +182,17 @@ def test_bad_friction_input():
             sheared_blocks(*args, ("coulomb", 0.1), 0.0, 0.0, **options)
 
 
-def test_friction_in_3d_is_refused():
+@pytest.mark.parametrize("normals", ["slave", "master"])
+def test_friction_in_3d_needs_averaged_normals(normals):
+    """3D tangent frames are built on the averaged nodal normals: other options refused."""
     tagged = meshes.patch_test_3d(ratio=(1, 1), cell_type="hexahedron")
     V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (3,)))
     u, v = dolfinx.fem.Function(V), ufl.TestFunction(V)
     F = internal_work(u, v, {0: Material(E, NU, "linear")})
     pair = ContactPair(tagged.facet_tags, tagged.markers["contact_slave"],
                        tagged.markers["contact_master"])
-    with pytest.raises(ValueError, match="2D only"):
-        ContactProblem(F, u, [], [pair], friction=("coulomb", 0.1))
+    with pytest.raises(ValueError, match="needs normals='averaged'"):
+        ContactProblem(F, u, [], [pair], friction=("coulomb", 0.1), normals=normals)
 
 
 def test_state_is_saved_and_restored_with_the_tangential_multipliers():

@@ -85,7 +85,10 @@ class PairQuantities3:
     ``M`` (n, ns, nm) values; ``Dn`` (n, ns, ns, 3), ``Mn`` (n, ns, nm, 3),
     ``gap`` (n, ns), ``area`` (n, ns) Duals over ``num_variables`` variables;
     ``valid`` (n,): the pair faces and overlaps; ``overlap`` (n,): clipped area
-    over slave facet area.
+    over slave facet area. ``D_dual``, ``M_dual``: D and M with their gradients
+    (only when asked for, ``scalar_gradients``: friction's nodal tangent frames
+    need them); ``normals_vary``: whether the nodal normal variables follow the
+    coordinates (False for integrals frozen in the reference configuration).
     """
 
     D: np.ndarray
@@ -98,6 +101,9 @@ class PairQuantities3:
     overlap: np.ndarray
     num_variables: int
     slices: dict
+    D_dual: RowSubsetDual | None = None
+    M_dual: RowSubsetDual | None = None
+    normals_vary: bool = True
 
 
 # -- dual helpers ------------------------------------------------------------------------
@@ -317,6 +323,7 @@ def pair_quantities(
     num_gauss_points: int | None = None,
     crosspoint: np.ndarray | None = None,
     slave_facet: np.ndarray | None = None,
+    scalar_gradients: bool = False,
 ) -> PairQuantities3:
     """Mortar contributions of every pair, with derivatives (see the module docstring).
 
@@ -365,7 +372,7 @@ def pair_quantities(
         "Dn": np.zeros((n, ns, ns, 3)), "Mn": np.zeros((n, ns, nm, 3)),
         "gap": np.zeros((n, ns)), "area": np.zeros((n, ns)),
     }
-    names = ("Dn", "Mn", "gap", "area")
+    names = ("Dn", "Mn", "gap", "area") + (("D", "M") if scalar_gradients else ())
     valid = np.zeros(n, dtype=bool)
     overlap = np.zeros(n)
     if integration == "segment":
@@ -384,14 +391,16 @@ def pair_quantities(
                 grads[name][position] = quantities[name].grad
     else:
         rows, grads = _element_parts(slave_x, master_x, slave_normals, crosspoint, normals,
-                                     basis, rule, slave_facet, values, valid, overlap)
+                                     basis, rule, slave_facet, values, valid, overlap, names)
 
     def subset(name: str) -> RowSubsetDual:
         return RowSubsetDual(values[name], rows, grads[name])
 
     return PairQuantities3(
         D=values["D"], M=values["M"], Dn=subset("Dn"), Mn=subset("Mn"), gap=subset("gap"),
-        area=subset("area"), valid=valid, overlap=overlap, num_variables=nvar, slices=slices)
+        area=subset("area"), valid=valid, overlap=overlap, num_variables=nvar, slices=slices,
+        D_dual=subset("D") if scalar_gradients else None,
+        M_dual=subset("M") if scalar_gradients else None)
 
 
 def _normal_field(xs: Dual, xm: Dual, nodal: Dual, normals: str, ns: int, nm: int) -> Dual:
@@ -453,16 +462,15 @@ def _auxiliary_plane(xs: Dual, xm: Dual, nodal: Dual, normals: str):
 
 
 def _element_parts(slave_x, master_x, slave_normals, crosspoint, normals, basis, rule,
-                   slave_facet, values, valid, overlap):
+                   slave_facet, values, valid, overlap, names):
     """Element-based integration in chunks: fills ``values``, ``valid`` and ``overlap``;
-    returns the contributing rows and their gradients."""
+    returns the contributing rows and the gradients of the outputs ``names``."""
     n, ns, _ = slave_x.shape
     nvar = 3 * (2 * ns + master_x.shape[1])
     points, point_weights = _facet_rule(ns, rule)
     on_master = _element_points_on_master(
         slave_x, master_x, slave_normals, normals, points,
         np.arange(n) if slave_facet is None else np.asarray(slave_facet).reshape(-1))
-    names = ("Dn", "Mn", "gap", "area")
     gradients: dict[str, list] = {name: [] for name in names}
     all_rows = []
     for start in range(0, n, _CHUNK):

@@ -1,0 +1,204 @@
+"""Coulomb friction in 3D: nodal tangent frames, Taylor tests in stick and slip, the friction
+patch test, mu = 0, serial = parallel."""
+
+import dolfinx
+import numpy as np
+import pytest
+from mpi4py import MPI
+from test_contact import assert_taylor_second_order
+from test_contact3d import curved_punch
+
+from dolfinx_mortar import compat
+from dolfinx_mortar.friction import FrictionLaw, tangent_frames
+
+
+def test_tangent_frames_are_orthonormal_with_exact_derivatives():
+    """tau^1, tau^2, n orthonormal and right-handed; d tau / d n against central
+    differences of the unit normal (the frame is used only on the sphere |n| = 1, so the
+    derivative is checked along tangent directions of n)."""
+    rng = np.random.default_rng(0)
+    normals = rng.standard_normal((50, 3))
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    axis = np.array([1.0, 0.0, 0.0])
+    normals = normals[np.abs(normals @ axis) < 0.95]
+    tau, dtau = tangent_frames(normals, axis)
+    frame = np.concatenate([tau, normals[:, None]], axis=1)
+    np.testing.assert_allclose(frame @ frame.transpose(0, 2, 1),
+                               np.broadcast_to(np.eye(3), frame.shape), atol=1e-14)
+    np.testing.assert_allclose(np.linalg.det(frame), 1.0, rtol=1e-14)
+    direction = rng.standard_normal(normals.shape)
+    direction -= np.einsum("nc,nc->n", direction, normals)[:, None] * normals
+    h = 1e-6
+    plus, minus = (tangent_frames(normals + s * h * direction, axis)[0] for s in (1, -1))
+    difference = (plus - minus) / (2 * h)
+    exact = np.einsum("nace,ne->nac", dtau, direction)
+    np.testing.assert_allclose(difference, exact, atol=1e-8)
+
+
+def frictional_punch(method: str, mu: float = 1.0):
+    """The 3D contact Taylor test's state (test_contact3d: curved punch, Neo-Hookean,
+    every slave node 0.03 to 0.04 deep, sheared) with Coulomb friction, slips from the
+    undeformed state and random tangential multipliers 1 <= |y^a_j| <= 2."""
+    problem, apply_load = curved_punch(MPI.COMM_WORLD, cell="tetrahedron", ratio=(4, 3),
+                                       curvature=0.02, material="neo-hookean",
+                                       method=method, friction=("coulomb", mu))
+    rng = np.random.default_rng(3 + problem.comm.rank)
+    u = problem.u
+    V = u.function_space
+    shift = dolfinx.fem.Function(V)
+    punch = dolfinx.mesh.locate_entities(V.mesh, 3, lambda x: x[2] >= 0.5 - 1e-12)
+    shift.interpolate(lambda x: np.vstack([0.01 * np.sin(3 * x[1]), 0.01 * np.cos(2 * x[0]),
+                                           -0.04 + 0.0 * x[2]]), punch)
+    u.x.array[:] = shift.x.array + 1e-3 * rng.standard_normal(u.x.array.size)
+    u.x.scatter_forward()
+    apply_load(0.0)
+    compat.set_bc_values(u, problem.bcs)
+    for z in problem.multipliers:
+        z.setArray(rng.uniform(0.5, 1.5, z.getLocalSize()))
+    for y in problem.tangential:
+        size = y.getLocalSize()
+        y.setArray(rng.choice([-1.0, 1.0], size) * rng.uniform(1.0, 2.0, size))
+    problem._read_state_into_x()
+    return problem
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("method", ["lagrange", "penalty"])
+@pytest.mark.parametrize("state", ["slipping", "sticking"])
+def test_frictional_jacobian_taylor_3d(state, method):
+    """The whole 3D frictional system: slope 2 in the stick and in the slip state, with
+    mu set so that every active node is in ``state`` with a margin of 2 from the kink
+    (bound mu (z_j - c_n g^_j), penalty mu z_j, against |v_j|). Slip exercises the
+    coupled 2 x 2 derivative of the projection onto the disc; both exercise d D, d M and
+    the frames' derivative through the averaged normals."""
+    problem = frictional_punch(method)
+    problem._residual(problem.snes, problem.x, problem.b)
+    active = problem.active[0]
+    z = problem.multipliers[0].getArray(readonly=True)[active]
+    if method == "lagrange":
+        z = z - problem.c_n * problem.gaps[0][active] / problem.areas[0][active]
+    s = problem.friction_state()["slip"][active]
+    y = problem.friction_state()["traction"][active]
+    v = np.linalg.norm((y if method == "lagrange" else 0.0) + problem.c_t * s, axis=1)
+    comm = problem.comm
+    if state == "slipping":
+        mu = 0.5 * comm.allreduce(float(np.min(v, initial=np.inf)), op=MPI.MIN) / \
+            comm.allreduce(float(np.max(z, initial=0.0)), op=MPI.MAX)
+    else:
+        mu = 2.0 * comm.allreduce(float(np.max(v, initial=0.0)), op=MPI.MAX) / \
+            comm.allreduce(float(np.min(z, initial=np.inf)), op=MPI.MIN)
+    problem.friction.laws[0] = FrictionLaw("coulomb", mu)
+    problem._residual(problem.snes, problem.x, problem.b)
+    friction = problem.friction_state()
+    counts = comm.allreduce(
+        np.array([int(active.sum()), int(friction[state][active].sum())]), op=MPI.SUM)
+    assert counts[0] > 0 and counts[1] == counts[0]
+    assert_taylor_second_order(problem, seed=11)
+    problem.destroy()
+
+
+def load_demo(name: str):
+    import importlib.util
+    import pathlib
+
+    path = pathlib.Path(__file__).parents[1] / "demos" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"demo3d_{name}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+PATCH = load_demo("friction_patch")
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("slave", ["upper", "lower"])
+@pytest.mark.parametrize("cell", ["tetrahedron", "hexahedron"])
+@pytest.mark.parametrize("shear_ratio", [0.5, 2.0])
+def test_friction_patch_test_3d(shear_ratio, cell, slave):
+    """demos/friction_patch.py --dim 3, non-matching 3:7 (tetrahedra) or 2:3 (hexahedra):
+    R = 2 every node slips with the traction vector mu p along the slip and the slip
+    (R - 1) mu p H / G; R = 0.5 every node sticks with the traction R mu p and slip 0
+    (measured deviations <= 2.4e-13)."""
+    ratio = "3:7" if cell == "tetrahedron" else "2:3"
+    summary = PATCH.main(["--dim", "3", "--cell-type", cell, "--ratio", ratio, "--slave", slave,
+                          "--shear-ratio", str(shear_ratio)])
+    state = "num_slipping" if shear_ratio > 1 else "num_sticking"
+    assert summary[state] == summary["num_active"] == summary["num_slave_nodes"]
+    for key in ("pressure", "traction", "slip"):
+        assert summary[f"max_{key}_deviation_rel"] < 1e-10, key
+    assert summary["newton_iterations"] <= 10
+
+
+def test_tresca_and_penalty_friction_in_3d():
+    """Tresca with bound 1.5: full slip with |y_j| = 1.5 along the slip; penalty Coulomb
+    while sticking: y = eps_t s as vectors."""
+    problem = PATCH.sheared_blocks_3d((3, 7), "upper", ("tresca", 1.5), 0.02, 1.5)
+    assert problem.solve().converged
+    state = problem.friction_state()
+    assert state["slipping"].all()
+    np.testing.assert_allclose(np.linalg.norm(state["traction"], axis=1), 1.5, rtol=1e-10)
+    np.testing.assert_allclose(state["traction"][:, 1], 0.0, atol=1e-10)
+    problem.destroy()
+    eps = 1e4
+    shift = 0.0078
+    problem = PATCH.sheared_blocks_3d((3, 7), "upper", ("coulomb", 0.5), shift,
+                                      shift * PATCH.SHEAR_MODULUS, method="penalty",
+                                      penalty=1e5, c_t=eps)
+    assert problem.solve().converged
+    state = problem.friction_state()
+    assert state["sticking"].all()
+    np.testing.assert_allclose(state["traction"], eps * state["slip"], rtol=1e-10, atol=1e-12)
+    problem.destroy()
+
+
+def test_zero_friction_is_the_frictionless_problem_3d():
+    """The curved punch of test_contact3d, 2 load steps: mu = 0 gives the frictionless
+    Newton iterations and displacement (y stays exactly 0)."""
+    from test_contact3d import solve_curved_punch
+
+    frictionless = solve_curved_punch(MPI.COMM_SELF, steps=2)
+    frictional = solve_curved_punch(MPI.COMM_SELF, steps=2, friction=("coulomb", 0.0))
+    assert frictional["iterations"] == frictionless["iterations"]
+    np.testing.assert_allclose(frictional["pressure"], frictionless["pressure"], rtol=1e-10,
+                               atol=1e-12 * np.max(frictionless["pressure"]))
+    force = frictionless["slave_force"]
+    np.testing.assert_allclose(frictional["slave_force"], force, rtol=1e-10,
+                               atol=1e-12 * np.linalg.norm(force))
+
+
+def test_disc_projection_rows_against_finite_differences():
+    """tangential_rows in 3D (one node at a time): the derivatives of C_j with respect to
+    y_j, u~_j, z_j, g~_j and A_j against central differences, in stick and in slip,
+    Lagrange and penalty: the 2 x 2 blocks of the projection onto the disc."""
+    from dolfinx_mortar.friction import tangential_rows
+
+    rng = np.random.default_rng(5)
+    law = FrictionLaw("coulomb", 0.4)
+    n = 40
+    y = rng.standard_normal((n, 2))
+    slip = 0.3 * rng.standard_normal((n, 2))
+    z = rng.uniform(1.0, 3.0, n)
+    gap = -0.05 * rng.uniform(0.0, 1.0, n)
+    area = rng.uniform(0.5, 1.5, n)
+    active = np.ones(n, dtype=bool)
+    h = 1e-7
+    for c_n in (2.0, None):
+        def rows(y=y, slip=slip, z=z, gap=gap, area=area, c_n=c_n):
+            return tangential_rows(law, 1.3, 1.7, c_n, y, z, active, slip, gap, area)
+
+        base = rows()
+        assert 0 < base.sticking.sum() < n
+        for a in range(2):
+            dy = np.zeros((n, 2))
+            dy[:, a] = h
+            np.testing.assert_allclose((rows(y=y + dy).residual - rows(y=y - dy).residual)
+                                       / (2 * h), base.own[:, :, a], atol=1e-6)
+            np.testing.assert_allclose((rows(slip=slip + dy).residual
+                                        - rows(slip=slip - dy).residual) / (2 * h),
+                                       base.slip[:, :, a], atol=1e-6)
+        for name, value in (("normal", "z"), ("gap", "gap"), ("area", "area")):
+            plus = rows(**{value: locals()[value] + h}).residual
+            minus = rows(**{value: locals()[value] - h}).residual
+            np.testing.assert_allclose((plus - minus) / (2 * h), getattr(base, name),
+                                       atol=1e-6, err_msg=name)
