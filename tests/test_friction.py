@@ -1,4 +1,4 @@
-"""Coulomb and Tresca friction (2D; 3D in test_friction3d): exact patch tests, Taylor tests, mu = 0, bad input."""
+"""Coulomb and Tresca friction in 2D (3D: test_friction3d): patch tests, Taylor tests, mu = 0."""
 
 from __future__ import annotations
 
