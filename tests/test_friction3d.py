@@ -202,3 +202,68 @@ def test_disc_projection_rows_against_finite_differences():
             minus = rows(**{value: locals()[value] - h}).residual
             np.testing.assert_allclose((plus - minus) / (2 * h), getattr(base, name),
                                        atol=1e-6, err_msg=name)
+
+
+def sheared_punch(comm, steps: int = 4) -> dict:
+    """The curved punch (test_contact3d) pressed 0.02 (t in [0, 1]) then its top moved
+    0.02 along x (t in [1, 2]) with Coulomb mu = 0.3: a circular contact zone with a
+    sticking centre and a slipping rim, then gross sliding."""
+    from dolfinx_mortar.loading import solve_load_steps
+
+    problem, press = curved_punch(comm, cell="hexahedron", ratio=(6, 5), curvature=0.1,
+                                  friction=("coulomb", 0.3))
+    drive = problem.bcs[0].g.x.array.reshape(-1, 3)
+
+    def apply_load(t):
+        press(min(t, 1.0))
+        drive[:, 0] = 0.02 * max(t - 1.0, 0.0)
+
+    history = []
+
+    def record(step):
+        state = problem.friction_state()
+        z = problem.multipliers[0].getArray(readonly=True)
+        slave, master = problem.contact_forces()
+        history.append({
+            "iterations": step.iterations,
+            "slave": slave, "master": master,
+            "slipping": comm.allreduce(int(state["slipping"].sum()), op=MPI.SUM),
+            "sticking": comm.allreduce(int(state["sticking"].sum()), op=MPI.SUM),
+            "dissipation": comm.allreduce(float(state["dissipation"].sum()), op=MPI.SUM),
+            "min_dissipation": comm.allreduce(float(state["dissipation"].min(initial=0.0)),
+                                              op=MPI.MIN),
+            # |y_j| - mu z_j on the slipping nodes, relative to the largest pressure
+            "slip_bound_deviation": comm.allreduce(float(np.max(np.abs(
+                np.linalg.norm(state["traction"], axis=1) - 0.3 * z)[state["slipping"]],
+                initial=0.0)), op=MPI.MAX) / comm.allreduce(float(z.max(initial=0.0)),
+                                                            op=MPI.MAX),
+        })
+
+    records = solve_load_steps(problem, apply_load, 2 * steps, on_step=record, end=2.0)
+    problem.destroy()
+    assert all(r.cutbacks == 0 for r in records)
+    return {"history": history}
+
+
+@pytest.mark.parallel
+def test_sheared_punch_sticks_then_slides_and_dissipates():
+    """3D frictional sliding (curved punch, hexahedra, mu = 0.3): at most 10 Newton
+    iterations a step, a stick zone inside a slip rim on the first shear step and gross
+    slip at the end; on slipping nodes |y_j| = mu z_j (the gap closed to solver
+    tolerance); slave and master forces balance; the nodal frictional work is never
+    negative (to rounding); N ranks give the serial forces to 1e-8."""
+    result = sheared_punch(MPI.COMM_WORLD)
+    history = result["history"]
+    assert max(h["iterations"] for h in history) <= 10
+    first_shear, last = history[4], history[-1]
+    assert first_shear["sticking"] > 0 and first_shear["slipping"] > 0
+    assert last["sticking"] == 0 and last["slipping"] > 0
+    for h in history:
+        assert h["slip_bound_deviation"] < 1e-8
+        np.testing.assert_allclose(h["slave"], -h["master"], atol=1e-12 * abs(h["slave"][2]))
+        assert h["min_dissipation"] >= -1e-12 * max(g["dissipation"] for g in history)
+    if MPI.COMM_WORLD.size > 1:
+        serial = sheared_punch(MPI.COMM_SELF)["history"]
+        for a, b in zip(history, serial, strict=True):
+            np.testing.assert_allclose(a["slave"], b["slave"], rtol=1e-8,
+                                       atol=1e-8 * abs(b["slave"][2]))
