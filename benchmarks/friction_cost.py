@@ -8,7 +8,10 @@ step) and the answer, as a markdown table (and JSON with ``--json``):
 
 Cases: 2D ironing (500 steps, Neo-Hookean, mu = 0.3, the frictional shallow
 ironing benchmark) and Hertz case B at refinement 2 (mu = 0.3; similar
-materials, so friction changes the pressure only slightly).
+materials, so friction changes the pressure only slightly); in 3D (two
+tangential multipliers per node) the Hertz sphere on a block (quarter model,
+2 elements per contact radius, refinement 1) and the 3D ironing setup with one
+hexahedron through the thickness to t = 1.5 (375 of the 500 steps).
 """
 
 from __future__ import annotations
@@ -25,8 +28,12 @@ from mpi4py import MPI
 DEMOS = pathlib.Path(__file__).parents[1] / "demos"
 
 CASES = {
-    "ironing": (["--steps", "500"], "vertical_force_at_t1_5"),
-    "hertz": (["--refinement", "2", "--steps", "2"], "p_max"),
+    "ironing": ("ironing", ["--steps", "500"], "vertical_force_at_t1_5"),
+    "hertz": ("hertz", ["--refinement", "2", "--steps", "2"], "p_max"),
+    "hertz_sphere": ("hertz_sphere", ["--elements-per-radius", "2", "--refinement", "1"],
+                     "p_max"),
+    "ironing3d": ("ironing", ["--dim", "3", "--layers", "1", "--steps", "500",
+                              "--end-time", "1.5"], "horizontal_force_at_t1_5"),
 }
 VARIANTS = {"frictionless": [], "mu = 0": ["--mu", "0"], "mu = 0.3": ["--mu", "0.3"]}
 
@@ -49,8 +56,8 @@ def main(argv=None) -> int:
     logging.getLogger("dolfinx_mortar").setLevel(logging.WARNING)
     rows = []
     for case in args.cases:
-        base, key = CASES[case]
-        module = demo(case)
+        name, base, key = CASES[case]
+        module = demo(name)
         # repeats interleaved (A B C A B C ...), so that load from elsewhere hits all alike
         results = {variant: [] for variant in VARIANTS}
         for _ in range(args.repeats):

@@ -13,10 +13,14 @@ with T^a_j the tangential counterpart of B_j:
   and Mn (R is constant), no new mortar integrals.
 - 3D: a frame tau^1_j, tau^2_j of the tangent plane of the averaged nodal
   normal n_j (tau^1 the unit projection of a fixed axis e of the interface onto
-  that plane, tau^2 = n x tau^1), and T^a_j = -D_jk tau^a_j on slave dofs,
-  +M_jl tau^a_j on master dofs (Gitterle, Popp, Gee and Wall 2010). D and M
-  come from the kernel with their gradients; the frame's derivative is chained
-  through d n_j / dx over the node's facet star.
+  that plane, tau^2 = n x tau^1; the averaged normals also with the ``slave``
+  and ``master`` normal options, which have no single normal per node), and
+  T^a_j = -D_jk tau^a_j on slave dofs, +M_jl tau^a_j on master dofs (Gitterle,
+  Popp, Gee and Wall 2010). D and M come from the kernel with their
+  gradients; the frame's derivative is chained through d n_j / dx over the
+  node's facet star. A tangent direction along a prescribed displacement of
+  its node (a symmetry plane) carries no friction (:meth:`Friction.
+  set_fixed_components`).
 
 The weighted slip of the slave against the master over the current solve is
 
@@ -67,6 +71,11 @@ STICK_BAND = 1e-6
 ROTATION = np.array([[0.0, -1.0], [1.0, 0.0]])
 """R: tau = R n (2D)."""
 
+ALIGNED = 0.99
+"""3D: a tangent direction within 8 degrees of a prescribed displacement component of
+its node lies along it (a symmetry plane: the averaged normal there leans a little out of
+the plane, the star holding only the model's half of the node's facets)."""
+
 FRAME_DEGENERACY = 1e-3
 """3D: an active node whose normal is this close to parallel (|(I - n n^T) e|) to the
 interface's frame axis e has no usable tangent frame."""
@@ -115,10 +124,13 @@ class TangentialRows:
 
 def tangential_rows(law: FrictionLaw | None, weight: float, c_t: float, c_n: float | None,
                     y: np.ndarray, z: np.ndarray, active: np.ndarray, slip: np.ndarray,
-                    gap: np.ndarray, area: np.ndarray) -> TangentialRows:
+                    gap: np.ndarray, area: np.ndarray,
+                    held: np.ndarray | None = None) -> TangentialRows:
     """The rows of the module docstring at the current state (weight = h^(d-1)).
 
-    y and slip are (n, m). ``c_n`` given (Lagrange multipliers): the Coulomb bound is
+    y and slip are (n, m). ``held`` (n, m): components along a prescribed displacement
+    of the slave node (a symmetry plane): y^a = 0 there, and the law acts on the others.
+    ``c_n`` given (Lagrange multipliers): the Coulomb bound is
     mu max(0, z_j - c_n g^_j), the normal complementarity quantity (equal to mu z_j once
     the gap is closed), as in Hueber, Stadler and Wohlmuth and Gitterle et al.; None
     (penalty): mu max(0, z_j).
@@ -133,9 +145,10 @@ def tangential_rows(law: FrictionLaw | None, weight: float, c_t: float, c_n: flo
     if law is None or not np.any(active):
         return TangentialRows(residual, d_slip, d_gap, d_area, d_normal, d_own, sticking)
     lagrange = c_n is not None
+    free = np.ones((n, m)) if held is None else (~held).astype(float)
     a = np.where(active, area, 1.0)
     s = slip / a[:, None]
-    v = (y if lagrange else 0.0) + c_t * s
+    v = ((y if lagrange else 0.0) + c_t * s) * free
     # the bound b and its derivatives over z, g~ and A
     db_dz, db_dgap, db_darea = np.zeros(n), np.zeros(n), np.zeros(n)
     if law.kind == "coulomb":
@@ -163,7 +176,7 @@ def tangential_rows(law: FrictionLaw | None, weight: float, c_t: float, c_n: flo
         direction[moving] = v[moving] / size[moving, None]
     residual[sticking] = weight * (y - v)[sticking]
     d_slip[sticking] = -weight * c_t / a[sticking, None, None] * identity
-    d_area[sticking] = weight * c_t * (slip / a[:, None] ** 2)[sticking]
+    d_area[sticking] = weight * c_t * (slip / a[:, None] ** 2 * free)[sticking]
     d_own[sticking] = 0.0 if lagrange else weight * identity
     residual[slipping] = weight * (y - bound[:, None] * direction)[slipping]
     d_normal[slipping] = -weight * (db_dz[:, None] * direction)[slipping]
@@ -174,11 +187,22 @@ def tangential_rows(law: FrictionLaw | None, weight: float, c_t: float, c_n: flo
         turning = slipping & moving
         ratio = np.where(turning, bound / np.where(moving, size, 1.0), 0.0)
         P = ratio[:, None, None] * (identity - direction[:, :, None] * direction[:, None, :])
+        P *= free[:, None, :]  # dv^a = 0 for held components
         if lagrange:
             d_own[turning] -= weight * P[turning]
         d_slip[turning] = -weight * c_t * P[turning] / a[turning, None, None]
         d_area[turning] += weight * c_t * np.einsum(
             "nab,nb->na", P, slip / a[:, None] ** 2)[turning]
+    if held is not None and held.any():
+        # v^a = 0 whatever y^a and u~^a: nothing depends on them; their rows are y^a = 0
+        d_slip *= free[:, None, :]
+        rows = np.nonzero(held)
+        residual[rows] = weight * y[rows]
+        for out in (d_gap, d_area, d_normal):
+            out[rows] = 0.0
+        d_slip[rows[0], rows[1], :] = 0.0
+        d_own[rows[0], rows[1], :] = 0.0
+        d_own[rows[0], rows[1], rows[1]] = weight
     return TangentialRows(residual, d_slip, d_gap, d_area, d_normal, d_own, sticking)
 
 
@@ -334,12 +358,9 @@ def laws_per_pair(friction, num_pairs: int) -> list[FrictionLaw | None]:
     return [law] * num_pairs
 
 
-def check_options(gdim: int, method: str, active_set: str, condensation: bool,
-                  linear_solver: str, normals: str) -> None:
+def check_options(method: str, active_set: str, condensation: bool,
+                  linear_solver: str) -> None:
     """Raise for the combinations friction does not support (yet)."""
-    if gdim == 3 and normals != "averaged":
-        raise ValueError("friction in 3D needs normals='averaged' (the tangent frames are "
-                         f"built on the averaged nodal normals), got normals={normals!r}")
     if method not in ("lagrange", "penalty"):
         raise ValueError(f"friction works with method='lagrange' or 'penalty', got {method!r}")
     if active_set != "semismooth":
@@ -379,14 +400,31 @@ class Friction:
         self.slips = [np.zeros((i.num_owned_multipliers, self.components)) for i in interfaces]
         self.increments: list[np.ndarray | None] = [None] * len(interfaces)
         self.axes = [frame_axis(i) if self.gdim == 3 else None for i in interfaces]
-        for interface in interfaces:
-            interface.scalar_gradients = self.gdim == 3
+        self.fixed: list[np.ndarray | None] = [None] * len(interfaces)
+        self.held: list[np.ndarray | None] = [None] * len(interfaces)
+        if self.gdim == 3 and any(i.stencil is not None and i.stencil.max_star == 0
+                                  and i.normals != "averaged" for i in interfaces):
+            raise RuntimeError("3D friction: set interface.scalar_gradients before the "
+                               "first search (the stencils need the normals' stars)")
         self._start = u.x.array.copy()
 
     @property
     def vectors(self) -> list[PETSc.Vec]:
         """Every y^a, pair by pair (the order of the layout's tangential fields)."""
         return [y for pair in self.multipliers for y in pair]
+
+    def set_fixed_components(self, fixed: list[np.ndarray]) -> None:
+        """Per pair, (owned slave nodes, gdim): the displacement components the Dirichlet
+        conditions prescribe (collective). 3D: a tangent direction along a prescribed
+        component (a symmetry plane through the coordinate axes, whose frames align with
+        it) carries no friction, y^a = 0 (:func:`tangential_rows`); otherwise the mortar
+        slip across a symmetry plane, integrated over the half of the neighbourhood the
+        model holds, would be held by a spurious stick condition."""
+        partial = [f.any(axis=1) & ~f.all(axis=1) for f in fixed]
+        any_partial = self.interfaces[0].comm.allreduce(
+            [bool(p.any()) for p in partial], op=MPI.MAX) if partial else []
+        self.fixed = [f if self.gdim == 3 and flag else None
+                      for f, flag in zip(fixed, any_partial, strict=True)]
 
     def start(self, u) -> None:
         """Measure slips from u (the state a solve starts from)."""
@@ -420,6 +458,9 @@ class Friction:
             vector.setValues(indices, values[:, a].reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
             vector.assemble()
             self.slips[k][:, a] = vector.getArray(readonly=True)
+        if self.fixed[k] is not None:
+            aligned = np.abs(self.nodal_frames(k)) > ALIGNED  # (n, a, c)
+            self.held[k] = (aligned & self.fixed[k][:, None, :]).any(axis=2)
 
     def rows(self, k: int, z: np.ndarray, active: np.ndarray, gap: np.ndarray,
              area: np.ndarray) -> TangentialRows:
@@ -428,7 +469,7 @@ class Friction:
         if self.gdim == 3 and self.laws[k] is not None:
             self._check_frames(k, active)
         return tangential_rows(self.laws[k], self.weight, self.c_t, self.c_n, y, z, active,
-                               self.slips[k], gap, area)
+                               self.slips[k], gap, area, self.held[k])
 
     def _check_frames(self, k: int, active: np.ndarray) -> None:
         """Raise (on every rank) if an active node's normal is parallel to the frame axis."""

@@ -192,7 +192,9 @@ class MortarInterface:
         self._pair_dofs: np.ndarray | None = None
         self.stencil: stencils.PairStencil | None = None
         self.scalar_gradients = False
-        """3D: the kernel also keeps the gradients of D and M (friction sets it)."""
+        """3D: the kernel also keeps the gradients of D and M, and the stencils hold the
+        averaged normals' stars whatever the normal option (friction's tangent frames;
+        set before the first search)."""
 
     # -- multipliers -------------------------------------------------------
 
@@ -507,7 +509,7 @@ class MortarInterface:
         else:
             stencil = stencils.Surface3Stencil.build(
                 self._node_blocks, self._node_x, all_slave_facets, local_slave_facets,
-                all_master_facets, pairs, self.normals)
+                all_master_facets, pairs, self.normals, nodal_frames=self.scalar_gradients)
         self.stencil = stencil
         self.pair_slave_facets = stencil.slave_facets
         self.pair_multipliers = self.node_multipliers[stencil.slave_nodes]

@@ -136,7 +136,7 @@ class ContactProblem:
         friction: ``None`` (frictionless, the default), ``("coulomb", mu)``,
             ``("tresca", bound)`` (a pressure), or a list of these, one per
             pair (:mod:`dolfinx_mortar.friction`; direct linear solver, with
-            ``lagrange`` semismooth or ``penalty``; in 3D with averaged normals).
+            ``lagrange`` semismooth or ``penalty``).
         c_t: the tangential complementarity parameter (pressure / length;
             default c_n), or with ``penalty`` the tangential penalty (default
             the normal one). Like c_n it changes the Newton path, never the
@@ -200,8 +200,7 @@ class ContactProblem:
         self.friction: friction_rules.Friction | None = None
         """The frictional state (:class:`~dolfinx_mortar.friction.Friction`), if any."""
         if self.has_friction:
-            friction_rules.check_options(u.function_space.mesh.geometry.dim, method, active_set,
-                                         condensation, linear_solver, normals)
+            friction_rules.check_options(method, active_set, condensation, linear_solver)
         for value, name in ((c_n, "c_n"), (penalty, "penalty"), (c_t, "c_t")):
             if value is not None and not value > 0:
                 raise ValueError(f"{name} must be positive, got {value}")
@@ -236,6 +235,9 @@ class ContactProblem:
             )
             for pair in self.pairs
         ]
+        if self.has_friction and u.function_space.mesh.geometry.dim == 3:
+            for interface in self.interfaces:
+                interface.scalar_gradients = True  # friction's tangent frames
         self._check_slave_body()
         self._inversion_check = diagnostics.InversionCheck(self.V)
         self._last_inversion = diagnostics.Inversion()
@@ -292,6 +294,10 @@ class ContactProblem:
             self.friction = friction_rules.Friction(
                 friction_laws, self.interfaces, u, self.c_t,
                 self.c_n if method == "lagrange" else None, scales.face)
+            gdim = self.V.mesh.geometry.dim
+            self.friction.set_fixed_components([
+                np.isin(i.owned_multiplier_blocks[:, None] * bs + np.arange(gdim),
+                        self._fixed_dofs) for i in self.interfaces])
         self.enforcement = enforcement.create(
             method, active_set, scales,
             [i.num_owned_multipliers for i in self.interfaces], c_n=self.c_n,

@@ -270,7 +270,8 @@ class Surface3Stencil(PairStencil):
     nodes are matched by global block). Those nodes follow the facet nodes in
     the stencil, ``max_star`` slots per slave node (padded, ``present`` False).
     With the ``slave`` or ``master`` normal option the normals depend on the
-    pair's own facets only and there are no star slots.
+    pair's own facets only and there are no star slots, unless friction's
+    tangent frames need the averaged normals (``nodal_frames``).
     """
 
     gdim = 3
@@ -289,7 +290,7 @@ class Surface3Stencil(PairStencil):
 
     @classmethod
     def build(cls, node_blocks, node_x, all_slave_facets, local_slave_facets, all_master_facets,
-              pairs, normals: str):
+              pairs, normals: str, nodal_frames: bool = False):
         from . import normals as normals_module
 
         ns = local_slave_facets.shape[1]
@@ -297,7 +298,7 @@ class Surface3Stencil(PairStencil):
         facet = pairs[:, 0]
         slave = local_slave_facets[facet]
         master = all_master_facets[pairs[:, 1]]
-        if normals != "averaged":
+        if normals != "averaged" and not nodal_frames:
             nodes = np.concatenate([slave, master], axis=1)
             return cls(nodes, np.ones(nodes.shape, dtype=bool), facet, ns, nm, 0, None, None)
         # the slave nodes known here, one row per global block
@@ -331,7 +332,7 @@ class Surface3Stencil(PairStencil):
         """(rows, ns, 3) the averaged unit nodal normals of the pairs' slave nodes at the
         last evaluation (the kernel's normal variables)."""
         if self._nodal_normals is None:
-            raise ValueError("nodal normals exist with normals='averaged' only")
+            raise ValueError("no nodal normals: the stencil was built without normal stars")
         return self._nodal_normals[self._pair_star_rows[rows]]
 
     def _normal_variable(self, q, index: int) -> int | None:
@@ -346,7 +347,7 @@ class Surface3Stencil(PairStencil):
 
         slave_x = node_x[self.slave_nodes]
         master_x = node_x[self.master_nodes]
-        if normals == "averaged":
+        if self._star_table is not None:
             table_rows, star_facets = self._star_table
             nodal = normals_module.averaged_nodal_normals(node_x[table_rows], star_facets)
             slave_normals = nodal.normals[self._pair_star_rows]

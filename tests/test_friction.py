@@ -2,16 +2,13 @@
 
 from __future__ import annotations
 
-import dolfinx
 import numpy as np
 import pytest
-import ufl
 from mpi4py import MPI
 from test_contact import assert_taylor_second_order, built_problem, penetrating_blocks
 
-from dolfinx_mortar import compat, meshes
-from dolfinx_mortar.materials import Material, internal_work
-from dolfinx_mortar.problem import ContactPair, ContactProblem
+from dolfinx_mortar import compat
+from dolfinx_mortar.problem import ContactProblem
 
 
 def load_demo(name: str):
@@ -180,19 +177,6 @@ def test_bad_friction_input():
                              ({"linear_solver": "iterative"}, "linear_solver='direct'")]:
         with pytest.raises(ValueError, match=message):
             sheared_blocks(*args, ("coulomb", 0.1), 0.0, 0.0, **options)
-
-
-@pytest.mark.parametrize("normals", ["slave", "master"])
-def test_friction_in_3d_needs_averaged_normals(normals):
-    """3D tangent frames are built on the averaged nodal normals: other options refused."""
-    tagged = meshes.patch_test_3d(ratio=(1, 1), cell_type="hexahedron")
-    V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (3,)))
-    u, v = dolfinx.fem.Function(V), ufl.TestFunction(V)
-    F = internal_work(u, v, {0: Material(E, NU, "linear")})
-    pair = ContactPair(tagged.facet_tags, tagged.markers["contact_slave"],
-                       tagged.markers["contact_master"])
-    with pytest.raises(ValueError, match="needs normals='averaged'"):
-        ContactProblem(F, u, [], [pair], friction=("coulomb", 0.1), normals=normals)
 
 
 def test_state_is_saved_and_restored_with_the_tangential_multipliers():
