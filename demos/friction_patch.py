@@ -48,6 +48,27 @@ E, NU, PRESSURE = 1000.0, 0.3, 10.0
 SHEAR_MODULUS = E / (2.0 * (1.0 + NU))
 
 
+def _sheared_form(u, v, vertical: int, side_shear: float) -> tuple[list, ufl.Form]:
+    """The facets of the faces x = 0, x = 1 and of the bottom and top (coordinate
+    ``vertical`` = 0 and 1), and the weak form: linear elasticity, PRESSURE on the top,
+    the shear traction along ``vertical`` on the faces x = 0 (down) and x = 1 (up)."""
+    mesh = u.function_space.mesh
+    fdim = mesh.topology.dim - 1
+    where = {1: lambda x: np.isclose(x[0], 0.0), 2: lambda x: np.isclose(x[0], 1.0),
+             3: lambda x: np.isclose(x[vertical], 0.0), 4: lambda x: np.isclose(x[vertical], 1.0)}
+    facets = [dolfinx.mesh.locate_entities_boundary(mesh, fdim, f) for f in where.values()]
+    values = np.concatenate([np.full(f.size, tag, dtype=np.int32)
+                             for tag, f in zip(where, facets, strict=True)])
+    order = np.argsort(np.concatenate(facets))
+    boundary = dolfinx.mesh.meshtags(mesh, fdim, np.concatenate(facets)[order], values[order])
+    ds = ufl.Measure("ds", domain=mesh, subdomain_data=boundary)
+    shear = dolfinx.fem.Constant(mesh, float(side_shear))
+    pressure = dolfinx.fem.Constant(mesh, PRESSURE)
+    up = v[vertical]
+    return facets, (internal_work(u, v, {0: Material(E, NU, "linear")})
+                    - (-shear * up * ds(1) + shear * up * ds(2) - pressure * up * ds(4)))
+
+
 def sheared_blocks(ratio, slave: str, friction, top_shift: float, side_shear: float,
                    cell_type: str = "triangle", comm: MPI.Intracomm = MPI.COMM_WORLD,
                    split_at: float | None = None, **options) -> ContactProblem:
@@ -62,18 +83,7 @@ def sheared_blocks(ratio, slave: str, friction, top_shift: float, side_shear: fl
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
     u, v = dolfinx.fem.Function(V), ufl.TestFunction(V)
     fdim = mesh.topology.dim - 1
-    where = {1: lambda x: np.isclose(x[0], 0.0), 2: lambda x: np.isclose(x[0], 1.0),
-             3: lambda x: np.isclose(x[1], 0.0), 4: lambda x: np.isclose(x[1], 1.0)}
-    facets = [dolfinx.mesh.locate_entities_boundary(mesh, fdim, f) for f in where.values()]
-    values = np.concatenate([np.full(f.size, tag, dtype=np.int32)
-                             for tag, f in zip(where, facets, strict=True)])
-    order = np.argsort(np.concatenate(facets))
-    boundary = dolfinx.mesh.meshtags(mesh, fdim, np.concatenate(facets)[order], values[order])
-    ds = ufl.Measure("ds", domain=mesh, subdomain_data=boundary)
-    shear = dolfinx.fem.Constant(mesh, float(side_shear))
-    pressure = dolfinx.fem.Constant(mesh, PRESSURE)
-    F = (internal_work(u, v, {0: Material(E, NU, "linear")})
-         - (-shear * v[1] * ds(1) + shear * v[1] * ds(2) - pressure * v[1] * ds(4)))
+    facets, F = _sheared_form(u, v, vertical=1, side_shear=side_shear)
     V0, V1 = V.sub(0), V.sub(1)
     X = V0.collapse()[0]
     bottom_y = dolfinx.fem.locate_dofs_topological(V1, fdim, facets[2])
@@ -122,18 +132,7 @@ def sheared_blocks_3d(ratio, slave: str, friction, top_shift: float, side_shear:
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (3,)))
     u, v = dolfinx.fem.Function(V), ufl.TestFunction(V)
     fdim = mesh.topology.dim - 1
-    where = {1: lambda x: np.isclose(x[0], 0.0), 2: lambda x: np.isclose(x[0], 1.0),
-             3: lambda x: np.isclose(x[2], 0.0), 4: lambda x: np.isclose(x[2], 1.0)}
-    facets = [dolfinx.mesh.locate_entities_boundary(mesh, fdim, f) for f in where.values()]
-    values = np.concatenate([np.full(f.size, tag, dtype=np.int32)
-                             for tag, f in zip(where, facets, strict=True)])
-    order = np.argsort(np.concatenate(facets))
-    boundary = dolfinx.mesh.meshtags(mesh, fdim, np.concatenate(facets)[order], values[order])
-    ds = ufl.Measure("ds", domain=mesh, subdomain_data=boundary)
-    shear = dolfinx.fem.Constant(mesh, float(side_shear))
-    pressure = dolfinx.fem.Constant(mesh, PRESSURE)
-    F = (internal_work(u, v, {0: Material(E, NU, "linear")})
-         - (-shear * v[2] * ds(1) + shear * v[2] * ds(2) - pressure * v[2] * ds(4)))
+    facets, F = _sheared_form(u, v, vertical=2, side_shear=side_shear)
     # u_x = eps x (+ top_shift on the top), u_y = eps y: eps the Poisson expansion
     expansion = NU * PRESSURE / E
     bcs = []

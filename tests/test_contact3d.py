@@ -233,9 +233,18 @@ def test_contact_jacobian_taylor(normals, method):
     """The whole 3D contact system R(x) in a penetrating, sheared state (Neo-Hookean,
     current configuration; every slave node 0.04 deep, so no active set changes within
     the steps): |R(x + e h) - R(x) - e J h| = O(e^2)."""
+    problem = penetrating_punch(curvature=0.0, normals=normals, method=method)
+    assert_taylor_second_order(problem, seed=3)
+    problem.destroy()
+
+
+def penetrating_punch(curvature: float, **options) -> ContactProblem:
+    """curved_punch (tetrahedra 4:3, Neo-Hookean, current configuration) with the punch
+    moved 0.04 into the foundation and sheared by 0.01 sin / cos waves plus 1e-3 noise,
+    and random multipliers z in [0.5, 1.5]: a state for Taylor tests in which no active
+    set changes within the steps."""
     problem, apply_load = curved_punch(MPI.COMM_WORLD, cell="tetrahedron", ratio=(4, 3),
-                                       curvature=0.0, material="neo-hookean", normals=normals,
-                                       method=method)
+                                       curvature=curvature, material="neo-hookean", **options)
     rng = np.random.default_rng(3 + problem.comm.rank)
     u = problem.u
     V = u.function_space
@@ -250,8 +259,7 @@ def test_contact_jacobian_taylor(normals, method):
     for z in problem.multipliers:
         z.setArray(rng.uniform(0.5, 1.5, z.getLocalSize()))
     problem._read_state_into_x()
-    assert_taylor_second_order(problem, seed=3)
-    problem.destroy()
+    return problem
 
 
 @pytest.mark.parallel

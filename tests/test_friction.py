@@ -120,12 +120,47 @@ def frictional_blocks(mu: float, method: str = "lagrange"):
         problem = penetrating_blocks("averaged", method)
     finally:
         test_contact.ContactProblem = original
-    rng = np.random.default_rng(3 + problem.comm.rank)
+    return with_random_tangential_multipliers(problem, seed=3)
+
+
+def with_random_tangential_multipliers(problem, seed: int):
+    """``problem`` with random tangential multipliers 1 <= |y^a_j| <= 2 (per-rank seed)."""
+    rng = np.random.default_rng(seed + problem.comm.rank)
     for y in problem.tangential:
         size = y.getLocalSize()
         y.setArray(rng.choice([-1.0, 1.0], size) * rng.uniform(1.0, 2.0, size))
     problem._read_state_into_x()
     return problem
+
+
+def put_every_active_node_in(problem, state: str, method: str) -> None:
+    """Set pair 0's Coulomb mu so that every active node is in ``state`` ("slipping" or
+    "sticking") with a margin of 2 from the kink: the bound mu (z_j - c_n g^_j)
+    (penalty: mu z_j) against |v_j| (module docstring of friction); checks it."""
+    from dolfinx_mortar.friction import FrictionLaw
+
+    problem._residual(problem.snes, problem.x, problem.b)
+    active = problem.active[0]
+    z = problem.multipliers[0].getArray(readonly=True)[active]
+    if method == "lagrange":
+        z = z - problem.c_n * problem.gaps[0][active] / problem.areas[0][active]
+    state_now = problem.friction_state()
+    s = state_now["slip"][active].reshape(z.size, -1)
+    y = state_now["traction"][active].reshape(z.size, -1)
+    v = np.linalg.norm((y if method == "lagrange" else 0.0) + problem.c_t * s, axis=1)
+    comm = problem.comm
+    if state == "slipping":
+        mu = 0.5 * comm.allreduce(float(np.min(v, initial=np.inf)), op=MPI.MIN) / \
+            comm.allreduce(float(np.max(z, initial=0.0)), op=MPI.MAX)
+    else:
+        mu = 2.0 * comm.allreduce(float(np.max(v, initial=0.0)), op=MPI.MAX) / \
+            comm.allreduce(float(np.min(z, initial=np.inf)), op=MPI.MIN)
+    problem.friction.laws[0] = FrictionLaw("coulomb", mu)
+    problem._residual(problem.snes, problem.x, problem.b)
+    friction = problem.friction_state()
+    counts = comm.allreduce(
+        np.array([int(active.sum()), int(friction[state][active].sum())]), op=MPI.SUM)
+    assert counts[0] > 0 and counts[1] == counts[0]
 
 
 @pytest.mark.parallel
@@ -136,30 +171,8 @@ def test_frictional_jacobian_taylor(state, method):
     mu is set from the state, so that every active node is in ``state`` with a margin of
     2 from the kink: bound = mu (z_j - c_n g^_j) (penalty: mu z_j) against |v_j| (module
     docstring of friction)."""
-    from dolfinx_mortar.friction import FrictionLaw
-
     problem = frictional_blocks(1.0, method)
-    problem._residual(problem.snes, problem.x, problem.b)
-    active = problem.active[0]
-    z = problem.multipliers[0].getArray(readonly=True)[active]
-    if method == "lagrange":  # the bound is mu (z - c_n g^) there
-        z = z - problem.c_n * problem.gaps[0][active] / problem.areas[0][active]
-    s = problem.friction_state()["slip"][active]
-    v = (problem.tangential[0].getArray(readonly=True)[active] if method == "lagrange"
-         else 0.0) + problem.c_t * s
-    comm = problem.comm
-    if state == "slipping":
-        mu = 0.5 * comm.allreduce(float(np.min(np.abs(v), initial=np.inf)), op=MPI.MIN) / \
-            comm.allreduce(float(np.max(z, initial=0.0)), op=MPI.MAX)
-    else:
-        mu = 2.0 * comm.allreduce(float(np.max(np.abs(v), initial=0.0)), op=MPI.MAX) / \
-            comm.allreduce(float(np.min(z, initial=np.inf)), op=MPI.MIN)
-    problem.friction.laws[0] = FrictionLaw("coulomb", mu)
-    problem._residual(problem.snes, problem.x, problem.b)
-    friction = problem.friction_state()
-    counts = comm.allreduce(
-        np.array([int(active.sum()), int(friction[state][active].sum())]), op=MPI.SUM)
-    assert counts[0] > 0 and counts[1] == counts[0]
+    put_every_active_node_in(problem, state, method)
     assert_taylor_second_order(problem, seed=11)
 
 

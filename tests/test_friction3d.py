@@ -1,14 +1,13 @@
 """Coulomb friction in 3D: nodal tangent frames, Taylor tests in stick and slip, the friction
 patch test, mu = 0, serial = parallel."""
 
-import dolfinx
 import numpy as np
 import pytest
 from mpi4py import MPI
 from test_contact import assert_taylor_second_order
-from test_contact3d import curved_punch
+from test_contact3d import curved_punch, penetrating_punch
+from test_friction import load_demo, put_every_active_node_in, with_random_tangential_multipliers
 
-from dolfinx_mortar import compat
 from dolfinx_mortar.friction import FrictionLaw, tangent_frames
 
 
@@ -36,31 +35,12 @@ def test_tangent_frames_are_orthonormal_with_exact_derivatives():
 
 
 def frictional_punch(method: str, mu: float = 1.0, normals: str = "averaged"):
-    """The 3D contact Taylor test's state (test_contact3d: curved punch, Neo-Hookean,
-    every slave node 0.03 to 0.04 deep, sheared) with Coulomb friction, slips from the
+    """The 3D contact Taylor test's state (test_contact3d.penetrating_punch, curvature
+    0.02: every slave node 0.03 to 0.04 deep) with Coulomb friction, slips from the
     undeformed state and random tangential multipliers 1 <= |y^a_j| <= 2."""
-    problem, apply_load = curved_punch(MPI.COMM_WORLD, cell="tetrahedron", ratio=(4, 3),
-                                       curvature=0.02, material="neo-hookean",
-                                       method=method, friction=("coulomb", mu),
-                                       normals=normals)
-    rng = np.random.default_rng(3 + problem.comm.rank)
-    u = problem.u
-    V = u.function_space
-    shift = dolfinx.fem.Function(V)
-    punch = dolfinx.mesh.locate_entities(V.mesh, 3, lambda x: x[2] >= 0.5 - 1e-12)
-    shift.interpolate(lambda x: np.vstack([0.01 * np.sin(3 * x[1]), 0.01 * np.cos(2 * x[0]),
-                                           -0.04 + 0.0 * x[2]]), punch)
-    u.x.array[:] = shift.x.array + 1e-3 * rng.standard_normal(u.x.array.size)
-    u.x.scatter_forward()
-    apply_load(0.0)
-    compat.set_bc_values(u, problem.bcs)
-    for z in problem.multipliers:
-        z.setArray(rng.uniform(0.5, 1.5, z.getLocalSize()))
-    for y in problem.tangential:
-        size = y.getLocalSize()
-        y.setArray(rng.choice([-1.0, 1.0], size) * rng.uniform(1.0, 2.0, size))
-    problem._read_state_into_x()
-    return problem
+    problem = penetrating_punch(0.02, method=method, friction=("coulomb", mu),
+                                normals=normals)
+    return with_random_tangential_multipliers(problem, seed=5)
 
 
 @pytest.mark.parallel
@@ -75,40 +55,9 @@ def test_frictional_jacobian_taylor_3d(state, method, normals):
     the frames' derivative through the averaged normals (with every normal option: the
     frames always come from the averaged normals)."""
     problem = frictional_punch(method, normals=normals)
-    problem._residual(problem.snes, problem.x, problem.b)
-    active = problem.active[0]
-    z = problem.multipliers[0].getArray(readonly=True)[active]
-    if method == "lagrange":
-        z = z - problem.c_n * problem.gaps[0][active] / problem.areas[0][active]
-    s = problem.friction_state()["slip"][active]
-    y = problem.friction_state()["traction"][active]
-    v = np.linalg.norm((y if method == "lagrange" else 0.0) + problem.c_t * s, axis=1)
-    comm = problem.comm
-    if state == "slipping":
-        mu = 0.5 * comm.allreduce(float(np.min(v, initial=np.inf)), op=MPI.MIN) / \
-            comm.allreduce(float(np.max(z, initial=0.0)), op=MPI.MAX)
-    else:
-        mu = 2.0 * comm.allreduce(float(np.max(v, initial=0.0)), op=MPI.MAX) / \
-            comm.allreduce(float(np.min(z, initial=np.inf)), op=MPI.MIN)
-    problem.friction.laws[0] = FrictionLaw("coulomb", mu)
-    problem._residual(problem.snes, problem.x, problem.b)
-    friction = problem.friction_state()
-    counts = comm.allreduce(
-        np.array([int(active.sum()), int(friction[state][active].sum())]), op=MPI.SUM)
-    assert counts[0] > 0 and counts[1] == counts[0]
+    put_every_active_node_in(problem, state, method)
     assert_taylor_second_order(problem, seed=11)
     problem.destroy()
-
-
-def load_demo(name: str):
-    import importlib.util
-    import pathlib
-
-    path = pathlib.Path(__file__).parents[1] / "demos" / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(f"demo3d_{name}", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 PATCH = load_demo("friction_patch")
