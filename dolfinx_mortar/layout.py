@@ -123,6 +123,7 @@ class CooMatrix:
         cols = np.asarray(cols, dtype=np.int64).reshape(-1)
         self.num_entries = rows.size
         self._blocks = None
+        self._serial = None
         self._keep = np.flatnonzero((rows >= 0) & (cols >= 0))
         rows, cols = rows[self._keep], cols[self._keep]
         order = self._sorting_order(rows, cols)
@@ -200,6 +201,20 @@ class CooMatrix:
             gather -= np.repeat(indptr[:-1] - segment_start, row_lengths)
             self._indices = block_cols[gather].astype(PETSc.IntType)
         self._num_unique = num_blocks * br * bc
+        pattern.data = np.arange(num_blocks, dtype=np.float64)
+        self._blocks = {
+            "pattern": pattern, "rows": row_local, "cols": col_local, "count": num_blocks,
+            "position": np.empty((num_groups, rows_per_group, cols_per_group),
+                                 dtype=np.int32 if num_blocks < 2**31 - 1 else np.int64),
+            "known": np.zeros(num_groups, dtype=bool),
+        }
+        self.mat = None
+        self._serial = None
+        if create and comm.size == 1:
+            # serial: the matrix is made around its values at the first assembly
+            # (no preallocation, no insertion), see _set_serial
+            self._serial = self._serial_layout(row_sizes, col_sizes, block_indptr, present)
+            return self
         # the values are kept as (a, block, b): then row (r, a) is one contiguous
         # run, and the rows go to PETSc grouped by a
         self._ijv = (
@@ -208,22 +223,37 @@ class CooMatrix:
             self._indices if br == 1 else np.tile(block_cols, br),
             np.concatenate([global_rows * br + a for a in range(br)]).astype(PETSc.IntType),
         )
-        pattern.data = np.arange(num_blocks, dtype=np.float64)
-        self._blocks = {
-            "pattern": pattern, "rows": row_local, "cols": col_local, "count": num_blocks,
-            "position": np.empty((num_groups, rows_per_group, cols_per_group),
-                                 dtype=np.int32 if num_blocks < 2**31 - 1 else np.int64),
-            "known": np.zeros(num_groups, dtype=bool),
-        }
         if not create:
-            self.mat = None
             return self
         self._create(comm, row_sizes, col_sizes)
         del self._indptr, self._indices  # the preallocation was their only use
         return self
 
+    def _serial_layout(self, row_sizes, col_sizes, block_indptr, present) -> dict:
+        """What a serial matrix of :meth:`from_blocks` needs: its full CSR structure and,
+        for blocks of several rows, where each block's row a starts in the CSR values
+        (in units of bc; block p of block row r: p + (br - 1) start(r) + a length(r))."""
+        num_rows = int(row_sizes[0] if isinstance(row_sizes, (tuple, list)) else row_sizes)
+        counts = np.zeros(num_rows, dtype=PETSc.IntType)
+        counts[self._rowmap] = np.diff(self._indptr)
+        indptr = np.zeros(num_rows + 1, dtype=PETSc.IntType)
+        np.cumsum(counts, out=indptr[1:])
+        br = self._block_shape[1]
+        starts = []
+        if br > 1:
+            per_row = np.diff(block_indptr)[present]
+            blocks = np.arange(self._blocks["count"], dtype=np.int64)
+            starts = [blocks + np.repeat((br - 1) * block_indptr[present] + a * per_row, per_row)
+                      for a in range(br)]
+        del self._indptr
+        return {"sizes": (row_sizes, col_sizes), "indptr": indptr,
+                "indices": np.ascontiguousarray(self._indices, dtype=PETSc.IntType),
+                "row_starts": starts, "values": None}
+
     def pattern_csr(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(rowmap, indptr, indices): the global rows of the pattern and their sorted columns."""
+        if self._serial is not None:
+            raise TypeError("pattern_csr is for matrices built with create=False")
         return self._rowmap, self._indptr, self._indices
 
     def _create(self, comm: MPI.Intracomm, row_sizes, col_sizes) -> None:
@@ -281,7 +311,28 @@ class CooMatrix:
         shape (nr, br, nc, bc, len(groups)) (or any shape with those
         entries in that order): the group axis last.
         """
+        if self._serial is not None:
+            return self._set_serial(values, groups)
         return self._set(self._summed_groups(values, groups), self._ijv)
+
+    def _set_serial(self, values, groups) -> PETSc.Mat:
+        """The summed values written straight into the CSR values of the serial matrix,
+        which is made around them (zero copy) at the first assembly."""
+        serial = self._serial
+        first = serial["values"] is None
+        if first:
+            serial["values"] = np.empty(serial["indices"].size, dtype=PETSc.ScalarType)
+        self._summed_groups(values, groups, out=serial["values"], row_starts=serial["row_starts"])
+        if first:
+            row_sizes, col_sizes = serial["sizes"]
+            self.mat = PETSc.Mat().createAIJWithArrays(
+                (row_sizes, col_sizes), (serial["indptr"], serial["indices"], serial["values"]),
+                comm=MPI.COMM_SELF)
+            self.mat.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+            self.mat.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True)
+        # (assembly ends a change of the values: PETSc drops what it derived from them)
+        self.mat.assemble()
+        return self.mat
 
     def add_groups(self, matrix: PETSc.Mat, values, groups) -> None:
         """Add the listed groups' values to ``matrix`` (not assembled; its pattern has ours)."""
@@ -292,8 +343,9 @@ class CooMatrix:
         matrix.setValuesIJV(indptr, indices, self._summed_groups(values, groups),
                             addv=PETSc.InsertMode.ADD_VALUES, rowmap=rowmap)
 
-    def _summed_groups(self, values, groups) -> np.ndarray:
-        """The groups' values summed into the pattern, in the order of ``_ijv``."""
+    def _summed_groups(self, values, groups, out=None, row_starts=()) -> np.ndarray:
+        """The groups' values summed into the pattern, in the order of ``_ijv``, or with
+        ``row_starts`` (serial CSR, see :meth:`_serial_layout`) in CSR order into ``out``."""
         if self._blocks is None:
             raise TypeError("assemble_groups needs a matrix built by CooMatrix.from_blocks")
         groups = np.asarray(groups, dtype=np.int64).reshape(-1)
@@ -305,13 +357,17 @@ class CooMatrix:
         values = values.reshape(nr, br, nc, bc, groups.size)
         position = self._positions(groups).reshape(-1)
         count = self._blocks["count"]
-        summed = np.empty((br, count, bc))
+        summed = np.empty(br * count * bc) if out is None else out
+        by_block = summed.reshape(br * count, bc)
         for a in range(br):
             for b in range(bc):
                 weights = np.ascontiguousarray(values[:, a, :, b, :]).reshape(-1)
                 sums = np.bincount(position, weights=weights, minlength=count + 1)
-                summed[a, :, b] = sums[:count]
-        return summed.reshape(-1)
+                if len(row_starts):
+                    by_block[row_starts[a], b] = sums[:count]
+                else:
+                    by_block[a * count:(a + 1) * count, b] = sums[:count]
+        return summed
 
     def _positions(self, groups: np.ndarray) -> np.ndarray:
         """(nr, nc, len(groups)) positions of the groups' blocks; dropped ones past the end."""
@@ -335,6 +391,7 @@ class CooMatrix:
     def destroy(self) -> None:
         if self.mat is not None:
             self.mat.destroy()
+            self.mat = None
 
 
 class MonolithicMatrix:
