@@ -166,18 +166,17 @@ class CooMatrix:
         values for :meth:`add_groups` into another matrix.
         """
         self = cls.__new__(cls)
-        row_blocks = np.asarray(row_blocks, dtype=np.int64)
-        col_blocks = np.asarray(col_blocks, dtype=np.int64)
-        num_groups, rows_per_group = row_blocks.shape
-        cols_per_group = col_blocks.shape[1]
+        row_side = row_blocks if isinstance(row_blocks, BlockIncidence) else BlockIncidence(
+            row_blocks)
+        col_side = col_blocks if isinstance(col_blocks, BlockIncidence) else BlockIncidence(
+            col_blocks)
+        num_groups, rows_per_group = row_side.local.shape
+        cols_per_group = col_side.local.shape[1]
         br, bc = (int(b) for b in block_shape)
         self.num_entries = num_groups * rows_per_group * br * cols_per_group * bc
         self._block_shape = (rows_per_group, br, cols_per_group, bc)
-        # the block numbering: the global one unless it is much larger than the data
-        row_numbers, row_local, num_row_numbers = _compact_numbering(row_blocks)
-        col_numbers, col_local, num_col_numbers = _compact_numbering(col_blocks)
-        incidence_rows = _incidence(row_local, num_row_numbers).T.tocsr()
-        pattern = (incidence_rows @ _incidence(col_local, num_col_numbers)).tocsr()
+        row_numbers, col_numbers = row_side.numbers, col_side.numbers
+        pattern = (row_side.transposed @ col_side.csr).tocsr()
         pattern.sort_indices()
         block_indptr = pattern.indptr.astype(np.int64)
         per_row = np.diff(block_indptr)
@@ -201,9 +200,11 @@ class CooMatrix:
             gather -= np.repeat(indptr[:-1] - segment_start, row_lengths)
             self._indices = block_cols[gather].astype(PETSc.IntType)
         self._num_unique = num_blocks * br * bc
-        pattern.data = np.arange(num_blocks, dtype=np.float64)
+        # 1 + the block's position: a lookup of an absent block (a dropped one) gives 0
+        pattern.data = np.arange(1, num_blocks + 1, dtype=np.float64)
         self._blocks = {
-            "pattern": pattern, "rows": row_local, "cols": col_local, "count": num_blocks,
+            "pattern": pattern, "rows": row_side.local, "cols": col_side.local,
+            "count": num_blocks,
             "position": np.empty((num_groups, rows_per_group, cols_per_group),
                                  dtype=np.int32 if num_blocks < 2**31 - 1 else np.int64),
             "known": np.zeros(num_groups, dtype=bool),
@@ -364,29 +365,24 @@ class CooMatrix:
                 weights = np.ascontiguousarray(values[:, a, :, b, :]).reshape(-1)
                 sums = np.bincount(position, weights=weights, minlength=count + 1)
                 if len(row_starts):
-                    by_block[row_starts[a], b] = sums[:count]
+                    by_block[row_starts[a], b] = sums[1:]
                 else:
-                    by_block[a * count:(a + 1) * count, b] = sums[:count]
+                    by_block[a * count:(a + 1) * count, b] = sums[1:]
         return summed
 
     def _positions(self, groups: np.ndarray) -> np.ndarray:
-        """(nr, nc, len(groups)) positions of the groups' blocks; dropped ones past the end."""
+        """(nr, nc, len(groups)) 1 + positions of the groups' blocks; 0 for dropped ones."""
         blocks = self._blocks
         position, known = blocks["position"], blocks["known"]
         new = groups[~known[groups]]
         if new.size:
             nr, nc = position.shape[1:]
             rows, cols = blocks["rows"][new], blocks["cols"][new]
-            # a dropped block is looked up as block 0 (absent or not), then marked
-            found = blocks["pattern"][np.repeat(np.maximum(rows, 0), nc, axis=1).reshape(-1),
-                                      np.tile(np.maximum(cols, 0), (1, nr)).reshape(-1)]
-            found = np.asarray(found).reshape(new.size, nr, nc).astype(position.dtype)
-            found[(rows < 0)[:, :, None] | (cols < 0)[:, None, :]] = -1
-            position[new] = found
+            found = blocks["pattern"][np.repeat(rows, nc, axis=1).reshape(-1),
+                                      np.tile(cols, (1, nr)).reshape(-1)]
+            position[new] = np.asarray(found).reshape(new.size, nr, nc)
             known[new] = True
-        result = position[groups].transpose(1, 2, 0).astype(np.int64)
-        result[result < 0] = blocks["count"]
-        return result
+        return position[groups].transpose(1, 2, 0).astype(np.int64)
 
     def destroy(self) -> None:
         if self.mat is not None:
@@ -515,6 +511,40 @@ def _interleave(blocks: np.ndarray, size: int) -> np.ndarray:
     return result.reshape(-1)
 
 
+class BlockIncidence:
+    """The row (or column) blocks of the groups of a block pattern, (groups, n), -1 where a
+    group has none: their compact numbering and incidence matrices, built once and shared
+    by the matrices that have the same blocks (:meth:`CooMatrix.from_blocks` takes this or
+    the array).
+
+    ``local`` numbers the blocks among ``count`` (``numbers``: the global block of each,
+    None if the global numbering is used); a missing block is ``count``, a block that no
+    group has (the pattern gets an empty last row or column, and a lookup there finds
+    nothing).
+    """
+
+    def __init__(self, blocks):
+        blocks = np.asarray(blocks, dtype=np.int64)
+        self.numbers, local, self.count = _compact_numbering(blocks)
+        missing = local < 0
+        self.local = np.where(missing, self.count, local) if missing.any() else local
+        self._csr = self._transposed = None
+
+    @property
+    def csr(self):
+        """(groups, count + 1) CSR matrix with a one where a group has a block."""
+        if self._csr is None:
+            self._csr = _incidence(self.local, self.count)
+        return self._csr
+
+    @property
+    def transposed(self):
+        """The transpose of :attr:`csr`, in CSR form."""
+        if self._transposed is None:
+            self._transposed = self.csr.T.tocsr()
+        return self._transposed
+
+
 def _compact_numbering(blocks: np.ndarray):
     """(numbers, local, count): the block numbers used, each block's index among them
     (-1 stays -1) and how many. ``numbers`` is None when the global numbering itself
@@ -530,10 +560,11 @@ def _compact_numbering(blocks: np.ndarray):
 
 
 def _incidence(blocks: np.ndarray, num_blocks: int):
-    """(groups x blocks) CSR matrix with a one where a group has a block (negative: none)."""
+    """(groups x num_blocks + 1) CSR matrix with a one where a group has a block (blocks
+    num_blocks and above: none)."""
     import scipy.sparse
 
-    valid = blocks >= 0
+    valid = blocks < num_blocks
     if valid.all():
         step = max(blocks.shape[1], 1)
         indptr = np.arange(0, blocks.size + 1, step, dtype=np.int64)[: blocks.shape[0] + 1]
@@ -543,4 +574,4 @@ def _incidence(blocks: np.ndarray, num_blocks: int):
         np.cumsum(valid.sum(axis=1), out=indptr[1:])
         indices = blocks[valid]
     return scipy.sparse.csr_matrix((np.ones(indices.size), indices, indptr),
-                                   shape=(blocks.shape[0], max(num_blocks, 1)))
+                                   shape=(blocks.shape[0], num_blocks + 1))
