@@ -371,18 +371,42 @@ class CooMatrix:
         return summed
 
     def _positions(self, groups: np.ndarray) -> np.ndarray:
-        """(nr, nc, len(groups)) 1 + positions of the groups' blocks; 0 for dropped ones."""
+        """(nr, nc, len(groups)) 1 + positions of the groups' blocks; 0 for dropped ones.
+
+        The answer for the last ``groups`` is kept (a Newton iteration assembles the same
+        pairs again); it goes into the per-group table only when other groups come.
+        """
         blocks = self._blocks
+        last = blocks.get("last")
+        if last is not None:
+            if np.array_equal(last[0], groups):
+                return last[1]
+            blocks["position"][last[0]] = last[1].transpose(2, 0, 1)
+            blocks["known"][last[0]] = True
         position, known = blocks["position"], blocks["known"]
-        new = groups[~known[groups]]
-        if new.size:
-            nr, nc = position.shape[1:]
-            rows, cols = blocks["rows"][new], blocks["cols"][new]
-            found = blocks["pattern"][np.repeat(rows, nc, axis=1).reshape(-1),
-                                      np.tile(cols, (1, nr)).reshape(-1)]
-            position[new] = np.asarray(found).reshape(new.size, nr, nc)
-            known[new] = True
-        return position[groups].transpose(1, 2, 0).astype(np.int64)
+        unknown = ~known[groups]
+        if unknown.all():
+            result = self._lookup(groups)
+        else:
+            new = groups[unknown]
+            if new.size:
+                position[new] = self._lookup(new).transpose(2, 0, 1)
+                known[new] = True
+            result = position[groups].transpose(1, 2, 0).astype(np.int64)
+        blocks["last"] = (groups.copy(), result)
+        return result
+
+    def _lookup(self, groups: np.ndarray) -> np.ndarray:
+        """(nr, nc, len(groups)) 1 + positions of the groups' blocks, found in the pattern."""
+        blocks = self._blocks
+        rows = blocks["rows"][groups].T.astype(np.int32)
+        cols = blocks["cols"][groups].T.astype(np.int32)
+        shape = (rows.shape[0], cols.shape[0], groups.size)
+        if groups.size == 0:
+            return np.zeros(shape, dtype=np.int64)
+        found = blocks["pattern"][np.broadcast_to(rows[:, None, :], shape).reshape(-1),
+                                  np.broadcast_to(cols[None, :, :], shape).reshape(-1)]
+        return np.asarray(found).reshape(shape).astype(np.int64)
 
     def destroy(self) -> None:
         if self.mat is not None:

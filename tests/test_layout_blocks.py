@@ -51,8 +51,10 @@ def test_blocks_equal_triplets(block_shape):
     rows, cols, _ = _triplets(row_blocks, col_blocks, block_shape,
                               np.zeros((nr, br, nc, bc, num_groups)), all_groups)
     triplets = CooMatrix(comm, rows, cols, *sizes)
-    for subset in (rng.choice(num_groups, 150, replace=False), np.sort(
-            rng.choice(num_groups, 230, replace=False)), np.zeros(0, dtype=np.int64)):
+    first = rng.choice(num_groups, 150, replace=False)
+    second = np.sort(rng.choice(num_groups, 230, replace=False))
+    # new groups, the same again, others partly known, none, the first again
+    for subset in (first, first.copy(), second, np.zeros(0, dtype=np.int64), first):
         values = rng.standard_normal((nr, br, nc, bc, subset.size))
         full = np.zeros((nr, br, nc, bc, num_groups))
         full[..., subset] = values
