@@ -183,8 +183,7 @@ class CooMatrix:
         present = np.flatnonzero(per_row)
         num_blocks = pattern.nnz
         global_rows = present if row_numbers is None else row_numbers[present]
-        block_cols = pattern.indices if col_numbers is None else col_numbers[pattern.indices]
-        block_cols = _interleave(block_cols, bc)  # PETSc integers
+        global_cols = pattern.indices if col_numbers is None else col_numbers[pattern.indices]
         # the CSR form (rows sorted, each row's columns sorted), for the preallocation:
         # row (r, a) holds the columns c * bc + b of the blocks c of block row r
         self._rowmap = _interleave(global_rows, br)
@@ -192,16 +191,24 @@ class CooMatrix:
         indptr = np.zeros(row_lengths.size + 1, dtype=np.int64)
         np.cumsum(row_lengths, out=indptr[1:])
         self._indptr = indptr.astype(PETSc.IntType)
+        row_starts = []
         if br == 1:  # the rows' runs of block columns follow each other
-            self._indices = block_cols
+            self._indices = _interleave(global_cols, bc)
         else:
-            gather = np.arange(int(indptr[-1]), dtype=np.int64)
-            segment_start = np.repeat(block_indptr[present] * bc, br)
-            gather -= np.repeat(indptr[:-1] - segment_start, row_lengths)
-            self._indices = block_cols[gather].astype(PETSc.IntType)
+            # block p of block row r is block slot p + (br - 1) start(r) + a length(r) of
+            # the CSR rows, in row (r, a)
+            lengths = per_row[present]
+            starts = (br - 1) * block_indptr[present]
+            block_numbers = np.arange(num_blocks, dtype=np.int64)
+            row_starts = [block_numbers + np.repeat(starts + a * lengths, lengths)
+                          for a in range(br)]
+            slot_blocks = np.empty(br * num_blocks, dtype=np.int64)
+            for start in row_starts:
+                slot_blocks[start] = block_numbers
+            self._indices = _interleave(global_cols[slot_blocks], bc)
         self._num_unique = num_blocks * br * bc
         # 1 + the block's position: a lookup of an absent block (a dropped one) gives 0
-        pattern.data = np.arange(1, num_blocks + 1, dtype=np.float64)
+        pattern.data = np.arange(1, num_blocks + 1, dtype=np.int64)
         self._blocks = {
             "pattern": pattern, "rows": row_side.local, "cols": col_side.local,
             "count": num_blocks,
@@ -214,14 +221,14 @@ class CooMatrix:
         if create and comm.size == 1:
             # serial: the matrix is made around its values at the first assembly
             # (no preallocation, no insertion), see _set_serial
-            self._serial = self._serial_layout(row_sizes, col_sizes, block_indptr, present)
+            self._serial = self._serial_layout(row_sizes, col_sizes, row_starts)
             return self
         # the values are kept as (a, block, b): then row (r, a) is one contiguous
         # run, and the rows go to PETSc grouped by a
         self._ijv = (
             np.concatenate([a * num_blocks * bc + block_indptr[present] * bc for a in range(br)]
                            + [[br * num_blocks * bc]]).astype(PETSc.IntType),
-            self._indices if br == 1 else np.tile(block_cols, br),
+            self._indices if br == 1 else np.tile(_interleave(global_cols, bc), br),
             np.concatenate([global_rows * br + a for a in range(br)]).astype(PETSc.IntType),
         )
         if not create:
@@ -230,26 +237,19 @@ class CooMatrix:
         del self._indptr, self._indices  # the preallocation was their only use
         return self
 
-    def _serial_layout(self, row_sizes, col_sizes, block_indptr, present) -> dict:
+    def _serial_layout(self, row_sizes, col_sizes, row_starts) -> dict:
         """What a serial matrix of :meth:`from_blocks` needs: its full CSR structure and,
         for blocks of several rows, where each block's row a starts in the CSR values
-        (in units of bc; block p of block row r: p + (br - 1) start(r) + a length(r))."""
+        (in units of bc)."""
         num_rows = int(row_sizes[0] if isinstance(row_sizes, (tuple, list)) else row_sizes)
         counts = np.zeros(num_rows, dtype=PETSc.IntType)
         counts[self._rowmap] = np.diff(self._indptr)
         indptr = np.zeros(num_rows + 1, dtype=PETSc.IntType)
         np.cumsum(counts, out=indptr[1:])
-        br = self._block_shape[1]
-        starts = []
-        if br > 1:
-            per_row = np.diff(block_indptr)[present]
-            blocks = np.arange(self._blocks["count"], dtype=np.int64)
-            starts = [blocks + np.repeat((br - 1) * block_indptr[present] + a * per_row, per_row)
-                      for a in range(br)]
         del self._indptr
         return {"sizes": (row_sizes, col_sizes), "indptr": indptr,
                 "indices": np.ascontiguousarray(self._indices, dtype=PETSc.IntType),
-                "row_starts": starts, "values": None}
+                "row_starts": row_starts, "values": None}
 
     def pattern_csr(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(rowmap, indptr, indices): the global rows of the pattern and their sorted columns."""
@@ -406,7 +406,7 @@ class CooMatrix:
             return np.zeros(shape, dtype=np.int64)
         found = blocks["pattern"][np.broadcast_to(rows[:, None, :], shape).reshape(-1),
                                   np.broadcast_to(cols[None, :, :], shape).reshape(-1)]
-        return np.asarray(found).reshape(shape).astype(np.int64)
+        return np.asarray(found, dtype=np.int64).reshape(shape)
 
     def destroy(self) -> None:
         if self.mat is not None:
