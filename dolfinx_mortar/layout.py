@@ -116,6 +116,10 @@ class CooMatrix:
     blocks, one per group (a mortar pair), without sorting the entries, and
     :meth:`assemble_groups` assembles the values of a few groups only (the
     others are zero): most candidate pairs of a contact search never overlap.
+    In serial, a matrix of :meth:`from_blocks` is made at its first assembly
+    around its own CSR arrays (``createAIJWithArrays``, no copy): the values
+    are summed straight into PETSc's storage, with no preallocation and no
+    insertion.
     """
 
     def __init__(self, comm: MPI.Intracomm, rows, cols, row_sizes, col_sizes):
@@ -158,12 +162,13 @@ class CooMatrix:
 
         Group g has the entries (row_blocks[g, i] * br + a, col_blocks[g, j] * bc + b)
         for a < br, b < bc, in the order (g, i, a, j, b); a negative block
-        drops its rows or columns. The block pattern is a sparse product of
-        the groups' row- and column-block incidences (no sort of the
-        entries); where a group's blocks go is looked up when the group is
-        first assembled. With ``create=False`` no PETSc matrix is made: the
-        object is only the pattern (``pattern_csr``) and the summation of
-        values for :meth:`add_groups` into another matrix.
+        drops its rows or columns (``row_blocks`` and ``col_blocks`` may be
+        :class:`BlockIncidence` objects shared with other matrices). The block
+        pattern is a sparse product of the groups' row- and column-block
+        incidences (no sort of the entries); where a group's blocks go is
+        looked up when the group is first assembled. With ``create=False`` no
+        PETSc matrix is made: the object is only the pattern (``pattern_csr``)
+        and the summation of values for :meth:`add_groups` into another matrix.
         """
         self = cls.__new__(cls)
         row_side = row_blocks if isinstance(row_blocks, BlockIncidence) else BlockIncidence(
