@@ -216,10 +216,7 @@ class CooMatrix:
         pattern.data = np.arange(1, num_blocks + 1, dtype=np.int64)
         self._blocks = {
             "pattern": pattern, "rows": row_side.local, "cols": col_side.local,
-            "count": num_blocks,
-            "position": np.empty((num_groups, rows_per_group, cols_per_group),
-                                 dtype=np.int32 if num_blocks < 2**31 - 1 else np.int64),
-            "known": np.zeros(num_groups, dtype=bool),
+            "count": num_blocks, "num_groups": num_groups, "last": None,
         }
         self.mat = None
         self._serial = None
@@ -304,7 +301,7 @@ class CooMatrix:
         if values.size != self.num_entries:
             raise ValueError(f"expected {self.num_entries} values, got {values.size}")
         if self._blocks is not None:
-            num_groups = self._blocks["known"].size
+            num_groups = self._blocks["num_groups"]
             grouped = values.reshape((num_groups,) + self._block_shape)
             return self.assemble_groups(np.moveaxis(grouped, 0, -1), np.arange(num_groups))
         summed = np.bincount(self._slot, weights=values[self._keep], minlength=self._num_unique)
@@ -378,26 +375,25 @@ class CooMatrix:
     def _positions(self, groups: np.ndarray) -> np.ndarray:
         """(nr, nc, len(groups)) 1 + positions of the groups' blocks; 0 for dropped ones.
 
-        The answer for the last ``groups`` is kept (a Newton iteration assembles the same
-        pairs again); it goes into the per-group table only when other groups come.
+        The answer for the last ``groups`` is kept: a Newton iteration assembles the same
+        pairs again, or almost the same (only the groups that were not in the last call
+        are looked up).
         """
         blocks = self._blocks
-        last = blocks.get("last")
-        if last is not None:
-            if np.array_equal(last[0], groups):
-                return last[1]
-            blocks["position"][last[0]] = last[1].transpose(2, 0, 1)
-            blocks["known"][last[0]] = True
-        position, known = blocks["position"], blocks["known"]
-        unknown = ~known[groups]
-        if unknown.all():
+        last = blocks["last"]
+        if last is None:
             result = self._lookup(groups)
+        elif np.array_equal(last[0], groups):
+            return last[1]
         else:
-            new = groups[unknown]
-            if new.size:
-                position[new] = self._lookup(new).transpose(2, 0, 1)
-                known[new] = True
-            result = position[groups].transpose(1, 2, 0).astype(np.int64)
+            where = np.full(blocks["num_groups"], -1, dtype=np.int64)
+            where[last[0]] = np.arange(last[0].size)
+            index = where[groups]
+            known = index >= 0
+            result = np.empty(last[1].shape[:2] + (groups.size,), dtype=np.int64)
+            result[:, :, known] = last[1][:, :, index[known]]
+            if not known.all():
+                result[:, :, ~known] = self._lookup(groups[~known])
         blocks["last"] = (groups.copy(), result)
         return result
 

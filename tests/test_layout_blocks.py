@@ -64,6 +64,11 @@ def test_blocks_equal_triplets(block_shape):
         assert np.array_equal(got[1], expected[1])
         assert np.allclose(got[2], expected[2], rtol=1e-14, atol=1e-14)
         assert np.abs(expected[2]).max(initial=1.0) > 0.0
+    full = rng.standard_normal((num_groups, nr, br, nc, bc))  # all groups, group axis first
+    expected = _csr(triplets.assemble(full))
+    got = _csr(blocks.assemble(full))
+    assert np.array_equal(got[1], expected[1])
+    assert np.allclose(got[2], expected[2], rtol=1e-14, atol=1e-14)
     assert blocks.mat.getSize() == (num_row_blocks * br, num_col_blocks * bc)
     blocks.destroy()
     triplets.destroy()
