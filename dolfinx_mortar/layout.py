@@ -224,6 +224,7 @@ class CooMatrix:
             # serial: the matrix is made around its values at the first assembly
             # (no preallocation, no insertion), see _set_serial
             self._serial = self._serial_layout(row_sizes, col_sizes, row_starts)
+            self._serial["comm"] = comm
             return self
         # the values are kept as (a, block, b): then row (r, a) is one contiguous
         # run, and the rows go to PETSc grouped by a
@@ -330,7 +331,7 @@ class CooMatrix:
             row_sizes, col_sizes = serial["sizes"]
             self.mat = PETSc.Mat().createAIJWithArrays(
                 (row_sizes, col_sizes), (serial["indptr"], serial["indices"], serial["values"]),
-                comm=MPI.COMM_SELF)
+                comm=serial["comm"])
             self.mat.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
             self.mat.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True)
         # (assembly ends a change of the values: PETSc drops what it derived from them)
