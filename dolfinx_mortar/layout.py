@@ -116,6 +116,10 @@ class CooMatrix:
     blocks, one per group (a mortar pair), without sorting the entries, and
     :meth:`assemble_groups` assembles the values of a few groups only (the
     others are zero): most candidate pairs of a contact search never overlap.
+    In serial, a matrix of :meth:`from_blocks` is made at its first assembly
+    around its own CSR arrays (``createAIJWithArrays``, no copy): the values
+    are summed straight into PETSc's storage, with no preallocation and no
+    insertion.
     """
 
     def __init__(self, comm: MPI.Intracomm, rows, cols, row_sizes, col_sizes):
@@ -123,6 +127,7 @@ class CooMatrix:
         cols = np.asarray(cols, dtype=np.int64).reshape(-1)
         self.num_entries = rows.size
         self._blocks = None
+        self._serial = None
         self._keep = np.flatnonzero((rows >= 0) & (cols >= 0))
         rows, cols = rows[self._keep], cols[self._keep]
         order = self._sorting_order(rows, cols)
@@ -157,34 +162,33 @@ class CooMatrix:
 
         Group g has the entries (row_blocks[g, i] * br + a, col_blocks[g, j] * bc + b)
         for a < br, b < bc, in the order (g, i, a, j, b); a negative block
-        drops its rows or columns. The block pattern is a sparse product of
-        the groups' row- and column-block incidences (no sort of the
-        entries); where a group's blocks go is looked up when the group is
-        first assembled. With ``create=False`` no PETSc matrix is made: the
-        object is only the pattern (``pattern_csr``) and the summation of
-        values for :meth:`add_groups` into another matrix.
+        drops its rows or columns (``row_blocks`` and ``col_blocks`` may be
+        :class:`BlockIncidence` objects shared with other matrices). The block
+        pattern is a sparse product of the groups' row- and column-block
+        incidences (no sort of the entries); where a group's blocks go is
+        looked up when the group is first assembled. With ``create=False`` no
+        PETSc matrix is made: the object is only the pattern (``pattern_csr``)
+        and the summation of values for :meth:`add_groups` into another matrix.
         """
         self = cls.__new__(cls)
-        row_blocks = np.asarray(row_blocks, dtype=np.int64)
-        col_blocks = np.asarray(col_blocks, dtype=np.int64)
-        num_groups, rows_per_group = row_blocks.shape
-        cols_per_group = col_blocks.shape[1]
+        row_side = row_blocks if isinstance(row_blocks, BlockIncidence) else BlockIncidence(
+            row_blocks)
+        col_side = col_blocks if isinstance(col_blocks, BlockIncidence) else BlockIncidence(
+            col_blocks)
+        num_groups, rows_per_group = row_side.local.shape
+        cols_per_group = col_side.local.shape[1]
         br, bc = (int(b) for b in block_shape)
         self.num_entries = num_groups * rows_per_group * br * cols_per_group * bc
         self._block_shape = (rows_per_group, br, cols_per_group, bc)
-        # the block numbering: the global one unless it is much larger than the data
-        row_numbers, row_local, num_row_numbers = _compact_numbering(row_blocks)
-        col_numbers, col_local, num_col_numbers = _compact_numbering(col_blocks)
-        incidence_rows = _incidence(row_local, num_row_numbers).T.tocsr()
-        pattern = (incidence_rows @ _incidence(col_local, num_col_numbers)).tocsr()
+        row_numbers, col_numbers = row_side.numbers, col_side.numbers
+        pattern = (row_side.transposed @ col_side.csr).tocsr()
         pattern.sort_indices()
         block_indptr = pattern.indptr.astype(np.int64)
         per_row = np.diff(block_indptr)
         present = np.flatnonzero(per_row)
         num_blocks = pattern.nnz
         global_rows = present if row_numbers is None else row_numbers[present]
-        block_cols = pattern.indices if col_numbers is None else col_numbers[pattern.indices]
-        block_cols = _interleave(block_cols, bc)  # PETSc integers
+        global_cols = pattern.indices if col_numbers is None else col_numbers[pattern.indices]
         # the CSR form (rows sorted, each row's columns sorted), for the preallocation:
         # row (r, a) holds the columns c * bc + b of the blocks c of block row r
         self._rowmap = _interleave(global_rows, br)
@@ -192,38 +196,68 @@ class CooMatrix:
         indptr = np.zeros(row_lengths.size + 1, dtype=np.int64)
         np.cumsum(row_lengths, out=indptr[1:])
         self._indptr = indptr.astype(PETSc.IntType)
+        row_starts = []
         if br == 1:  # the rows' runs of block columns follow each other
-            self._indices = block_cols
+            self._indices = _interleave(global_cols, bc)
         else:
-            gather = np.arange(int(indptr[-1]), dtype=np.int64)
-            segment_start = np.repeat(block_indptr[present] * bc, br)
-            gather -= np.repeat(indptr[:-1] - segment_start, row_lengths)
-            self._indices = block_cols[gather].astype(PETSc.IntType)
+            # block p of block row r is block slot p + (br - 1) start(r) + a length(r) of
+            # the CSR rows, in row (r, a)
+            lengths = per_row[present]
+            starts = (br - 1) * block_indptr[present]
+            block_numbers = np.arange(num_blocks, dtype=np.int64)
+            row_starts = [block_numbers + np.repeat(starts + a * lengths, lengths)
+                          for a in range(br)]
+            slot_blocks = np.empty(br * num_blocks, dtype=np.int64)
+            for start in row_starts:
+                slot_blocks[start] = block_numbers
+            self._indices = _interleave(global_cols[slot_blocks], bc)
         self._num_unique = num_blocks * br * bc
+        # 1 + the block's position: a lookup of an absent block (a dropped one) gives 0
+        pattern.data = np.arange(1, num_blocks + 1, dtype=np.int64)
+        self._blocks = {
+            "pattern": pattern, "rows": row_side.local, "cols": col_side.local,
+            "count": num_blocks, "num_groups": num_groups, "last": None,
+        }
+        self.mat = None
+        self._serial = None
+        if create and comm.size == 1:
+            # serial: the matrix is made around its values at the first assembly
+            # (no preallocation, no insertion), see _set_serial
+            self._serial = self._serial_layout(row_sizes, col_sizes, row_starts)
+            self._serial["comm"] = comm
+            return self
         # the values are kept as (a, block, b): then row (r, a) is one contiguous
         # run, and the rows go to PETSc grouped by a
         self._ijv = (
             np.concatenate([a * num_blocks * bc + block_indptr[present] * bc for a in range(br)]
                            + [[br * num_blocks * bc]]).astype(PETSc.IntType),
-            self._indices if br == 1 else np.tile(block_cols, br),
+            self._indices if br == 1 else np.tile(_interleave(global_cols, bc), br),
             np.concatenate([global_rows * br + a for a in range(br)]).astype(PETSc.IntType),
         )
-        pattern.data = np.arange(num_blocks, dtype=np.float64)
-        self._blocks = {
-            "pattern": pattern, "rows": row_local, "cols": col_local, "count": num_blocks,
-            "position": np.empty((num_groups, rows_per_group, cols_per_group),
-                                 dtype=np.int32 if num_blocks < 2**31 - 1 else np.int64),
-            "known": np.zeros(num_groups, dtype=bool),
-        }
         if not create:
-            self.mat = None
             return self
         self._create(comm, row_sizes, col_sizes)
         del self._indptr, self._indices  # the preallocation was their only use
         return self
 
+    def _serial_layout(self, row_sizes, col_sizes, row_starts) -> dict:
+        """What a serial matrix of :meth:`from_blocks` needs: its full CSR structure and,
+        for blocks of several rows, where each block's row a starts in the CSR values
+        (in units of bc)."""
+        num_rows = int(row_sizes[0] if isinstance(row_sizes, (tuple, list)) else row_sizes)
+        counts = np.zeros(num_rows, dtype=PETSc.IntType)
+        counts[self._rowmap] = np.diff(self._indptr)
+        indptr = np.zeros(num_rows + 1, dtype=PETSc.IntType)
+        np.cumsum(counts, out=indptr[1:])
+        del self._indptr
+        return {"sizes": (row_sizes, col_sizes), "indptr": indptr,
+                "indices": np.ascontiguousarray(self._indices, dtype=PETSc.IntType),
+                "row_starts": row_starts, "values": None}
+
     def pattern_csr(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(rowmap, indptr, indices): the global rows of the pattern and their sorted columns."""
+        if self._serial is not None:
+            raise TypeError("pattern_csr is for matrices built with create=False")
         return self._rowmap, self._indptr, self._indices
 
     def _create(self, comm: MPI.Intracomm, row_sizes, col_sizes) -> None:
@@ -268,7 +302,7 @@ class CooMatrix:
         if values.size != self.num_entries:
             raise ValueError(f"expected {self.num_entries} values, got {values.size}")
         if self._blocks is not None:
-            num_groups = self._blocks["known"].size
+            num_groups = self._blocks["num_groups"]
             grouped = values.reshape((num_groups,) + self._block_shape)
             return self.assemble_groups(np.moveaxis(grouped, 0, -1), np.arange(num_groups))
         summed = np.bincount(self._slot, weights=values[self._keep], minlength=self._num_unique)
@@ -281,7 +315,28 @@ class CooMatrix:
         shape (nr, br, nc, bc, len(groups)) (or any shape with those
         entries in that order): the group axis last.
         """
+        if self._serial is not None:
+            return self._set_serial(values, groups)
         return self._set(self._summed_groups(values, groups), self._ijv)
+
+    def _set_serial(self, values, groups) -> PETSc.Mat:
+        """The summed values written straight into the CSR values of the serial matrix,
+        which is made around them (zero copy) at the first assembly."""
+        serial = self._serial
+        first = serial["values"] is None
+        if first:
+            serial["values"] = np.empty(serial["indices"].size, dtype=PETSc.ScalarType)
+        self._summed_groups(values, groups, out=serial["values"], row_starts=serial["row_starts"])
+        if first:
+            row_sizes, col_sizes = serial["sizes"]
+            self.mat = PETSc.Mat().createAIJWithArrays(
+                (row_sizes, col_sizes), (serial["indptr"], serial["indices"], serial["values"]),
+                comm=serial["comm"])
+            self.mat.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+            self.mat.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True)
+        # (assembly ends a change of the values: PETSc drops what it derived from them)
+        self.mat.assemble()
+        return self.mat
 
     def add_groups(self, matrix: PETSc.Mat, values, groups) -> None:
         """Add the listed groups' values to ``matrix`` (not assembled; its pattern has ours)."""
@@ -292,8 +347,9 @@ class CooMatrix:
         matrix.setValuesIJV(indptr, indices, self._summed_groups(values, groups),
                             addv=PETSc.InsertMode.ADD_VALUES, rowmap=rowmap)
 
-    def _summed_groups(self, values, groups) -> np.ndarray:
-        """The groups' values summed into the pattern, in the order of ``_ijv``."""
+    def _summed_groups(self, values, groups, out=None, row_starts=()) -> np.ndarray:
+        """The groups' values summed into the pattern, in the order of ``_ijv``, or with
+        ``row_starts`` (serial CSR, see :meth:`_serial_layout`) in CSR order into ``out``."""
         if self._blocks is None:
             raise TypeError("assemble_groups needs a matrix built by CooMatrix.from_blocks")
         groups = np.asarray(groups, dtype=np.int64).reshape(-1)
@@ -305,36 +361,59 @@ class CooMatrix:
         values = values.reshape(nr, br, nc, bc, groups.size)
         position = self._positions(groups).reshape(-1)
         count = self._blocks["count"]
-        summed = np.empty((br, count, bc))
+        summed = np.empty(br * count * bc) if out is None else out
+        by_block = summed.reshape(br * count, bc)
         for a in range(br):
             for b in range(bc):
                 weights = np.ascontiguousarray(values[:, a, :, b, :]).reshape(-1)
                 sums = np.bincount(position, weights=weights, minlength=count + 1)
-                summed[a, :, b] = sums[:count]
-        return summed.reshape(-1)
+                if len(row_starts):
+                    by_block[row_starts[a], b] = sums[1:]
+                else:
+                    by_block[a * count:(a + 1) * count, b] = sums[1:]
+        return summed
 
     def _positions(self, groups: np.ndarray) -> np.ndarray:
-        """(nr, nc, len(groups)) positions of the groups' blocks; dropped ones past the end."""
+        """(nr, nc, len(groups)) 1 + positions of the groups' blocks; 0 for dropped ones.
+
+        The answer for the last ``groups`` is kept: a Newton iteration assembles the same
+        pairs again, or almost the same (only the groups that were not in the last call
+        are looked up).
+        """
         blocks = self._blocks
-        position, known = blocks["position"], blocks["known"]
-        new = groups[~known[groups]]
-        if new.size:
-            nr, nc = position.shape[1:]
-            rows, cols = blocks["rows"][new], blocks["cols"][new]
-            # a dropped block is looked up as block 0 (absent or not), then marked
-            found = blocks["pattern"][np.repeat(np.maximum(rows, 0), nc, axis=1).reshape(-1),
-                                      np.tile(np.maximum(cols, 0), (1, nr)).reshape(-1)]
-            found = np.asarray(found).reshape(new.size, nr, nc).astype(position.dtype)
-            found[(rows < 0)[:, :, None] | (cols < 0)[:, None, :]] = -1
-            position[new] = found
-            known[new] = True
-        result = position[groups].transpose(1, 2, 0).astype(np.int64)
-        result[result < 0] = blocks["count"]
+        last = blocks["last"]
+        if last is None:
+            result = self._lookup(groups)
+        elif np.array_equal(last[0], groups):
+            return last[1]
+        else:
+            where = np.full(blocks["num_groups"], -1, dtype=np.int64)
+            where[last[0]] = np.arange(last[0].size)
+            index = where[groups]
+            known = index >= 0
+            result = np.empty(last[1].shape[:2] + (groups.size,), dtype=np.int64)
+            result[:, :, known] = last[1][:, :, index[known]]
+            if not known.all():
+                result[:, :, ~known] = self._lookup(groups[~known])
+        blocks["last"] = (groups.copy(), result)
         return result
+
+    def _lookup(self, groups: np.ndarray) -> np.ndarray:
+        """(nr, nc, len(groups)) 1 + positions of the groups' blocks, found in the pattern."""
+        blocks = self._blocks
+        rows = blocks["rows"][groups].T.astype(np.int32)
+        cols = blocks["cols"][groups].T.astype(np.int32)
+        shape = (rows.shape[0], cols.shape[0], groups.size)
+        if groups.size == 0:
+            return np.zeros(shape, dtype=np.int64)
+        found = blocks["pattern"][np.broadcast_to(rows[:, None, :], shape).reshape(-1),
+                                  np.broadcast_to(cols[None, :, :], shape).reshape(-1)]
+        return np.asarray(found, dtype=np.int64).reshape(shape)
 
     def destroy(self) -> None:
         if self.mat is not None:
             self.mat.destroy()
+            self.mat = None
 
 
 class MonolithicMatrix:
@@ -458,6 +537,40 @@ def _interleave(blocks: np.ndarray, size: int) -> np.ndarray:
     return result.reshape(-1)
 
 
+class BlockIncidence:
+    """The row (or column) blocks of the groups of a block pattern, (groups, n), -1 where a
+    group has none: their compact numbering and incidence matrices, built once and shared
+    by the matrices that have the same blocks (:meth:`CooMatrix.from_blocks` takes this or
+    the array).
+
+    ``local`` numbers the blocks among ``count`` (``numbers``: the global block of each,
+    None if the global numbering is used); a missing block is ``count``, a block that no
+    group has (the pattern gets an empty last row or column, and a lookup there finds
+    nothing).
+    """
+
+    def __init__(self, blocks):
+        blocks = np.asarray(blocks, dtype=np.int64)
+        self.numbers, local, self.count = _compact_numbering(blocks)
+        missing = local < 0
+        self.local = np.where(missing, self.count, local) if missing.any() else local
+        self._csr = self._transposed = None
+
+    @property
+    def csr(self):
+        """(groups, count + 1) CSR matrix with a one where a group has a block."""
+        if self._csr is None:
+            self._csr = _incidence(self.local, self.count)
+        return self._csr
+
+    @property
+    def transposed(self):
+        """The transpose of :attr:`csr`, in CSR form."""
+        if self._transposed is None:
+            self._transposed = self.csr.T.tocsr()
+        return self._transposed
+
+
 def _compact_numbering(blocks: np.ndarray):
     """(numbers, local, count): the block numbers used, each block's index among them
     (-1 stays -1) and how many. ``numbers`` is None when the global numbering itself
@@ -473,10 +586,11 @@ def _compact_numbering(blocks: np.ndarray):
 
 
 def _incidence(blocks: np.ndarray, num_blocks: int):
-    """(groups x blocks) CSR matrix with a one where a group has a block (negative: none)."""
+    """(groups x num_blocks + 1) CSR matrix with a one where a group has a block (blocks
+    num_blocks and above: none)."""
     import scipy.sparse
 
-    valid = blocks >= 0
+    valid = blocks < num_blocks
     if valid.all():
         step = max(blocks.shape[1], 1)
         indptr = np.arange(0, blocks.size + 1, step, dtype=np.int64)[: blocks.shape[0] + 1]
@@ -486,4 +600,4 @@ def _incidence(blocks: np.ndarray, num_blocks: int):
         np.cumsum(valid.sum(axis=1), out=indptr[1:])
         indices = blocks[valid]
     return scipy.sparse.csr_matrix((np.ones(indices.size), indices, indptr),
-                                   shape=(blocks.shape[0], max(num_blocks, 1)))
+                                   shape=(blocks.shape[0], num_blocks + 1))

@@ -32,7 +32,7 @@ from petsc4py import PETSc
 from . import kernels, search, stencils, surface
 from .dual import RowSubsetDual
 from .kernels import BasisOption, IntegrationOption, NormalOption
-from .layout import CooMatrix
+from .layout import BlockIncidence, CooMatrix
 
 CONFIGURATIONS = ("current", "reference")
 DEFAULT_GAUSS_POINTS = {"segment": 3, "element": 4}
@@ -187,6 +187,7 @@ class MortarInterface:
         self._number_multipliers()
         self._pattern_version = 0
         self._matrices: dict[str, tuple[int, PETSc.Mat]] = {}
+        self._pair_block_sides: dict[str, tuple[int, BlockIncidence]] = {}
         self.quantities: kernels.PairQuantities | None = None
         self._crosspoint_blocks = np.zeros(0, dtype=np.int64)
         self._pair_dofs: np.ndarray | None = None
@@ -610,17 +611,37 @@ class MortarInterface:
             raise RuntimeError("call update(u) before assembling mortar quantities")
         return self.quantities
 
-    def _block_matrix(self, name: str, row_blocks, col_blocks, block_shape,
+    def _block_matrix(self, name: str, row_blocks: str, col_blocks: str, block_shape,
                       row_sizes, col_sizes) -> CooMatrix:
-        """A matrix of a dense block per pair, whose pattern is rebuilt only after a new search."""
+        """A matrix of a dense block per pair (rows and columns: :meth:`_pair_blocks`),
+        whose pattern is rebuilt only after a new search."""
         version, matrix = self._matrices.get(name, (-1, None))
         if version != self._pattern_version:
             if matrix is not None:
                 matrix.destroy()
-            matrix = CooMatrix.from_blocks(self.comm, row_blocks, col_blocks, block_shape,
+            matrix = CooMatrix.from_blocks(self.comm, self._pair_blocks(row_blocks),
+                                           self._pair_blocks(col_blocks), block_shape,
                                            row_sizes, col_sizes)
             self._matrices[name] = (self._pattern_version, matrix)
         return matrix
+
+    def _pair_blocks(self, name: str) -> BlockIncidence:
+        """The pairs' blocks of one side of the matrix patterns, built once per search and
+        shared: ``multipliers`` (rows of D, M, G, B), ``slave`` and ``master`` nodes
+        (columns of D, M), ``stencil`` (columns of G, K), ``force`` (B's columns, K's rows)."""
+        version, side = self._pair_block_sides.get(name, (-1, None))
+        if version != self._pattern_version:
+            stencil = self.stencil
+            blocks = {
+                "multipliers": lambda: self.pair_multipliers,
+                "slave": lambda: self.pair_node_blocks[:, stencil.slave_slots],
+                "master": lambda: self.pair_node_blocks[:, stencil.master_slots],
+                "stencil": lambda: self._pair_col_blocks,
+                "force": lambda: self._pair_force_blocks,
+            }[name]()
+            side = BlockIncidence(blocks)
+            self._pair_block_sides[name] = (self._pattern_version, side)
+        return side
 
     def _rows(self, q: kernels.PairQuantities) -> np.ndarray:
         """The pairs whose quantities may be nonzero (the others are skipped in assembly)."""
@@ -641,11 +662,8 @@ class MortarInterface:
         q = self._require()
         rows = self._rows(q)
         sizes = (self._multiplier_sizes, self._block_sizes)
-        stencil = self.stencil
-        slave = self.pair_node_blocks[:, stencil.slave_slots]
-        master = self.pair_node_blocks[:, stencil.master_slots]
-        D = self._block_matrix("D", self.pair_multipliers, slave, (1, 1), *sizes)
-        M = self._block_matrix("M", self.pair_multipliers, master, (1, 1), *sizes)
+        D = self._block_matrix("D", "multipliers", "slave", (1, 1), *sizes)
+        M = self._block_matrix("M", "multipliers", "master", (1, 1), *sizes)
         return (D.assemble_groups(q.D[rows].transpose(1, 2, 0), rows),
                 M.assemble_groups(q.M[rows].transpose(1, 2, 0), rows))
 
@@ -671,8 +689,7 @@ class MortarInterface:
         gap = self.stencil.GAP
         terms = [[(gap + j, 1.0)] for j in range(self.stencil.ns)]
         values = self._combined_gradients(q, rows, terms)  # (j, width * gdim, n)
-        matrix = self._block_matrix("G", self.pair_multipliers, self._pair_col_blocks,
-                                    (1, self.gdim),
+        matrix = self._block_matrix("G", "multipliers", "stencil", (1, self.gdim),
                                     self._multiplier_sizes, self._dof_sizes)
         return matrix.assemble_groups(values, rows)
 
@@ -697,8 +714,7 @@ class MortarInterface:
         q = self._require()
         rows = self._rows(q)
         values = self._force_coefficient_values(q, rows).transpose(1, 2, 3, 0)  # (j, k, c, n)
-        matrix = self._block_matrix("B", self.pair_multipliers, self._pair_force_blocks,
-                                    (1, self.gdim),
+        matrix = self._block_matrix("B", "multipliers", "force", (1, self.gdim),
                                     self._multiplier_sizes, self._dof_sizes)
         return matrix.assemble_groups(values, rows)
 
@@ -715,8 +731,7 @@ class MortarInterface:
         terms += [[(stencil.mn(j, k, c), -z_pair[:, j]) for j in js]
                   for k in range(stencil.nm) for c in range(gdim)]
         values = self._combined_gradients(q, rows, terms)  # ((ns + nm) gdim, width gdim, n)
-        matrix = self._block_matrix("K", self._pair_force_blocks, self._pair_col_blocks,
-                                    (gdim, gdim),
+        matrix = self._block_matrix("K", "force", "stencil", (gdim, gdim),
                                     self._dof_sizes, self._dof_sizes)
         return matrix.assemble_groups(values, rows)
 
@@ -735,3 +750,4 @@ class MortarInterface:
         for _, matrix in self._matrices.values():
             matrix.destroy()
         self._matrices.clear()
+        self._pair_block_sides.clear()

@@ -1,0 +1,87 @@
+"""CooMatrix.from_blocks against the plain triplet CooMatrix (sorted entries, PETSc insertion).
+
+The block path builds its pattern by sparse products and, in serial, makes the PETSc
+matrix around its own CSR arrays with the values summed straight into CSR order; the
+triplet path sorts all entries and inserts them. Both must give the same pattern and
+the same values, also after a second assembly of other groups into the same matrix.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from dolfinx_mortar.layout import CooMatrix
+
+
+def _triplets(row_blocks, col_blocks, block_shape, values, groups):
+    """(rows, cols, values) of the listed groups, in the (g, i, a, j, b) order."""
+    br, bc = block_shape
+    nr, nc = row_blocks.shape[1], col_blocks.shape[1]
+    row_block = row_blocks[groups][:, :, None, None, None]
+    col_block = col_blocks[groups][:, None, None, :, None]
+    rows = np.where(row_block < 0, -1, row_block * br + np.arange(br)[:, None, None])
+    cols = np.where(col_block < 0, -1, col_block * bc + np.arange(bc))
+    shape = (groups.size, nr, br, nc, bc)
+    return (np.broadcast_to(rows, shape).reshape(-1), np.broadcast_to(cols, shape).reshape(-1),
+            np.moveaxis(values, -1, 0).reshape(-1))
+
+
+def _csr(matrix):
+    indptr, indices, values = matrix.getValuesCSR()
+    return indptr.copy(), indices.copy(), values.copy()
+
+
+@pytest.mark.parametrize("block_shape", [(1, 1), (1, 2), (2, 2), (3, 1)])
+def test_blocks_equal_triplets(block_shape):
+    """Same CSR structure and values (to rounding: the sums run in another order)."""
+    comm = MPI.COMM_SELF
+    rng = np.random.default_rng(7)
+    num_groups, nr, nc = 400, 3, 5
+    num_row_blocks, num_col_blocks = 60, 90
+    row_blocks = rng.integers(0, num_row_blocks, (num_groups, nr))
+    col_blocks = rng.integers(0, num_col_blocks, (num_groups, nc))
+    row_blocks[rng.random(row_blocks.shape) < 0.1] = -1  # dropped rows and columns
+    col_blocks[rng.random(col_blocks.shape) < 0.1] = -1
+    br, bc = block_shape
+    sizes = ((num_row_blocks * br,) * 2, (num_col_blocks * bc,) * 2)
+    blocks = CooMatrix.from_blocks(comm, row_blocks, col_blocks, block_shape, *sizes)
+    all_groups = np.arange(num_groups)
+    rows, cols, _ = _triplets(row_blocks, col_blocks, block_shape,
+                              np.zeros((nr, br, nc, bc, num_groups)), all_groups)
+    triplets = CooMatrix(comm, rows, cols, *sizes)
+    first = rng.choice(num_groups, 150, replace=False)
+    second = np.sort(rng.choice(num_groups, 230, replace=False))
+    # new groups, the same again, others partly known, none, the first again
+    for subset in (first, first.copy(), second, np.zeros(0, dtype=np.int64), first):
+        values = rng.standard_normal((nr, br, nc, bc, subset.size))
+        full = np.zeros((nr, br, nc, bc, num_groups))
+        full[..., subset] = values
+        expected = _csr(triplets.assemble(np.moveaxis(full, -1, 0)))
+        got = _csr(blocks.assemble_groups(values, subset))
+        assert np.array_equal(got[0], expected[0])
+        assert np.array_equal(got[1], expected[1])
+        assert np.allclose(got[2], expected[2], rtol=1e-14, atol=1e-14)
+        assert np.abs(expected[2]).max(initial=1.0) > 0.0
+    full = rng.standard_normal((num_groups, nr, br, nc, bc))  # all groups, group axis first
+    expected = _csr(triplets.assemble(full))
+    got = _csr(blocks.assemble(full))
+    assert np.array_equal(got[1], expected[1])
+    assert np.allclose(got[2], expected[2], rtol=1e-14, atol=1e-14)
+    assert blocks.mat.getSize() == (num_row_blocks * br, num_col_blocks * bc)
+    blocks.destroy()
+    triplets.destroy()
+
+
+def test_blocks_without_groups():
+    """No pair at all: an empty matrix of the right size, assembled."""
+    comm = MPI.COMM_SELF
+    empty = np.zeros((0, 2), dtype=np.int64)
+    matrix = CooMatrix.from_blocks(comm, empty, np.zeros((0, 3), dtype=np.int64), (1, 2),
+                                   (4, 4), (6, 6))
+    mat = matrix.assemble_groups(np.zeros((2, 1, 3, 2, 0)), np.zeros(0, dtype=np.int64))
+    assert mat.getSize() == (4, 6)
+    indptr, indices, _ = mat.getValuesCSR()
+    assert np.array_equal(indptr, np.zeros(5)) and indices.size == 0
+    matrix.destroy()
