@@ -60,6 +60,19 @@ def test_frictional_jacobian_taylor_3d(state, method, normals):
     problem.destroy()
 
 
+@pytest.mark.parametrize("integration, basis",
+                         [("element", "standard"), ("segment", "dual"), ("element", "dual")])
+def test_frictional_jacobian_taylor_3d_integration_and_basis(integration, basis):
+    """The 3D frictional Taylor test (slip, Lagrange) with element-based integration and
+    the dual basis: D and M keep their exact gradients on every kernel path."""
+    problem = penetrating_punch(0.02, method="lagrange", friction=("coulomb", 1.0),
+                                integration=integration, multipliers=basis)
+    with_random_tangential_multipliers(problem, seed=5)
+    put_every_active_node_in(problem, "slipping", "lagrange")
+    assert_taylor_second_order(problem, seed=11)
+    problem.destroy()
+
+
 PATCH = load_demo("friction_patch")
 
 
