@@ -64,6 +64,15 @@ ITERATIVE_OPTIONS = {
     # graph, K_c not being symmetric) grew from 6 to 155 (docs/benchmarks.md)
     "condensed_pc_type": "hypre",
     "condensed_pc_hypre_type": "boomeramg",
+    # HMIS coarsening, extended+i interpolation of at most 4 entries a row: hypre's
+    # defaults for 3D (Falgout, classical) made coarse levels of 200-400 entries a
+    # row on the condensed 3D Hertz systems (operator complexity 5.6 at 13k dofs,
+    # 30 ms a V-cycle); these kept 17-20 inner steps from 13k to 85k dofs at 3.5 ms
+    # a step (13k). One level of aggressive coarsening was cheaper a step but grew
+    # from 22 to 51 steps (benchmarks/README.md, "Iterative linear solver")
+    "condensed_pc_hypre_boomeramg_coarsen_type": "HMIS",
+    "condensed_pc_hypre_boomeramg_interp_type": "ext+i",
+    "condensed_pc_hypre_boomeramg_P_max": 4,
 }
 
 GAMG_OPTIONS = {
