@@ -68,7 +68,8 @@ def inner_preconditioner_view(problem) -> str:
 @pytest.mark.parametrize(("dim", "petsc_options", "coarsening", "interpolation", "p_max"), [
     (3, {}, "HMIS", "ext\\+i", 4),
     (3, {"condensed_pc_hypre_boomeramg_coarsen_type": "PMIS"}, "PMIS", "ext\\+i", 4),
-    (2, {}, "Falgout", "classical", 0),
+    # PETSc 3.25 (sid) prints "not yet set" where it leaves hypre its own default
+    (2, {}, "(Falgout|not yet set)", "(classical|not yet set)", 0),
 ])
 def test_boomeramg_options_follow_the_dimension(dim, petsc_options, coarsening,
                                                 interpolation, p_max):
