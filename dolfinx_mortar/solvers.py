@@ -5,7 +5,8 @@ system, or, with condensation, fgmres on it preconditioned by a condensed
 displacement-only solve (:mod:`dolfinx_mortar.condensation`): MUMPS LU
 (``linear_solver="direct"``) or GMRES with algebraic multigrid whose
 near-nullspace is the rigid-body modes of each body
-(``linear_solver="iterative"``). ``petsc_options``
+(``linear_solver="iterative"``; BoomerAMG, with :data:`BOOMERAMG_3D_OPTIONS` in
+3D). ``petsc_options``
 given to the problem override the defaults, and the user's options database
 under the problem's prefix overrides both.
 
@@ -64,6 +65,20 @@ ITERATIVE_OPTIONS = {
     # graph, K_c not being symmetric) grew from 6 to 155 (docs/benchmarks.md)
     "condensed_pc_type": "hypre",
     "condensed_pc_hypre_type": "boomeramg",
+}
+
+BOOMERAMG_3D_OPTIONS = {
+    # added (under condensed_, unless the user set them) when the displacement has 3
+    # components: HMIS coarsening, extended+i interpolation of at most 4 entries a row.
+    # hypre's defaults (Falgout, classical) made coarse levels of 200-400 entries a row
+    # on the condensed 3D Hertz systems (operator complexity 5.6 at 13k dofs, 12 ms a
+    # V-cycle); these kept 17-20 inner steps from 13k to 85k dofs at 3.5 ms a step
+    # (13k). One level of aggressive coarsening was cheaper a step but grew from 22 to
+    # 51 steps. In 2D the defaults stay: there HMIS took 16.5 inner steps at 77k dofs
+    # against 6.9 (benchmarks/README.md, "Iterative linear solver in 3D")
+    "pc_hypre_boomeramg_coarsen_type": "HMIS",
+    "pc_hypre_boomeramg_interp_type": "ext+i",
+    "pc_hypre_boomeramg_P_max": 4,
 }
 
 GAMG_OPTIONS = {
@@ -260,9 +275,21 @@ def condensed_preconditioner(ksp: PETSc.KSP, layout, interfaces, block_size: int
         [i.owned_multiplier_blocks[:, None] * block_size + np.arange(block_size)
          for i in interfaces]
     ).reshape(-1, block_size)
-    condenser = CondensedPreconditioner(comm, u_rows, z_rows, node_dofs,
-                                        prefix=f"{prefix}condensed_",
-                                        near_nullspace=near_nullspace)
+    options = PETSc.Options()
+    added = []
+    if block_size == 3:
+        for key, value in BOOMERAMG_3D_OPTIONS.items():
+            name = f"{prefix}condensed_{key}"
+            if not options.hasName(name):
+                options[name] = value
+                added.append(name)
+    try:
+        condenser = CondensedPreconditioner(comm, u_rows, z_rows, node_dofs,
+                                            prefix=f"{prefix}condensed_",
+                                            near_nullspace=near_nullspace)
+    finally:
+        for name in added:
+            options.delValue(name)
     pc = ksp.getPC()
     pc.setType(PETSc.PC.Type.PYTHON)
     pc.setPythonContext(condenser)
