@@ -130,8 +130,8 @@ def add_common_arguments(
         "--linear-solver",
         choices=("direct", "iterative"),
         default="direct",
-        help="direct: MUMPS LU; iterative: condensed system, GMRES + GAMG with rigid-body "
-        "modes (dual multipliers)",
+        help="direct: MUMPS LU; iterative: condensed system, GMRES + BoomerAMG (GAMG "
+        "selectable) with rigid-body modes (dual multipliers)",
     )
     parser.add_argument(
         "--search-margin",
