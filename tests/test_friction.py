@@ -145,8 +145,9 @@ def put_every_active_node_in(problem, state: str, method: str) -> None:
     if method == "lagrange":
         z = z - problem.c_n * problem.gaps[0][active] / problem.areas[0][active]
     state_now = problem.friction_state()
-    s = state_now["slip"][active].reshape(z.size, -1)
-    y = state_now["traction"][active].reshape(z.size, -1)
+    m = problem.friction.components  # (a rank may have no active node: no -1 in reshape)
+    s = state_now["slip"][active].reshape(z.size, m)
+    y = state_now["traction"][active].reshape(z.size, m)
     v = np.linalg.norm((y if method == "lagrange" else 0.0) + problem.c_t * s, axis=1)
     comm = problem.comm
     if state == "slipping":
