@@ -420,9 +420,9 @@ class Friction:
         it) carries no friction, y^a = 0 (:func:`tangential_rows`); otherwise the mortar
         slip across a symmetry plane, integrated over the half of the neighbourhood the
         model holds, would be held by a spurious stick condition."""
-        partial = [f.any(axis=1) & ~f.all(axis=1) for f in fixed]
-        any_partial = self.interfaces[0].comm.allreduce(
-            [bool(p.any()) for p in partial], op=MPI.MAX) if partial else []
+        comm = self.interfaces[0].comm
+        any_partial = [comm.allreduce(bool(np.any(f.any(axis=1) & ~f.all(axis=1))), op=MPI.LOR)
+                       for f in fixed]
         self.fixed = [f if self.gdim == 3 and flag else None
                       for f, flag in zip(fixed, any_partial, strict=True)]
 
@@ -435,11 +435,16 @@ class Friction:
         interface = self.interfaces[k]
         return PairTangents(interface, interface.quantities, rows, self.axes[k])
 
-    def pair_multipliers(self, k: int, rows: np.ndarray) -> np.ndarray:
-        """(rows, m, j): y^a at the slave nodes of pair k's pairs ``rows``."""
+    def node_multipliers(self, k: int) -> list[np.ndarray]:
+        """y^a of pair k at its node table, one array per component (collective: ghost
+        values are exchanged)."""
         interface = self.interfaces[k]
-        nodes = interface.pair_slave_nodes[rows]
-        return np.stack([interface.node_values(y)[nodes] for y in self.multipliers[k]], axis=1)
+        return [interface.node_values(y) for y in self.multipliers[k]]
+
+    def pair_multipliers(self, k: int, rows: np.ndarray) -> np.ndarray:
+        """(rows, m, j): y^a at the slave nodes of pair k's pairs ``rows`` (collective)."""
+        nodes = self.interfaces[k].pair_slave_nodes[rows]
+        return np.stack([y[nodes] for y in self.node_multipliers(k)], axis=1)
 
     def update_slip(self, k: int, u, vector: PETSc.Vec) -> None:
         """u~_j of pair k's owned slave nodes at u, summed over the pairs through the ghosted

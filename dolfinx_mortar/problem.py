@@ -593,7 +593,7 @@ class ContactProblem:
         tangential = None
         if self.has_friction:
             tangential = Tangential(self._tangential_rows, self.friction.increments,
-                                    self.friction.pair_multipliers, self.friction.tangents)
+                                    self.friction.node_multipliers, self.friction.tangents)
         rebuilt, contact, bulk = self.system.assemble(
             self.multipliers, self._row_coefficients, self._multiplier_rows, tangential)
         if rebuilt and hasattr(self, "snes"):

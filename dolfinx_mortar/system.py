@@ -34,12 +34,12 @@ if typing.TYPE_CHECKING:
 class Tangential(typing.NamedTuple):
     """What the matrix needs of friction: a callable k -> :class:`~dolfinx_mortar.friction.
     TangentialRows`, du = u - u_start at each pair's node table, and callables
-    (k, rows) -> the pairs' y^a (rows, m, j) and (k, rows) -> their
+    k -> y^a at the node table (collective) and (k, rows) -> the pairs'
     :class:`~dolfinx_mortar.friction.PairTangents`."""
 
     rows: typing.Callable
     increments: list
-    pair_multipliers: typing.Callable
+    node_multipliers: typing.Callable
     tangents: typing.Callable
 
 
@@ -257,6 +257,7 @@ class ContactSystem:
             for name, owned_values in names.items():
                 vectors[name].getArray()[:] = owned_values
                 row_nodes[name] = interface.node_values(vectors[name])
+            y_nodes = tangential.node_multipliers(k)  # (collective: before any early return)
         if contributing.size == 0:
             return None
         stencil, gdim = interface.stencil, interface.gdim
@@ -275,7 +276,7 @@ class ContactSystem:
         num_multipliers = ns
         if friction is not None:
             tangents = tangential.tangents(k, contributing)
-            y_pair = tangential.pair_multipliers(k, contributing)  # (pairs, a, j)
+            y_pair = np.stack([y[slave_nodes] for y in y_nodes], axis=1)  # (pairs, a, j)
             slave_extra, master_extra = tangents.force_terms(y_pair)
             for row, extra in zip(slave_terms + master_terms, slave_extra + master_extra,
                                   strict=True):
