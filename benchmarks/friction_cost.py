@@ -17,7 +17,6 @@ hexahedron through the thickness to t = 1.5 (375 of the 500 steps).
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import pathlib
 import statistics
@@ -25,7 +24,7 @@ import statistics
 import numpy as np
 from mpi4py import MPI
 
-DEMOS = pathlib.Path(__file__).parents[1] / "demos"
+from dolfinx_mortar.benchmarks.runner import demo
 
 CASES = {
     "ironing": ("ironing", ["--steps", "500"], "vertical_force_at_t1_5"),
@@ -36,13 +35,6 @@ CASES = {
                               "--end-time", "1.5"], "horizontal_force_at_t1_5"),
 }
 VARIANTS = {"frictionless": [], "mu = 0": ["--mu", "0"], "mu = 0.3": ["--mu", "0.3"]}
-
-
-def demo(name: str):
-    spec = importlib.util.spec_from_file_location(f"demo_{name}", DEMOS / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def main(argv=None) -> int:

@@ -15,7 +15,6 @@ and the inner (condensed GMRES + BoomerAMG) iterations per application:
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import pathlib
 
@@ -23,15 +22,7 @@ import numpy as np
 from mpi4py import MPI
 
 from dolfinx_mortar import condensation, problem
-
-DEMOS = pathlib.Path(__file__).parents[1] / "demos"
-
-
-def demo(name: str):
-    spec = importlib.util.spec_from_file_location(f"demo_{name}", DEMOS / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+from dolfinx_mortar.benchmarks.runner import demo
 
 
 def run(module, n0: int, refinement: int, solver: str) -> dict:
