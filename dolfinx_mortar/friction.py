@@ -401,6 +401,7 @@ class Friction:
         self.increments: list[np.ndarray | None] = [None] * len(interfaces)
         self.axes = [frame_axis(i) if self.gdim == 3 else None for i in interfaces]
         self.fixed: list[np.ndarray | None] = [None] * len(interfaces)
+        self._tangents: dict[int, tuple] = {}
         self.held: list[np.ndarray | None] = [None] * len(interfaces)
         if self.gdim == 3 and any(i.stencil is not None and i.stencil.max_star == 0
                                   and i.normals != "averaged" for i in interfaces):
@@ -431,9 +432,17 @@ class Friction:
         self._start = u.x.array.copy()
 
     def tangents(self, k: int, rows: np.ndarray) -> PairTangents:
-        """Pair k's tangential coefficients of the pairs ``rows`` at the last evaluation."""
+        """Pair k's tangential coefficients of the pairs ``rows`` at the last evaluation
+        (kept until the next one: the slip, the force and the Jacobian of an iterate share
+        them)."""
         interface = self.interfaces[k]
-        return PairTangents(interface, interface.quantities, rows, self.axes[k])
+        q = interface.quantities
+        kept = self._tangents.get(k)
+        if kept is not None and kept[0] is q and np.array_equal(kept[1], rows):
+            return kept[2]
+        tangents = PairTangents(interface, q, rows, self.axes[k])
+        self._tangents[k] = (q, rows.copy(), tangents)
+        return tangents
 
     def node_multipliers(self, k: int) -> list[np.ndarray]:
         """y^a of pair k at its node table, one array per component (collective: ghost
