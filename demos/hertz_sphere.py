@@ -44,6 +44,11 @@ cores shared with other jobs). ``--linear-solver iterative`` gives the same
 answer (to 1e-14 at refinement 1, 29 and 26 Krylov iterations per step) but was
 not faster there (60 s of linear solves against 38 s).
 
+``--cell hexahedron`` (dolfinx_mortar.meshes3d.hertz_sphere_hexahedral): structured
+graded hexahedral grids, the upper body a column [0, R/2]^2 whose bottom face is the
+sphere's surface. Its nodal pressures do not scatter as on gmsh's tetrahedra, so
+p_max itself converges to p0 (docs/benchmarks.md, "3D Hertz on hexahedra").
+
 Pressure error: the L2 norm over the slave surface (surface quadrature of
 degree 8 on the slave facets, reference configuration) of p_h - p_Hertz(r),
 p_h the P1 interpolant of the nodal multipliers, r = sqrt(x^2 + y^2),
@@ -174,7 +179,9 @@ def slave_edge_length(tagged, radius: float) -> float:
         points = mesh.geometry.x[vertices]
         centre = points.mean(axis=1)
         near = np.hypot(centre[:, 0], centre[:, 1]) < radius
-        edges = points[near][:, [1, 2, 0]] - points[near]
+        cycle = [0, 1, 2] if points.shape[1] == 3 else [0, 1, 3, 2]  # dolfinx quad order
+        ring = points[near][:, cycle]
+        edges = np.roll(ring, -1, axis=1) - ring
         lengths = np.linalg.norm(edges, axis=2)
         total, count = float(lengths.sum()), int(lengths.size)
     total = mesh.comm.allreduce(total, op=MPI.SUM)
@@ -212,6 +219,13 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         "--refinement", type=int, default=0, help="halves the element sizes per level"
     )
     parser.add_argument(
+        "--cell",
+        choices=meshes3d.CELL_TYPES_3D,
+        default="tetrahedron",
+        help="tetrahedron: gmsh mesh of the half balls; hexahedron: structured graded grids "
+        "(the upper body a column with the sphere's surface as its bottom face)",
+    )
+    parser.add_argument(
         "--elements-per-radius",
         type=int,
         default=meshes3d.ELEMENTS_PER_RADIUS,
@@ -239,7 +253,9 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         parser.error(f"the Hertz radius a = {exact['a']:.4g} is not below R/3: lower --load")
     start = time.perf_counter()
 
-    tagged = meshes3d.hertz_sphere(
+    builder = (meshes3d.hertz_sphere if args.cell == "tetrahedron"
+               else meshes3d.hertz_sphere_hexahedral)
+    tagged = builder(
         case=args.case,
         refinement=args.refinement,
         radius=args.radius,
@@ -317,6 +333,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         "c_n": problem.c_n,
         "penalty_used": problem.penalty,
         "refinement": args.refinement,
+        "cell": args.cell,
         "elements_per_radius": args.elements_per_radius,
         "num_ranks": comm.size,
         "num_cells": mesh.topology.index_map(3).size_global,

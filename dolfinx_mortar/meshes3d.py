@@ -12,12 +12,16 @@ from __future__ import annotations
 
 import math
 
+import dolfinx.mesh
+import numpy as np
 from mpi4py import MPI
 
 from dolfinx_mortar import compat, meshes
+from dolfinx_mortar.bodies import merge_meshes
 from dolfinx_mortar.meshes import TaggedMesh, _check_positive, _check_refinement
 
 HERTZ_SPHERE_CASES = ("block", "sphere")
+CELL_TYPES_3D = ("tetrahedron", "hexahedron")
 """Accepted values of :func:`hertz_sphere`'s ``case``."""
 
 ELEMENTS_PER_RADIUS = 4
@@ -216,3 +220,131 @@ def hertz_sphere(
     every["contact_slave"] = markers[sides[0]]
     every["contact_master"] = markers[sides[1]]
     return TaggedMesh(data.mesh, data.cell_tags, data.facet_tags, every, h_contact * unit)
+
+
+HEXAHEDRAL_GROWTH = 1.5
+"""Size ratio of neighbouring cells beyond the refined zone of :func:`hertz_sphere_hexahedral`
+(the same at every refinement, so that a level adds only a few graded cells)."""
+
+
+def graded_nodes(length: float, h_fine: float, zone: float, ratio: float, h_max: float):
+    """Node coordinates on [0, length]: cells of size ``h_fine`` up to ``zone``, then growing by
+    ``ratio`` per cell up to ``h_max``; the graded part is shrunk to end at ``length``."""
+    n_fine = max(1, math.ceil(zone / h_fine - 1e-9))
+    nodes = [i * h_fine for i in range(n_fine + 1)]
+    h = h_fine
+    while nodes[-1] < length:
+        h = min(h * ratio, h_max)
+        nodes.append(nodes[-1] + h)
+    nodes = np.array(nodes)
+    start = nodes[n_fine]
+    if start >= length:
+        return nodes[: n_fine + 1] * (length / start)
+    nodes[n_fine:] = start + (nodes[n_fine:] - start) * (length - start) / (nodes[-1] - start)
+    return nodes
+
+
+def hertz_sphere_hexahedral(
+    case: str = "block",
+    refinement: int = 0,
+    radius: float = 1.0,
+    contact_radius: float = 0.1,
+    block_size: float = 1.0,
+    slave: str = "sphere",
+    elements_per_radius: int = ELEMENTS_PER_RADIUS,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> TaggedMesh:
+    """Structured hexahedral quarter model of :func:`hertz_sphere`'s problem.
+
+    The upper body is the column [0, R/2]^2 whose bottom face is the sphere's surface
+    z = R - sqrt(R^2 - x^2 - y^2) (the cap of radius R/2 around the contact point, as
+    the tetrahedral model's contact surface) and whose top face z = R carries the load;
+    case "block": the block [0, L]^2 x [-L, 0]; case "sphere": the column mirrored in
+    z = 0. Each is a tensor-product grid: cells of size a / (n0 2**refinement) within
+    1.5 a of the contact point along each axis (the depth measured from the curved face),
+    growing by HEXAHEDRAL_GROWTH per cell beyond, up to R / 4. Hertz theory sees only the
+    curvature at the contact and the bodies' elasticity; the column differs from the
+    ball away from the contact zone. Same groups and aliases as :func:`hertz_sphere`.
+    """
+    if case not in HERTZ_SPHERE_CASES:
+        raise ValueError(f"case must be one of {HERTZ_SPHERE_CASES}, got {case!r}")
+    if slave not in ("sphere", "block"):
+        raise ValueError(f"slave must be 'sphere' or 'block', got {slave!r}")
+    level = _check_refinement(refinement)
+    n0 = _check_refinement(elements_per_radius)
+    if n0 < 1:
+        raise ValueError(f"elements_per_radius must be >= 1, got {elements_per_radius!r}")
+    unit = _check_positive("radius", radius)
+    a = float(f"{_check_positive('contact_radius', contact_radius) / unit:.12g}")
+    L = float(f"{_check_positive('block_size', block_size):.12g}")
+    if not 1.5 * a < CAP_RADIUS:
+        raise ValueError(f"contact_radius must be below {CAP_RADIUS / 1.5:.4g} R = "
+                         f"{CAP_RADIUS / 1.5 * unit:.6g}, got {contact_radius!r}")
+    h_contact = a / n0 * 0.5**level
+    h_max = 0.25
+
+    def axis(length: float):
+        return graded_nodes(length, h_contact, 1.5 * a, HEXAHEDRAL_GROWTH, h_max)
+
+    def grid(x_nodes, y_nodes, z_nodes, place):
+        """create_box on the unit cube, its nodes moved to place(x, y, depth)."""
+        counts = [x_nodes.size - 1, y_nodes.size - 1, z_nodes.size - 1]
+        box = dolfinx.mesh.create_box(comm, [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]], counts,
+                                      dolfinx.mesh.CellType.hexahedron)
+        x = box.geometry.x
+        index = [np.rint(x[:, i] * counts[i]).astype(np.int64) for i in range(3)]
+        x[:] = place(x_nodes[index[0]], y_nodes[index[1]], z_nodes[index[2]])
+        return box
+
+    def surface(x, y):
+        return 1.0 - np.sqrt(1.0 - x**2 - y**2)
+
+    def column(sign: float):
+        """The column on the side sign of z = 0; depth 0 on its curved face."""
+        nodes = axis(CAP_RADIUS)
+
+        def place(x, y, depth):
+            s = surface(x, y)
+            return np.column_stack([x, y, sign * (s + depth * (1.0 - s))])
+
+        return grid(nodes, nodes, axis(1.0), place)
+
+    tol = 1e-9
+    on_plane = {
+        "symmetry_x": lambda x: np.abs(x[0]) < tol,
+        "symmetry_y": lambda x: np.abs(x[1]) < tol,
+    }
+    upper = (column(1.0), {
+        "surface": lambda x: np.abs(x[2] - surface(x[0], x[1])) < tol,
+        "load": lambda x: np.abs(x[2] - 1.0) < tol, **on_plane})
+    if case == "block":
+        nodes = axis(L)
+        lower_mesh = grid(nodes, nodes, axis(L),
+                          lambda x, y, depth: np.column_stack([x, y, -depth]))
+        lower = (lower_mesh, {"surface": lambda x: np.abs(x[2]) < tol,
+                              "support": lambda x: np.abs(x[2] + L) < tol, **on_plane})
+    else:
+        lower = (column(-1.0), {
+            "surface": lambda x: np.abs(x[2] + surface(x[0], x[1])) < tol,
+            "support": lambda x: np.abs(x[2] + 1.0) < tol, **on_plane})
+    merged = merge_meshes({"sphere": upper, "block": lower}, comm)
+    # one tag per group across both bodies, named as hertz_sphere names them
+    groups = {"sphere_surface": ["sphere_surface"], "block_top": ["block_surface"],
+              "load": ["sphere_load"], "support": ["block_support"],
+              "symmetry_x": ["sphere_symmetry_x", "block_symmetry_x"],
+              "symmetry_y": ["sphere_symmetry_y", "block_symmetry_y"]}
+    names = ["sphere", "block", *groups]
+    markers = {name: 1 + i if i < 2 else 9 + i for i, name in enumerate(names)}
+    old = merged.facet_tags
+    values = np.full(old.values.shape, -1, dtype=np.int32)
+    for name, parts in groups.items():
+        for part in parts:
+            values[old.values == merged.markers[part]] = markers[name]
+    facet_tags = dolfinx.mesh.meshtags(merged.mesh, 2, old.indices, values)
+    if unit != 1.0:
+        merged.mesh.geometry.x[:] *= unit
+    sides = ("sphere_surface", "block_top") if slave == "sphere" else ("block_top",
+                                                                       "sphere_surface")
+    markers["contact_slave"] = markers[sides[0]]
+    markers["contact_master"] = markers[sides[1]]
+    return TaggedMesh(merged.mesh, merged.cell_tags, facet_tags, markers, h_contact * unit)

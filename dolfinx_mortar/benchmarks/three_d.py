@@ -40,6 +40,10 @@ HERTZ3D_VARIANTS: list[dict] = [
      "label": "segment-based, Lagrange (dual, semismooth), MUMPS LU of the monolithic system"},
     {"name": "iterative", "args": ["--linear-solver", "iterative"],
      "label": "segment-based, Lagrange (dual, semismooth), condensed system, GMRES + BoomerAMG"},
+    {"name": "hex-direct", "args": ["--cell", "hexahedron"],
+     "label": "as direct, on the structured hexahedral grids (--cell hexahedron)"},
+    {"name": "hex-iterative", "args": ["--cell", "hexahedron", "--linear-solver", "iterative"],
+     "label": "as iterative, on the structured hexahedral grids (--cell hexahedron)"},
 ]
 HERTZ3D_ERRORS = ("l2_pressure_error_rel", "p_max_error_rel", "p0_fit_error_rel",
                   "a_error_in_elements", "total_force_error_rel")
@@ -142,7 +146,7 @@ def hertz3d(refinements: list[int], repeats: int, variants: list[dict] = HERTZ3D
         for variant in variants:
             record = {"variant": variant["name"], "label": variant["label"],
                       "refinement": refinement}
-            if (variant["name"] == "direct" and direct_max_refinement is not None
+            if (variant["name"].endswith("direct") and direct_max_refinement is not None
                     and refinement > direct_max_refinement):
                 record.update(failed=True, error=f"not run (--direct-max-refinement "
                                                  f"{direct_max_refinement})")
