@@ -59,6 +59,7 @@ _FACING_TOLERANCE = 1e-8
 _AREA_TOLERANCE = 1e-14
 _MAX_VERTICES = 8
 _CHUNK = 2048
+_SCREEN_CHUNK = 16384  # candidates screened at once (values only)
 _BATCH = 512  # overlapping pairs integrated at once (their work arrays stay in cache)
 
 # symmetric triangle rules on the reference triangle (barycentric points, weights sum to 1)
@@ -170,20 +171,15 @@ def _inverse_map(corners: Dual, point: Dual, nodes: int) -> Dual:
     derivatives follow from one Newton step in dual arithmetic (exact at the root)."""
     c = corners.value  # (..., nodes, 2)
     p = point.value
-    xi = np.zeros(p.shape)
     if nodes == 3:
-        xi[...] = 0.0
-        iterations = 1
-    else:
-        iterations = 20
-    for _ in range(iterations):
+        return _triangle_inverse_map(corners, point)
+    xi = np.zeros(p.shape)
+    for _ in range(20):
         N = np.stack([np.asarray(v) for v in shape_functions(xi, nodes)], axis=-1)
         residual = np.einsum("...k,...kc->...c", N, c) - p
         J = np.einsum("...kc,...kd->...cd", c, _shape_derivatives(xi, nodes))
         step = np.linalg.solve(J, residual[..., None])[..., 0]
         xi = xi - step
-        if nodes == 3:
-            break
         if np.all(np.abs(step) < 1e-15 * (1.0 + np.abs(xi))):
             break
     # the final step in dual arithmetic: xi - J^-1 F(xi), with F's derivatives
@@ -197,6 +193,25 @@ def _inverse_map(corners: Dual, point: Dual, nodes: int) -> Dual:
     correction = Dual(np.einsum("...cd,...d->...c", inverse, F.value),
                       np.einsum("...cd,...dv->...cv", inverse, F.grad))
     return Dual(xi, np.zeros(xi.shape + (F.grad.shape[-1],))) - correction
+
+
+def _triangle_inverse_map(corners: Dual, point: Dual) -> Dual:
+    """xi = A^-1 (p - c_0), A = [c_1 - c_0, c_2 - c_0], for triangles: the inverse map is
+    affine, and dxi = A^-1 (dp - sum_k N_k(xi) dc_k)."""
+    c = corners.value
+    A = np.stack([c[..., 1, :] - c[..., 0, :], c[..., 2, :] - c[..., 0, :]], axis=-1)
+    inverse = np.linalg.inv(A)
+    offset = point.value - c[..., 0, :]
+    xi = np.empty(np.broadcast_shapes(offset.shape, inverse.shape[:-1]))
+    xi[..., 0] = inverse[..., 0, 0] * offset[..., 0] + inverse[..., 0, 1] * offset[..., 1]
+    xi[..., 1] = inverse[..., 1, 0] * offset[..., 0] + inverse[..., 1, 1] * offset[..., 1]
+    N = shape_functions(xi, 3)
+    rhs = point.grad - sum(N[k][..., None, None] * corners.grad[..., k, :, :] for k in range(3))
+    grad = np.empty(rhs.shape)
+    for row in range(2):
+        grad[..., row, :] = (inverse[..., row, 0, None] * rhs[..., 0, :]
+                             + inverse[..., row, 1, None] * rhs[..., 1, :])
+    return Dual(xi, grad)
 
 
 def _dual_coefficients(slave_x: Dual, nodes: int) -> Dual:
@@ -527,8 +542,8 @@ def _screen_segments(slave_x, master_x, slave_normals, normals):
     n, _, _ = slave_x.shape
     nm = master_x.shape[1]
     near = []  # pairs that face and are not separated: clipped together afterwards
-    for start in range(0, n, _CHUNK):
-        stop = min(n, start + _CHUNK)
+    for start in range(0, n, _SCREEN_CHUNK):
+        stop = min(n, start + _SCREEN_CHUNK)
         _, _, n0, _, _, S, Mp = _auxiliary_plane(
             *_pair_variables(slave_x[start:stop], master_x[start:stop],
                              slave_normals[start:stop], False), normals)
@@ -585,7 +600,8 @@ def _polygon_integrals(slave_x, master_x, slave_normals, crosspoint, normals, ba
     bary, rule_weights = _TRIANGLE_RULES[rule]
     if ns == 3 and nm == 3 and not pointwise:
         return _affine_integrals(S, Mp, topology, node_normals, xs, xm, basis, crosspoint,
-                                 bary, rule_weights, scalar_gradients)
+                                 bary, rule_weights, scalar_gradients,
+                                 normals_are_variables=normals == "averaged")
     vertex, centre, v_next, cell_area = _clip_cells(S, Mp, *topology)
     Vn = labels.shape[1]
     c = _expand(centre, 1)
@@ -662,7 +678,8 @@ def _multiplier_basis(N, xs: Dual, basis: str, crosspoint: np.ndarray, shape) ->
 
 def _affine_integrals(S: Dual, Mp: Dual, topology: tuple, node_normals: Dual, xs: Dual,
                       xm: Dual, basis: str, crosspoint: np.ndarray, bary: np.ndarray,
-                      rule_weights: np.ndarray, scalar_gradients: bool = True) -> dict:
+                      rule_weights: np.ndarray, scalar_gradients: bool = True,
+                      normals_are_variables: bool = False) -> dict:
     """The integrals of :func:`_mortar_integrals` for a triangle on a triangle.
 
     Both inverse maps are affine, so every point quantity (Phi_j, N_k, N_l, the normal
@@ -676,9 +693,10 @@ def _affine_integrals(S: Dual, Mp: Dual, topology: tuple, node_normals: Dual, xs
     the slave and master nodes, so it is differentiated with respect to those, and the
     sums are chained to the pair's variables once; the normal field's own dependence on
     the nodal normals is added from what multiplies it, summed at each point
-    (:func:`_cell_sum`). Only the gradients read are chained (those of D and M only with
-    ``scalar_gradients``). A multiplier basis with derivatives of its own keeps the pair's
-    variables throughout.
+    (:func:`_cell_sum`; a plain scatter if the nodal normals are the pair's last variables,
+    ``normals_are_variables``). Only the gradients read are chained (those of D and M only
+    with ``scalar_gradients``). A multiplier basis with derivatives of its own keeps the
+    pair's variables throughout.
     """
     m, ns = S.shape[:2]
     nm = Mp.shape[1]
@@ -713,7 +731,7 @@ def _affine_integrals(S: Dual, Mp: Dual, topology: tuple, node_normals: Dual, xs
         normal_at = Dual(N_stacked.value @ nodal,
                          (N_stacked.grad.transpose(0, 1, 3, 2) @ nodal[:, None])
                          .transpose(0, 1, 3, 2))
-        direct = {2: (N_stacked.value, node_normals.grad)}
+        direct = N_stacked.value
     # with a constant 1 after N_k, N_l and the normal field, one sum gives D, Dn and the
     # areas (the barycentric weights of a point sum to 1) and one M and Mn
     phi = dual.stack(Phi, axis=-1)
@@ -722,41 +740,61 @@ def _affine_integrals(S: Dual, Mp: Dual, topology: tuple, node_normals: Dual, xs
         factors.append((np.concatenate([stacked.value, np.ones(stacked.shape[:-1] + (1,))],
                                        axis=-1), stacked.grad))
     T = np.einsum("g,ga,gb,gd->abd", rule_weights, bary, bary, bary)
-    slave, slave_direct = _cell_sum(cell_area, [factors[0], factors[1], factors[3]], T,
-                                    direct)  # (m, ns, ns+1, 4)
-    master, master_direct = _cell_sum(cell_area, [factors[0], factors[2], factors[3]], T,
-                                      direct)  # (m, ns, nm+1, 4)
-    if chain is not None:
-        # the entries read: Dn, the areas and (if asked) D; Mn and (if asked) M
-        read_slave = np.zeros((ns, ns + 1, 4), dtype=bool)
-        read_slave[:, :ns, :3] = read_slave[:, ns, 3] = True
-        read_master = np.zeros((ns, nm + 1, 4), dtype=bool)
-        read_master[:, :nm, :3] = True
+    slave, slave_weights = _cell_sum(cell_area, [factors[0], factors[1], factors[3]], T,
+                                     direct)  # (m, ns, ns+1, 4)
+    master, master_weights = _cell_sum(cell_area, [factors[0], factors[2], factors[3]], T,
+                                       direct)  # (m, ns, nm+1, 4)
+    if chain is None:
+        D, Dn, area = slave[:, :, :ns, 3], slave[:, :, :ns, :3], slave[:, :, ns, 3]
+        M, Mn = master[:, :, :nm, 3], master[:, :, :nm, :3]
+    else:
+        # chained: the gradients read (Dn, the areas, Mn; D and M if asked), in one product
+        read = [slave.grad[:, :, :ns, :3], slave.grad[:, :, ns, 3], master.grad[:, :, :nm, :3]]
         if scalar_gradients:
-            read_slave[:, :ns, 3] = read_master[:, :nm, 3] = True
-        slave, master = _chained([slave, master], [read_slave, read_master], chain)
-        for total, terms in ((slave, slave_direct), (master, master_direct)):
-            for index, term in terms:
-                total.grad[index] += term
-    D, Dn, area = slave[:, :, :ns, 3], slave[:, :, :ns, :3], slave[:, :, ns, 3]
-    M, Mn = master[:, :, :nm, 3], master[:, :, :nm, :3]
+            read += [slave.grad[:, :, :ns, 3], master.grad[:, :, :nm, 3]]
+        sizes = [part[0].size // local for part in read]
+        product = np.concatenate([part.reshape(m, -1, local) for part in read], axis=1) @ chain
+        parts = np.split(product, np.cumsum(sizes)[:-1], axis=1)
+        Dn_grad = parts[0].reshape(m, ns, ns, 3, nvar)
+        Mn_grad = parts[2].reshape(m, ns, nm, 3, nvar)
+        # the normal field's dependence on the nodal normals: sum_j (weight of n(p) at the
+        # points, times N_j(p)) dn_j
+        for grad, weights, k in ((Dn_grad, slave_weights, ns), (Mn_grad, master_weights, nm)):
+            weights = weights[:, :, :k]  # (m, ns, k, ns): of n(p)_c's gradient, N_j
+            if normals_are_variables:
+                first = nvar - 3 * ns
+                for c in range(3):
+                    grad[..., c, first + c::3] += weights
+            else:
+                grad += (weights.reshape(m, ns * k, ns)
+                         @ node_normals.grad.reshape(m, ns, 3 * nvar)).reshape(grad.shape)
+        if scalar_gradients:
+            D_grad = parts[3].reshape(m, ns, ns, nvar)
+            M_grad = parts[4].reshape(m, ns, nm, nvar)
+        else:
+            D_grad = np.broadcast_to(0.0, (m, ns, ns, nvar))
+            M_grad = np.broadcast_to(0.0, (m, ns, nm, nvar))
+        D, M = Dual(slave.value[:, :, :ns, 3], D_grad), Dual(master.value[:, :, :nm, 3], M_grad)
+        Dn = Dual(slave.value[:, :, :ns, :3], Dn_grad)
+        Mn = Dual(master.value[:, :, :nm, :3], Mn_grad)
+        area = Dual(slave.value[:, :, ns, 3], parts[1])
     gap = (dual.sum_(dual.sum_(Mn * _expand(xm, 1), axis=-1), axis=-1)
            - dual.sum_(dual.sum_(Dn * _expand(xs, 1), axis=-1), axis=-1))
     return {"D": D, "M": M, "Dn": Dn, "Mn": Mn, "gap": gap, "area": area}
 
 
 def _cell_sum(W: Dual, factors: list, T: np.ndarray,
-              direct: dict | None = None) -> tuple[Dual, list]:
+              last_weights: np.ndarray | None = None) -> tuple[Dual, np.ndarray | None]:
     """sum_c W_c sum_abd T_abd F_1[a] F_2[b] F_3[d] (m, k_1, k_2, k_3), F_i[a] at corner a
     of cell c.
 
     ``factors`` are (value (m, V+1, k_i), grad (m, V+1, g_i, nv)) at the fan's centre (0)
     and vertices (1..V), the columns from g_i on constant; cell c has the corners
     (centre, vertex c, vertex c+1). Each gradient is contracted once at the V + 1 points,
-    with what multiplies it summed over the cells at each point. ``direct``
-    {i: (L (m, V+1, r), C (m, r, g_i, n))}: factor i also has the gradient sum_r L_r C_r
-    over n other variables; their terms are returned apart, as (index into the gradient,
-    term) pairs.
+    with what multiplies it summed over the cells at each point. With ``last_weights`` L
+    (m, V+1, r), also returns sum_p (what multiplies the last factor's gradient at p) L_r(p)
+    (m, k_1, k_2, r): the last factor's gradient over other variables, sum_r L_r C_r, then
+    contributes that times C_r.
     """
     m, V = W.shape
     cells = np.arange(V)
@@ -777,7 +815,7 @@ def _cell_sum(W: Dual, factors: list, T: np.ndarray,
          w * (F1t @ U3.reshape(m, V, 3, 3 * k3)).reshape(m, V, k1, 3, k3).transpose(0, 1, 3, 2, 4),
          w * (F1t @ U2.reshape(m, V, 3, 3 * k2)).reshape(m, V, k1, 3, k2).transpose(0, 1, 3, 2, 4))
     grad = (product.transpose(0, 2, 1) @ W.grad).reshape(m, *sizes, nv)
-    direct_terms = []
+    weights = None
     for i, (_, dF) in enumerate(factors):
         others = [j for j in range(3) if j != i]
         Ri = R[i].reshape(m, V, 3, -1)  # (m, V, corner, the other two factors' columns)
@@ -786,35 +824,12 @@ def _cell_sum(W: Dual, factors: list, T: np.ndarray,
         Rp[:, 0] = Ri[:, :, 0].sum(axis=1)
         Rp[:, 1:] = Ri[:, :, 1] + np.roll(Ri[:, :, 2], 1, axis=1)
         g = dF.shape[2]
-        index = (slice(None),) * (1 + i) + (slice(0, g),)
         term = Rp.transpose(0, 2, 1) @ dF.reshape(m, V + 1, g * nv)
         term = term.reshape(m, *[sizes[j] for j in others], g, nv)
-        grad[index] += np.moveaxis(term, -2, 1 + i)
-        if direct and i in direct:
-            L, C = direct[i]
-            n = C.shape[-1]
-            term = ((Rp.transpose(0, 2, 1) @ L) @ C.reshape(m, C.shape[1], -1))
-            term = term.reshape(m, *[sizes[j] for j in others], g, n)
-            direct_terms.append((index, np.moveaxis(term, -2, 1 + i)))
-    return Dual(value, grad), direct_terms
-
-
-def _chained(sums: list, read: list, chain: np.ndarray) -> list:
-    """The Duals ``sums`` over local variables with the gradients of their entries
-    ``read`` (boolean masks over the value shapes) chained to the pair's variables by
-    ``chain`` (m, local, nvar) in one product; the other entries' gradients are zero."""
-    m, local, nvar = chain.shape
-    index = [np.flatnonzero(mask) for mask in read]
-    stacked = np.concatenate([total.grad.reshape(m, -1, local)[:, rows]
-                              for total, rows in zip(sums, index, strict=True)], axis=1)
-    product = stacked @ chain
-    out, start = [], 0
-    for total, rows in zip(sums, index, strict=True):
-        grad = np.zeros((m, total.value[0].size, nvar))
-        grad[:, rows] = product[:, start:start + rows.size]
-        start += rows.size
-        out.append(Dual(total.value, grad.reshape(total.value.shape + (nvar,))))
-    return out
+        grad[(slice(None),) * (1 + i) + (slice(0, g),)] += np.moveaxis(term, -2, 1 + i)
+        if i == 2 and last_weights is not None:
+            weights = (Rp.transpose(0, 2, 1) @ last_weights).reshape(m, k1, k2, -1)
+    return Dual(value, grad), weights
 
 
 def _stacked(items, nvar: int) -> tuple[np.ndarray, np.ndarray]:
