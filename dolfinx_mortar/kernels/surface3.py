@@ -778,9 +778,31 @@ def _affine_integrals(S: Dual, Mp: Dual, topology: tuple, node_normals: Dual, xs
         Dn = Dual(slave.value[:, :, :ns, :3], Dn_grad)
         Mn = Dual(master.value[:, :, :nm, :3], Mn_grad)
         area = Dual(slave.value[:, :, ns, 3], parts[1])
+        if _identity_variables(xs, xm):
+            # gap_j = sum_lc Mn_jlc xm_lc - sum_kc Dn_jkc xs_kc, the coordinates being variables
+            gap_value = ((Mn.value * xm.value[:, None]).sum(axis=(-1, -2))
+                         - (Dn.value * xs.value[:, None]).sum(axis=(-1, -2)))
+            gap_grad = (np.einsum("mjkv,mk->mjv", Mn_grad.reshape(m, ns, 3 * nm, nvar),
+                                  xm.value.reshape(m, -1))
+                        - np.einsum("mjkv,mk->mjv", Dn_grad.reshape(m, ns, 3 * ns, nvar),
+                                    xs.value.reshape(m, -1)))
+            gap_grad[:, :, :3 * ns] -= Dn.value.reshape(m, ns, 3 * ns)
+            gap_grad[:, :, 3 * ns:3 * (ns + nm)] += Mn.value.reshape(m, ns, 3 * nm)
+            return {"D": D, "M": M, "Dn": Dn, "Mn": Mn, "gap": Dual(gap_value, gap_grad),
+                    "area": area}
     gap = (dual.sum_(dual.sum_(Mn * _expand(xm, 1), axis=-1), axis=-1)
            - dual.sum_(dual.sum_(Dn * _expand(xs, 1), axis=-1), axis=-1))
     return {"D": D, "M": M, "Dn": Dn, "Mn": Mn, "gap": gap, "area": area}
+
+
+def _identity_variables(xs: Dual, xm: Dual) -> bool:
+    """Whether the slave and master coordinates are the first 3 (ns + nm) variables, in
+    order (as :func:`_pair_variables` makes them)."""
+    ns, nm = xs.shape[1], xm.shape[1]
+    first = np.eye(3 * (ns + nm), xs.grad.shape[-1])
+    return (np.array_equal(xs.grad[0].reshape(3 * ns, -1), first[:3 * ns])
+            and np.array_equal(xm.grad[0].reshape(3 * nm, -1), first[3 * ns:])
+            and bool((xs.grad == xs.grad[:1]).all()) and bool((xm.grad == xm.grad[:1]).all()))
 
 
 def _cell_sum(W: Dual, factors: list, T: np.ndarray,
