@@ -60,7 +60,7 @@ _AREA_TOLERANCE = 1e-14
 _MAX_VERTICES = 8
 _CHUNK = 2048
 _SCREEN_CHUNK = 16384  # candidates screened at once (values only)
-_BATCH = 512  # overlapping pairs integrated at once (their work arrays stay in cache)
+_BATCH = 1024  # overlapping pairs integrated at once (their work arrays stay in cache)
 
 # symmetric triangle rules on the reference triangle (barycentric points, weights sum to 1)
 _TRIANGLE_RULES = {
