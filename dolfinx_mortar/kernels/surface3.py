@@ -59,7 +59,8 @@ _FACING_TOLERANCE = 1e-8
 _AREA_TOLERANCE = 1e-14
 _MAX_VERTICES = 8
 _CHUNK = 2048
-_BATCH = 512  # overlapping pairs integrated at once (their work arrays stay in cache)
+_SCREEN_CHUNK = 16384  # candidates screened at once (values only)
+_BATCH = 1024  # overlapping pairs integrated at once (their work arrays stay in cache)
 
 # symmetric triangle rules on the reference triangle (barycentric points, weights sum to 1)
 _TRIANGLE_RULES = {
@@ -170,20 +171,15 @@ def _inverse_map(corners: Dual, point: Dual, nodes: int) -> Dual:
     derivatives follow from one Newton step in dual arithmetic (exact at the root)."""
     c = corners.value  # (..., nodes, 2)
     p = point.value
-    xi = np.zeros(p.shape)
     if nodes == 3:
-        xi[...] = 0.0
-        iterations = 1
-    else:
-        iterations = 20
-    for _ in range(iterations):
+        return _triangle_inverse_map(corners, point)
+    xi = np.zeros(p.shape)
+    for _ in range(20):
         N = np.stack([np.asarray(v) for v in shape_functions(xi, nodes)], axis=-1)
         residual = np.einsum("...k,...kc->...c", N, c) - p
         J = np.einsum("...kc,...kd->...cd", c, _shape_derivatives(xi, nodes))
         step = np.linalg.solve(J, residual[..., None])[..., 0]
         xi = xi - step
-        if nodes == 3:
-            break
         if np.all(np.abs(step) < 1e-15 * (1.0 + np.abs(xi))):
             break
     # the final step in dual arithmetic: xi - J^-1 F(xi), with F's derivatives
@@ -197,6 +193,25 @@ def _inverse_map(corners: Dual, point: Dual, nodes: int) -> Dual:
     correction = Dual(np.einsum("...cd,...d->...c", inverse, F.value),
                       np.einsum("...cd,...dv->...cv", inverse, F.grad))
     return Dual(xi, np.zeros(xi.shape + (F.grad.shape[-1],))) - correction
+
+
+def _triangle_inverse_map(corners: Dual, point: Dual) -> Dual:
+    """xi = A^-1 (p - c_0), A = [c_1 - c_0, c_2 - c_0], for triangles: the inverse map is
+    affine, and dxi = A^-1 (dp - sum_k N_k(xi) dc_k)."""
+    c = corners.value
+    A = np.stack([c[..., 1, :] - c[..., 0, :], c[..., 2, :] - c[..., 0, :]], axis=-1)
+    inverse = np.linalg.inv(A)
+    offset = point.value - c[..., 0, :]
+    xi = np.empty(np.broadcast_shapes(offset.shape, inverse.shape[:-1]))
+    xi[..., 0] = inverse[..., 0, 0] * offset[..., 0] + inverse[..., 0, 1] * offset[..., 1]
+    xi[..., 1] = inverse[..., 1, 0] * offset[..., 0] + inverse[..., 1, 1] * offset[..., 1]
+    N = shape_functions(xi, 3)
+    rhs = point.grad - sum(N[k][..., None, None] * corners.grad[..., k, :, :] for k in range(3))
+    grad = np.empty(rhs.shape)
+    for row in range(2):
+        grad[..., row, :] = (inverse[..., row, 0, None] * rhs[..., 0, :]
+                             + inverse[..., row, 1, None] * rhs[..., 1, :])
+    return Dual(xi, grad)
 
 
 def _dual_coefficients(slave_x: Dual, nodes: int) -> Dual:
@@ -291,6 +306,25 @@ def _clip(slave2d: np.ndarray, master2d: np.ndarray):
     return labels[:, :_MAX_VERTICES], np.minimum(count, _MAX_VERTICES), positions[:, :_MAX_VERTICES]
 
 
+def _separated(slave2d: np.ndarray, master2d: np.ndarray) -> np.ndarray:
+    """(n,) the two polygons lie on either side of one of their edges' lines with a gap of
+    1e-8 of their size: their clip polygon is empty (Sutherland-Hodgman moves no vertex by
+    more than rounding). Either orientation; degenerate polygons are never separated."""
+    points = np.concatenate([slave2d, master2d], axis=1)
+    size = np.abs(points).max(axis=(1, 2))
+    separated = np.zeros(slave2d.shape[0], dtype=bool)
+    for polygon, other in ((slave2d, master2d), (master2d, slave2d)):
+        k = polygon.shape[1]
+        orientation = np.sign(_polygon_area(polygon))
+        for i in range(k):
+            start, end = polygon[:, i], polygon[:, (i + 1) % k]
+            direction = (end - start) * orientation[:, None]
+            side = (direction[:, None, 0] * (other[..., 1] - start[:, None, 1])
+                    - direction[:, None, 1] * (other[..., 0] - start[:, None, 0]))
+            gap = 1e-8 * size * np.hypot(direction[:, 0], direction[:, 1])
+            separated |= side.max(axis=1) < -gap
+    return separated
+
 def _side(start: np.ndarray, direction: np.ndarray, p: np.ndarray) -> np.ndarray:
     """> 0 left of the directed line (inside a counter-clockwise polygon)."""
     return direction[:, 0] * (p[:, 1] - start[:, 1]) - direction[:, 1] * (p[:, 0] - start[:, 0])
@@ -383,7 +417,8 @@ def pair_quantities(
         for batch, labels, count, master_node, master_edge_start in batches:
             quantities = _polygon_integrals(
                 slave_x[batch], master_x[batch], slave_normals[batch], crosspoint[batch],
-                normals, basis, rule, labels, count, master_node, master_edge_start)
+                normals, basis, rule, labels, count, master_node, master_edge_start,
+                scalar_gradients=scalar_gradients)
             position = np.searchsorted(rows, batch)
             for name in values:
                 values[name][batch] = quantities[name].value
@@ -506,21 +541,30 @@ def _screen_segments(slave_x, master_x, slave_normals, normals):
     """
     n, _, _ = slave_x.shape
     nm = master_x.shape[1]
-    kept = []
-    for start in range(0, n, _CHUNK):
-        stop = min(n, start + _CHUNK)
+    near = []  # pairs that face and are not separated: clipped together afterwards
+    for start in range(0, n, _SCREEN_CHUNK):
+        stop = min(n, start + _SCREEN_CHUNK)
         _, _, n0, _, _, S, Mp = _auxiliary_plane(
             *_pair_variables(slave_x[start:stop], master_x[start:stop],
                              slave_normals[start:stop], False), normals)
         facing = np.einsum("ij,ij->i", n0.value,
                            _master_normal(master_x[start:stop])) < -_FACING_TOLERANCE
-        slave_area = np.abs(_polygon_area(S.value))
-        labels, count, positions = _clip(S.value, Mp.value[:, ::-1])
+        local = np.flatnonzero(facing & ~_separated(S.value, Mp.value))
+        near.append((local + start, S.value[local], Mp.value[local]))
+    if not near:
+        return np.zeros(0, dtype=np.int64), np.zeros(0), []
+    near_rows = np.concatenate([part[0] for part in near])
+    near_slave = np.concatenate([part[1] for part in near])
+    near_master = np.concatenate([part[2] for part in near])
+    kept = []
+    for start in range(0, near_rows.size, _CHUNK):
+        part = slice(start, start + _CHUNK)
+        slave_area = np.abs(_polygon_area(near_slave[part]))
+        labels, count, positions = _clip(near_slave[part], near_master[part, ::-1])
         clip_area = _padded_area(positions, count)
-        contributing = facing & (count >= 3) & (clip_area > _AREA_TOLERANCE * slave_area)
-        local = np.flatnonzero(contributing)
-        kept.append((local + start, labels[local], count[local],
-                     clip_area[local] / slave_area[local]))
+        contributing = (count >= 3) & (clip_area > _AREA_TOLERANCE * slave_area)
+        kept.append((near_rows[part][contributing], labels[contributing], count[contributing],
+                     clip_area[contributing] / slave_area[contributing]))
     if not kept:
         return np.zeros(0, dtype=np.int64), np.zeros(0), []
     rows = np.concatenate([part[0] for part in kept])
@@ -541,17 +585,51 @@ def _screen_segments(slave_x, master_x, slave_normals, normals):
 
 
 def _polygon_integrals(slave_x, master_x, slave_normals, crosspoint, normals, basis, rule,
-                       labels, count, master_node, master_edge_start, pointwise=False):
+                       labels, count, master_node, master_edge_start, pointwise=False,
+                       scalar_gradients=True):
     """D, M, Dn, Mn, gap and area of pairs whose clip polygons (labels (m, V, 3)) have V
     vertices each, as Duals over the pair variables (a triangle on a triangle from the
-    corners of the fan cells, :func:`_affine_integrals`, unless ``pointwise``)."""
+    corners of the fan cells, :func:`_affine_integrals`, unless ``pointwise``; there the
+    gradients of D and M are zero unless ``scalar_gradients``)."""
     m, ns, _ = slave_x.shape
     nm = master_x.shape[1]
     nvar = 3 * (2 * ns + nm)
     xs, xm, nodal = _pair_variables(slave_x, master_x, slave_normals)
     node_normals, x0, n0, e1, e2, S, Mp = _auxiliary_plane(xs, xm, nodal, normals)
+    topology = (labels, count, master_node, master_edge_start)
+    bary, rule_weights = _TRIANGLE_RULES[rule]
+    if ns == 3 and nm == 3 and not pointwise:
+        return _affine_integrals(S, Mp, topology, node_normals, xs, xm, basis, crosspoint,
+                                 bary, rule_weights, scalar_gradients,
+                                 normals_are_variables=normals == "averaged")
+    vertex, centre, v_next, cell_area = _clip_cells(S, Mp, *topology)
+    Vn = labels.shape[1]
+    c = _expand(centre, 1)
+    # Gauss points (m, Vn, q, 2) in the plane
+    q = rule_weights.size
+    P = (_expand(c, 2) * bary[None, None, :, 0, None]
+         + _expand(vertex, 2) * bary[None, None, :, 1, None]
+         + _expand(v_next, 2) * bary[None, None, :, 2, None])
+    W = _expand(cell_area, 2) * rule_weights[None, None, :]  # (m, Vn, q)
+    P = Dual(P.value.reshape(m, Vn * q, 2), P.grad.reshape(m, Vn * q, 2, nvar))
+    W = Dual(W.value.reshape(m, Vn * q), W.grad.reshape(m, Vn * q, nvar))
+    xi = _inverse_map(_expand(S, 1), P, ns)  # (m, g, 2)
+    eta = _inverse_map(_expand(Mp, 1), P, nm)
+    N = shape_functions(xi, ns)
+    Nm = shape_functions(eta, nm)
 
-    # clip vertices recomputed from their labels
+    Phi = _multiplier_basis(N, xs, basis, crosspoint, W.shape)
+    normal_at = sum(_expand(node_normals[:, j], 1) * _expand(N[j], -1) for j in range(ns))
+    return _mortar_integrals(W, Phi, N, Nm, normal_at, xs, xm)
+
+
+def _clip_cells(S: Dual, Mp: Dual, labels, count, master_node, master_edge_start):
+    """The clip vertices (m, V, 2) recomputed from their labels (as Duals over whatever
+    variables S and Mp carry), their mean (m, 2), each vertex's successor (m, V, 2) and the
+    areas (m, V) of the fan cells (centre, v_k, v_k+1)."""
+    m, ns = S.shape[:2]
+    nm = Mp.shape[1]
+    nvar = S.grad.shape[-1]
     kind, i_slave = labels[..., 0], labels[..., 1]
     Vn = labels.shape[1]
     slave_vertex = _take(S, np.broadcast_to(i_slave[..., None], (m, Vn, 2)), axis=1)
@@ -572,33 +650,12 @@ def _polygon_integrals(slave_x, master_x, slave_normals, crosspoint, normals, ba
     present = np.arange(Vn)[None, :] < count[:, None]
     weights_v = present / count[:, None]
     centre = dual.sum_(vertex * weights_v[..., None], axis=1)  # (m, 2)
-
-    # triangle fan: cells (centre, v_k, v_k+1), k < count
     following = np.where(present, (np.arange(Vn)[None, :] + 1) % np.maximum(count, 1)[:, None], 0)
     v_next = _take(vertex, np.broadcast_to(following[..., None], (m, Vn, 2)), axis=1)
     c = _expand(centre, 1)
     edge_a, edge_b = vertex - c, v_next - c
     cell_area = _cross2(edge_a, edge_b) * 0.5 * present  # (m, Vn)
-    bary, rule_weights = _TRIANGLE_RULES[rule]
-    if ns == 3 and nm == 3 and not pointwise:
-        return _affine_integrals(cell_area, centre, vertex, S, Mp, node_normals, xs, xm, basis,
-                                 crosspoint, bary, rule_weights)
-    # Gauss points (m, Vn, q, 2) in the plane
-    q = rule_weights.size
-    P = (_expand(c, 2) * bary[None, None, :, 0, None]
-         + _expand(vertex, 2) * bary[None, None, :, 1, None]
-         + _expand(v_next, 2) * bary[None, None, :, 2, None])
-    W = _expand(cell_area, 2) * rule_weights[None, None, :]  # (m, Vn, q)
-    P = Dual(P.value.reshape(m, Vn * q, 2), P.grad.reshape(m, Vn * q, 2, nvar))
-    W = Dual(W.value.reshape(m, Vn * q), W.grad.reshape(m, Vn * q, nvar))
-    xi = _inverse_map(_expand(S, 1), P, ns)  # (m, g, 2)
-    eta = _inverse_map(_expand(Mp, 1), P, nm)
-    N = shape_functions(xi, ns)
-    Nm = shape_functions(eta, nm)
-
-    Phi = _multiplier_basis(N, xs, basis, crosspoint, W.shape)
-    normal_at = sum(_expand(node_normals[:, j], 1) * _expand(N[j], -1) for j in range(ns))
-    return _mortar_integrals(W, Phi, N, Nm, normal_at, xs, xm)
+    return vertex, centre, v_next, cell_area
 
 
 def _multiplier_basis(N, xs: Dual, basis: str, crosspoint: np.ndarray, shape) -> list:
@@ -619,9 +676,10 @@ def _multiplier_basis(N, xs: Dual, basis: str, crosspoint: np.ndarray, shape) ->
     return Phi
 
 
-def _affine_integrals(cell_area: Dual, centre: Dual, vertex: Dual, S: Dual, Mp: Dual,
-                      node_normals: Dual, xs: Dual, xm: Dual, basis: str,
-                      crosspoint: np.ndarray, bary: np.ndarray, rule_weights: np.ndarray) -> dict:
+def _affine_integrals(S: Dual, Mp: Dual, topology: tuple, node_normals: Dual, xs: Dual,
+                      xm: Dual, basis: str, crosspoint: np.ndarray, bary: np.ndarray,
+                      rule_weights: np.ndarray, scalar_gradients: bool = True,
+                      normals_are_variables: bool = False) -> dict:
     """The integrals of :func:`_mortar_integrals` for a triangle on a triangle.
 
     Both inverse maps are affine, so every point quantity (Phi_j, N_k, N_l, the normal
@@ -629,42 +687,136 @@ def _affine_integrals(cell_area: Dual, centre: Dual, vertex: Dual, S: Dual, Mp: 
     multilinear form in the quantities' values at the cell's three corners. These are
     evaluated (with derivatives) at the V + 1 points centre and vertices only, instead of
     at every Gauss point; the result is the same quadrature sum, to rounding.
+
+    Everything in the plane (clip vertices, cell areas, both inverse maps, N_k, N_l and
+    Phi_j) depends on the pair's variables only through the 12 plane coordinates S, Mp of
+    the slave and master nodes, so it is differentiated with respect to those, and the
+    sums are chained to the pair's variables once; the normal field's own dependence on
+    the nodal normals is added from what multiplies it, summed at each point
+    (:func:`_cell_sum`; a plain scatter if the nodal normals are the pair's last variables,
+    ``normals_are_variables``). Only the gradients read are chained (those of D and M only
+    with ``scalar_gradients``). A multiplier basis with derivatives of its own keeps the
+    pair's variables throughout.
     """
-    m, V = cell_area.shape
-    ns, nm = S.shape[1], Mp.shape[1]
+    m, ns = S.shape[:2]
+    nm = Mp.shape[1]
+    nvar = xs.grad.shape[-1]
+    if basis == "standard" or not _dual_coefficients(xs, ns).grad.any():
+        plane = Dual.variables(np.concatenate([S.value.reshape(m, -1), Mp.value.reshape(m, -1)],
+                                              axis=1))
+        local = plane.grad.shape[-1]
+        chain = np.concatenate([S.grad.reshape(m, 2 * ns, nvar),
+                                Mp.grad.reshape(m, 2 * nm, nvar)], axis=1)  # (m, 12, nvar)
+        S = Dual(S.value, plane.grad[:, :2 * ns].reshape(m, ns, 2, local))
+        Mp = Dual(Mp.value, plane.grad[:, 2 * ns:].reshape(m, nm, 2, local))
+        basis_x = Dual(xs.value, np.zeros(xs.shape + (local,)))
+    else:
+        chain, basis_x = None, xs
+    vertex, centre, _, cell_area = _clip_cells(S, Mp, *topology)
     points = Dual(np.concatenate([centre.value[:, None], vertex.value], axis=1),
                   np.concatenate([centre.grad[:, None], vertex.grad], axis=1))  # (m, V+1, 2)
     xi = _inverse_map(_expand(S, 1), points, ns)
     eta = _inverse_map(_expand(Mp, 1), points, nm)
     N = shape_functions(xi, ns)
     Nm = shape_functions(eta, nm)
-    Phi = _multiplier_basis(N, xs, basis, crosspoint, points.shape[:2])
-    normal_at = sum(_expand(node_normals[:, j], 1) * _expand(N[j], -1) for j in range(ns))
+    Phi = _multiplier_basis(N, basis_x, basis, crosspoint, points.shape[:2])
+    N_stacked = dual.stack(N, axis=-1)  # (m, V+1, ns)
+    if chain is None:
+        normal_at = sum(_expand(node_normals[:, j], 1) * _expand(N[j], -1) for j in range(ns))
+        direct = None
+    else:
+        # n(p) = sum_j N_j(p) n_j: through N_j over the plane coordinates here, through
+        # the n_j over the pair's variables after the chain
+        nodal = node_normals.value  # (m, ns, 3)
+        normal_at = Dual(N_stacked.value @ nodal,
+                         (N_stacked.grad.transpose(0, 1, 3, 2) @ nodal[:, None])
+                         .transpose(0, 1, 3, 2))
+        direct = N_stacked.value
     # with a constant 1 after N_k, N_l and the normal field, one sum gives D, Dn and the
     # areas (the barycentric weights of a point sum to 1) and one M and Mn
     phi = dual.stack(Phi, axis=-1)
     factors = [(phi.value, phi.grad)]
-    for stacked in (dual.stack(N, axis=-1), dual.stack(Nm, axis=-1), normal_at):
+    for stacked in (N_stacked, dual.stack(Nm, axis=-1), normal_at):
         factors.append((np.concatenate([stacked.value, np.ones(stacked.shape[:-1] + (1,))],
                                        axis=-1), stacked.grad))
     T = np.einsum("g,ga,gb,gd->abd", rule_weights, bary, bary, bary)
-    slave = _cell_sum(cell_area, [factors[0], factors[1], factors[3]], T)  # (m, ns, ns+1, 4)
-    master = _cell_sum(cell_area, [factors[0], factors[2], factors[3]], T)  # (m, ns, nm+1, 4)
-    D, Dn, area = slave[:, :, :ns, 3], slave[:, :, :ns, :3], slave[:, :, ns, 3]
-    M, Mn = master[:, :, :nm, 3], master[:, :, :nm, :3]
+    slave, slave_weights = _cell_sum(cell_area, [factors[0], factors[1], factors[3]], T,
+                                     direct)  # (m, ns, ns+1, 4)
+    master, master_weights = _cell_sum(cell_area, [factors[0], factors[2], factors[3]], T,
+                                       direct)  # (m, ns, nm+1, 4)
+    if chain is None:
+        D, Dn, area = slave[:, :, :ns, 3], slave[:, :, :ns, :3], slave[:, :, ns, 3]
+        M, Mn = master[:, :, :nm, 3], master[:, :, :nm, :3]
+    else:
+        # chained: the gradients read (Dn, the areas, Mn; D and M if asked), in one product
+        read = [slave.grad[:, :, :ns, :3], slave.grad[:, :, ns, 3], master.grad[:, :, :nm, :3]]
+        if scalar_gradients:
+            read += [slave.grad[:, :, :ns, 3], master.grad[:, :, :nm, 3]]
+        sizes = [part[0].size // local for part in read]
+        product = np.concatenate([part.reshape(m, -1, local) for part in read], axis=1) @ chain
+        parts = np.split(product, np.cumsum(sizes)[:-1], axis=1)
+        Dn_grad = parts[0].reshape(m, ns, ns, 3, nvar)
+        Mn_grad = parts[2].reshape(m, ns, nm, 3, nvar)
+        # the normal field's dependence on the nodal normals: sum_j (weight of n(p) at the
+        # points, times N_j(p)) dn_j
+        for grad, weights, k in ((Dn_grad, slave_weights, ns), (Mn_grad, master_weights, nm)):
+            weights = weights[:, :, :k]  # (m, ns, k, ns): of n(p)_c's gradient, N_j
+            if normals_are_variables:
+                first = nvar - 3 * ns
+                for c in range(3):
+                    grad[..., c, first + c::3] += weights
+            else:
+                grad += (weights.reshape(m, ns * k, ns)
+                         @ node_normals.grad.reshape(m, ns, 3 * nvar)).reshape(grad.shape)
+        if scalar_gradients:
+            D_grad = parts[3].reshape(m, ns, ns, nvar)
+            M_grad = parts[4].reshape(m, ns, nm, nvar)
+        else:
+            D_grad = np.broadcast_to(0.0, (m, ns, ns, nvar))
+            M_grad = np.broadcast_to(0.0, (m, ns, nm, nvar))
+        D, M = Dual(slave.value[:, :, :ns, 3], D_grad), Dual(master.value[:, :, :nm, 3], M_grad)
+        Dn = Dual(slave.value[:, :, :ns, :3], Dn_grad)
+        Mn = Dual(master.value[:, :, :nm, :3], Mn_grad)
+        area = Dual(slave.value[:, :, ns, 3], parts[1])
+        if _identity_variables(xs, xm):
+            # gap_j = sum_lc Mn_jlc xm_lc - sum_kc Dn_jkc xs_kc, the coordinates being variables
+            gap_value = ((Mn.value * xm.value[:, None]).sum(axis=(-1, -2))
+                         - (Dn.value * xs.value[:, None]).sum(axis=(-1, -2)))
+            gap_grad = (np.einsum("mjkv,mk->mjv", Mn_grad.reshape(m, ns, 3 * nm, nvar),
+                                  xm.value.reshape(m, -1))
+                        - np.einsum("mjkv,mk->mjv", Dn_grad.reshape(m, ns, 3 * ns, nvar),
+                                    xs.value.reshape(m, -1)))
+            gap_grad[:, :, :3 * ns] -= Dn.value.reshape(m, ns, 3 * ns)
+            gap_grad[:, :, 3 * ns:3 * (ns + nm)] += Mn.value.reshape(m, ns, 3 * nm)
+            return {"D": D, "M": M, "Dn": Dn, "Mn": Mn, "gap": Dual(gap_value, gap_grad),
+                    "area": area}
     gap = (dual.sum_(dual.sum_(Mn * _expand(xm, 1), axis=-1), axis=-1)
            - dual.sum_(dual.sum_(Dn * _expand(xs, 1), axis=-1), axis=-1))
     return {"D": D, "M": M, "Dn": Dn, "Mn": Mn, "gap": gap, "area": area}
 
 
-def _cell_sum(W: Dual, factors: list, T: np.ndarray) -> Dual:
+def _identity_variables(xs: Dual, xm: Dual) -> bool:
+    """Whether the slave and master coordinates are the first 3 (ns + nm) variables, in
+    order (as :func:`_pair_variables` makes them)."""
+    ns, nm = xs.shape[1], xm.shape[1]
+    first = np.eye(3 * (ns + nm), xs.grad.shape[-1])
+    return (np.array_equal(xs.grad[0].reshape(3 * ns, -1), first[:3 * ns])
+            and np.array_equal(xm.grad[0].reshape(3 * nm, -1), first[3 * ns:])
+            and bool((xs.grad == xs.grad[:1]).all()) and bool((xm.grad == xm.grad[:1]).all()))
+
+
+def _cell_sum(W: Dual, factors: list, T: np.ndarray,
+              last_weights: np.ndarray | None = None) -> tuple[Dual, np.ndarray | None]:
     """sum_c W_c sum_abd T_abd F_1[a] F_2[b] F_3[d] (m, k_1, k_2, k_3), F_i[a] at corner a
     of cell c.
 
     ``factors`` are (value (m, V+1, k_i), grad (m, V+1, g_i, nv)) at the fan's centre (0)
     and vertices (1..V), the columns from g_i on constant; cell c has the corners
     (centre, vertex c, vertex c+1). Each gradient is contracted once at the V + 1 points,
-    with what multiplies it summed over the cells at each point.
+    with what multiplies it summed over the cells at each point. With ``last_weights`` L
+    (m, V+1, r), also returns sum_p (what multiplies the last factor's gradient at p) L_r(p)
+    (m, k_1, k_2, r): the last factor's gradient over other variables, sum_r L_r C_r, then
+    contributes that times C_r.
     """
     m, V = W.shape
     cells = np.arange(V)
@@ -685,6 +837,7 @@ def _cell_sum(W: Dual, factors: list, T: np.ndarray) -> Dual:
          w * (F1t @ U3.reshape(m, V, 3, 3 * k3)).reshape(m, V, k1, 3, k3).transpose(0, 1, 3, 2, 4),
          w * (F1t @ U2.reshape(m, V, 3, 3 * k2)).reshape(m, V, k1, 3, k2).transpose(0, 1, 3, 2, 4))
     grad = (product.transpose(0, 2, 1) @ W.grad).reshape(m, *sizes, nv)
+    weights = None
     for i, (_, dF) in enumerate(factors):
         others = [j for j in range(3) if j != i]
         Ri = R[i].reshape(m, V, 3, -1)  # (m, V, corner, the other two factors' columns)
@@ -696,7 +849,9 @@ def _cell_sum(W: Dual, factors: list, T: np.ndarray) -> Dual:
         term = Rp.transpose(0, 2, 1) @ dF.reshape(m, V + 1, g * nv)
         term = term.reshape(m, *[sizes[j] for j in others], g, nv)
         grad[(slice(None),) * (1 + i) + (slice(0, g),)] += np.moveaxis(term, -2, 1 + i)
-    return Dual(value, grad)
+        if i == 2 and last_weights is not None:
+            weights = (Rp.transpose(0, 2, 1) @ last_weights).reshape(m, k1, k2, -1)
+    return Dual(value, grad), weights
 
 
 def _stacked(items, nvar: int) -> tuple[np.ndarray, np.ndarray]:
