@@ -1,0 +1,301 @@
+"""The dual basis over the covered part of each slave facet (2D and 3D).
+
+The whole-facet dual basis (Phi = A N with A from the full facet's mass
+matrix) is pair-local, but on a facet the master covers only in part the
+nodal weights int Phi_j over the covered part can be zero or negative and a
+weighted gap can take the wrong sign. Here, as Popp, Wohlmuth, Gee and Wall
+did for 3D dual mortar, the coefficients are built on the covered part: per
+slave facet e with pairs p,
+
+    M_e = sum_p D^std_p   (int N_j N_k over the union of the overlaps)
+    D_e = diag(M_e 1)     (int N_j over it: positive)
+    A_e = D_e M_e^-1
+
+and every dual quantity of a pair is A_e (then the crosspoint merge P_e)
+applied to its standard-basis one: D_p = P A D^std_p (summed over the facet:
+P D_e, diagonal), M_p, Dn_p, Mn_p, the weighted gaps and the nodal areas. A
+constant gap g gives g~_j = g int N_j over the covered part (right sign);
+a gap in the slave space gives its nodal values. On a fully covered facet
+M_e is the whole facet's mass matrix and nothing changes.
+
+Derivatives: dA = (dD_e - A dM_e) M_e^-1 with dM_e = sum_p' dD^std_p', so a
+linear combination sum w dY_p of a pair's outputs is a combination of its own
+standard outputs (weights A^T P^T w) plus sum_p' W . dD^std_p' over every
+pair p' of the facet. The slave nodes and the normal stars of p' are those
+of p; the master nodes of the facet's other candidate pairs are appended to
+each pair's stencil (:class:`CoveredStencil`), so the Jacobians' patterns
+hold the coupling.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .dual import RowSubsetDual
+
+COVERAGE_FLOOR = 1e-12
+"""Nodal weights int N_j over the covered part below this fraction of the facet's
+measure / ns are raised to it in the Jacobi scaling of M_e (never reached but by
+slivers; keeps the inverse finite)."""
+
+
+def merge_matrices(crosspoint: np.ndarray) -> np.ndarray:
+    """(n, ns, ns) P with Phi_new = P Phi: a crosspoint node's basis function shared
+    equally by the facet's other nodes (rows of crosspoints zero), as the kernels do."""
+    cross = np.asarray(crosspoint, dtype=bool)
+    n, ns = cross.shape
+    others = (~cross).sum(axis=1)
+    share = np.where(others > 0, 1.0 / np.maximum(others, 1), 0.0)
+    keep = (~cross).astype(float)
+    P = keep[:, :, None] * (np.eye(ns)[None] + share[:, None, None] * cross[:, None, :])
+    return P
+
+
+class FacetCoefficients:
+    """A_e, M_e^-1 and the merge P_e of the slave facets of some pairs.
+
+    Args:
+        D_standard: (rows, ns, ns) int N_j N_k over each pair's overlap.
+        facet: (rows,) slave facet of each pair.
+        crosspoint: (rows, ns) crosspoint flags of each pair's slave nodes.
+    """
+
+    def __init__(self, D_standard: np.ndarray, facet: np.ndarray, crosspoint: np.ndarray):
+        ns = D_standard.shape[1]
+        self.facets, self.index = np.unique(facet, return_inverse=True)
+        mass = np.zeros((self.facets.size, ns, ns))
+        np.add.at(mass, self.index, D_standard)
+        mass = 0.5 * (mass + mass.transpose(0, 2, 1))
+        lumped = mass.sum(axis=2)
+        floor = COVERAGE_FLOOR * np.maximum(lumped.sum(axis=1, keepdims=True), 1e-300) / ns
+        scale = 1.0 / np.sqrt(np.maximum(lumped, floor))
+        scaled = mass * scale[:, :, None] * scale[:, None, :]
+        inverse = np.linalg.inv(scaled) * scale[:, :, None] * scale[:, None, :]
+        self.mass, self.lumped, self.inverse = mass, lumped, inverse
+        self.A = lumped[:, :, None] * inverse
+        P = np.zeros((self.facets.size, ns, ns))
+        P[self.index] = merge_matrices(crosspoint)
+        self.P = P
+        self.T = P @ self.A
+
+    def pair(self, name: str, rows: np.ndarray | None = None) -> np.ndarray:
+        """A facet array per pair (rows: positions among the pairs given)."""
+        index = self.index if rows is None else self.index[rows]
+        return getattr(self, name)[index]
+
+    def apply(self, X: np.ndarray) -> np.ndarray:
+        """P A X per pair, X (rows, ns, ...)."""
+        T = self.pair("T")
+        return np.einsum("nji,ni...->nj...", T, X)
+
+
+def _family(stencil, o: int):
+    """(name, first-index j, index of the rest) of output o of ``stencil``'s numbering."""
+    ns, nm, g = stencil.ns, stencil.nm, stencil.gdim
+    if o < stencil.MN:
+        j, rest = divmod(o - stencil.DN, ns * g)
+        return "Dn", j, divmod(rest, g), stencil.DN + j * ns * g
+    if o < stencil.AREA:
+        j, rest = divmod(o - stencil.MN, nm * g)
+        return "Mn", j, divmod(rest, g), stencil.MN + j * nm * g
+    if o < stencil.GAP:
+        return "area", o - stencil.AREA, (), stencil.AREA
+    if o < stencil.D:
+        return "gap", o - stencil.GAP, (), stencil.GAP
+    if o < stencil.M:
+        j, k = divmod(o - stencil.D, ns)
+        return "D", j, (k,), stencil.D + j * ns
+    j, l = divmod(o - stencil.M, nm)  # noqa: E741
+    return "M", j, (l,), stencil.M + j * nm
+
+
+def _stride(stencil, name: str) -> int:
+    """How far apart the outputs of consecutive first indices j are."""
+    ns, nm, g = stencil.ns, stencil.nm, stencil.gdim
+    return {"Dn": ns * g, "Mn": nm * g, "area": 1, "gap": 1, "D": ns, "M": nm}[name]
+
+
+def transformed_quantities(stencil, q_std, crosspoint: np.ndarray, keep_scalars: bool):
+    """The covered-dual quantities of the standard-basis ones ``q_std``; the result
+    carries ``covered = (q_std, FacetCoefficients, rows)`` for the derivatives."""
+    rows = q_std.gap.rows
+    coefficients = FacetCoefficients(q_std.D[rows], stencil.slave_facets[rows],
+                                     crosspoint[rows])
+
+    def values(array: np.ndarray) -> np.ndarray:
+        result = np.zeros_like(array)
+        result[rows] = coefficients.apply(array[rows])
+        return result
+
+    def no_gradient():
+        raise NotImplementedError(
+            "covered dual quantities have no per-pair gradients (they couple the pairs of "
+            "a slave facet): use the stencil's combined_gradients")
+
+    def subset(array: np.ndarray) -> RowSubsetDual:
+        return RowSubsetDual(values(array), rows, no_gradient)
+
+    extra = {}
+    if keep_scalars:
+        extra = {"D_dual": subset(q_std.D), "M_dual": subset(q_std.M)}
+    elif hasattr(q_std, "D_dual"):
+        extra = {"D_dual": None, "M_dual": None}
+    q = dataclasses.replace(
+        q_std, D=values(q_std.D), M=values(q_std.M), Dn=subset(q_std.Dn.value),
+        Mn=subset(q_std.Mn.value), gap=subset(q_std.gap.value),
+        area=subset(q_std.area.value), **extra)
+    q.covered = (q_std, coefficients, rows)
+    return q
+
+
+def _standard_values(q_std, name: str) -> np.ndarray:
+    return {"Dn": q_std.Dn.value, "Mn": q_std.Mn.value, "area": q_std.area.value,
+            "gap": q_std.gap.value, "D": q_std.D, "M": q_std.M}[name]
+
+
+def translated_terms(stencil, q, rows: np.ndarray, terms):
+    """Terms over the covered-dual outputs of pairs ``rows`` as terms over the standard
+    outputs of the same pairs, and W (len(terms), rows, ns, ns): the weights of dM_e."""
+    q_std, coefficients, contributing = q.covered
+    ns = stencil.ns
+    position = np.searchsorted(contributing, rows)
+    inside = (position < contributing.size) & (
+        contributing[np.minimum(position, contributing.size - 1)] == rows)
+    position = np.where(inside, position, 0)
+    mask = inside.astype(float)
+    T = coefficients.pair("T", position) * mask[:, None, None]
+    P = coefficients.pair("P", position) * mask[:, None, None]
+    A = coefficients.pair("A", position)
+    inverse = coefficients.pair("inverse", position)
+    translated, W = [], np.zeros((len(terms), rows.size, ns, ns))
+    for t, row in enumerate(terms):
+        own = []
+        for o, w in row:
+            if o >= stencil.NORMAL:
+                own.append((o, w))
+                continue
+            name, j, rest, first = _family(stencil, o)
+            stride = _stride(stencil, name)
+            offset = o - first
+            w = np.broadcast_to(np.asarray(w, dtype=float), (rows.size,))
+            for i in range(ns):
+                own.append((first + (i - j) * stride + offset, T[:, j, i] * w))
+            X = _standard_values(q_std, name)[rows]  # (rows, ns, ...)
+            X = X[(slice(None), slice(None)) + tuple(rest)]
+            y = np.einsum("nik,nk->ni", inverse, X)
+            z = P[:, j, :] * w[:, None]
+            W[t] += (z * y)[:, :, None] - np.einsum("nli,nl->ni", A, z)[:, :, None] * y[:, None, :]
+        translated.append(own)
+    return translated, W
+
+
+class CoveredStencil:
+    """A pair stencil whose pairs carry the covered dual basis of their slave facet.
+
+    Wraps a :class:`~dolfinx_mortar.stencils.PairStencil` (everything not overridden
+    is the wrapped stencil's): the kernel runs with the standard basis, the outputs
+    are transformed per slave facet (:func:`transformed_quantities`), and the
+    stencil of each pair is extended by the master nodes of the other candidate pairs
+    of its slave facet (``partners``), on which its dual quantities also depend.
+    """
+
+    def __init__(self, base):
+        self.base = base
+        facet = base.slave_facets
+        n = facet.size
+        order = np.argsort(facet, kind="stable")
+        sorted_facets = facet[order]
+        first = np.r_[True, sorted_facets[1:] != sorted_facets[:-1]] if n else np.zeros(0, bool)
+        starts = np.flatnonzero(first)
+        counts = np.diff(np.r_[starts, n])
+        group = np.empty(n, dtype=np.int64)
+        group[order] = np.repeat(np.arange(starts.size), counts)
+        rank = np.empty(n, dtype=np.int64)
+        rank[order] = np.arange(n) - np.repeat(starts, counts)
+        width = int(counts.max()) - 1 if n else 0
+        partners = np.full((n, width), -1, dtype=np.int64)
+        for slot in range(width):
+            # the facet's other pairs in their order, skipping the pair itself
+            member = np.where(slot < rank, slot, slot + 1)
+            has = member < counts[group]
+            partners[has, slot] = order[starts[group[has]] + member[has]]
+        self.partners = partners
+        extra = base.master_nodes[np.maximum(partners, 0)].reshape(n, -1)
+        extra_present = np.repeat(partners >= 0, base.nm, axis=1)
+        self.nodes = np.concatenate([base.nodes, extra], axis=1)
+        self.present = np.concatenate([base.present, extra_present], axis=1)
+        self.slave_facets = facet
+
+    def __getattr__(self, name):
+        return getattr(self.base, name)
+
+    @property
+    def num_pairs(self) -> int:
+        return self.nodes.shape[0]
+
+    @property
+    def width(self) -> int:
+        return self.nodes.shape[1]
+
+    def evaluate(self, node_x: np.ndarray, *, crosspoint, basis="dual", **options):
+        keep_scalars = bool(options.get("scalar_gradients", False))
+        if self.base.gdim == 3:
+            options["scalar_gradients"] = True
+        q_std = self.base.evaluate(node_x, basis="standard", crosspoint=None, **options)
+        if crosspoint is None:
+            crosspoint = np.zeros((self.num_pairs, self.ns), dtype=bool)
+        return transformed_quantities(self, q_std, np.asarray(crosspoint, dtype=bool),
+                                      keep_scalars)
+
+    def _partner_gradients(self, q) -> np.ndarray:
+        """(ns ns, base width gdim, contributing) d D^std of every contributing pair."""
+        cached = getattr(q, "_covered_dD", None)
+        if cached is None:
+            q_std, _, contributing = q.covered
+            ns = self.ns
+            terms = [[(self.base.d(i, m), 1.0)] for i in range(ns) for m in range(ns)]
+            cached = self.base.combined_gradients(q_std, contributing, terms)
+            q._covered_dD = cached
+        return cached
+
+    def combined_gradients(self, q, rows, terms) -> np.ndarray:
+        gdim, base_columns = self.gdim, self.base.width * self.gdim
+        result = np.zeros((len(terms), self.width * gdim, rows.size))
+        if not hasattr(q, "covered"):
+            # frozen (reference-configuration) quantities: pair-local, as the base's
+            result[:, :base_columns] = self.base.combined_gradients(q, rows, terms)
+            return result
+        q_std, _, contributing = q.covered
+        ns, nm = self.ns, self.nm
+        translated, W = translated_terms(self, q, rows, terms)
+        result[:, :base_columns] = self.base.combined_gradients(q_std, rows, translated)
+        if contributing.size == 0 or rows.size == 0:
+            return result
+        dD = self._partner_gradients(q)  # (ns ns, base columns, contributing)
+        weights = W.reshape(len(terms), rows.size, ns * ns)
+        master_columns = (self.base.master_slots[:, None] * gdim
+                          + np.arange(gdim)).reshape(-1)
+        shared = np.ones(base_columns, dtype=bool)
+        shared[master_columns] = False
+        own_position = np.searchsorted(contributing, rows)
+        own_inside = (own_position < contributing.size) & (
+            contributing[np.minimum(own_position, contributing.size - 1)] == rows)
+        # p' = p: the own pair's D^std with weights W, over all of its columns
+        own = np.einsum("tnq,qvn->tvn", weights,
+                        dD[:, :, np.minimum(own_position, contributing.size - 1)])
+        result[:, :base_columns] += own * own_inside[None, None, :]
+        for r in range(self.partners.shape[1]):
+            partner = self.partners[rows, r]
+            position = np.searchsorted(contributing, partner)
+            inside = (partner >= 0) & (position < contributing.size) & (
+                contributing[np.minimum(position, contributing.size - 1)] == partner)
+            if not inside.any():
+                continue
+            G = dD[:, :, np.minimum(position, contributing.size - 1)]
+            part = np.einsum("tnq,qvn->tvn", weights, G) * inside[None, None, :]
+            result[:, :base_columns][:, shared] += part[:, shared]
+            start = base_columns + r * nm * gdim
+            result[:, start:start + nm * gdim] = part[:, master_columns]
+        return result
