@@ -222,7 +222,7 @@ class CoveredStencil:
             has = member < counts[group]
             partners[has, slot] = order[starts[group[has]] + member[has]]
         self.partners = partners
-        extra = base.master_nodes[np.maximum(partners, 0)].reshape(n, -1)
+        extra = base.master_nodes[np.maximum(partners, 0)].reshape(n, width * base.nm)
         extra_present = np.repeat(partners >= 0, base.nm, axis=1)
         self.nodes = np.concatenate([base.nodes, extra], axis=1)
         self.present = np.concatenate([base.present, extra_present], axis=1)

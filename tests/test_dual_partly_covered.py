@@ -97,12 +97,12 @@ def assembled_jacobians(stencil, q, node_x, z):
     return result
 
 
-def taylor_slopes(stencil, node_x, normals, seed=0):
+def taylor_slopes(stencil, node_x, normals, seed=0, crosspoint=None):
     """log2 of the remainder ratio |f(x + h v) - f(x) - h J v| for h and h/2, per output."""
     rng = np.random.default_rng(seed)
     z = rng.uniform(0.5, 1.5, node_x.shape[0])
     direction = rng.standard_normal(node_x.shape)
-    q = evaluate(stencil, node_x, normals)
+    q = evaluate(stencil, node_x, normals, crosspoint)
     values = assembled(stencil, q, node_x, z)
     jacobians = assembled_jacobians(stencil, q, node_x, z)
     slopes = {}
@@ -111,7 +111,7 @@ def taylor_slopes(stencil, node_x, normals, seed=0):
         linear = J @ direction.reshape(-1)
         errors = []
         for h in (2e-3, 1e-3):
-            moved = evaluate(stencil, node_x + h * direction, normals)
+            moved = evaluate(stencil, node_x + h * direction, normals, crosspoint)
             change = assembled(stencil, moved, node_x + h * direction, z)[name].reshape(-1)
             errors.append(np.abs(change - base - h * linear).max())
         assert np.abs(linear).max() > 1e-3, name
@@ -280,6 +280,23 @@ def test_taylor_2d(normals, gap):
         assert abs(slope - 2.0) < 0.1, (name, slopes)
 
 
+def test_crosspoint_2d():
+    """Node b = (0, 0) a crosspoint: its basis function goes to node a, whose weight is
+    then the whole covered length 0.68 and whose weighted gap is gap 0.68; the
+    derivatives hold the merge (Taylor)."""
+    node_x, slave, master, pairs = issue_example_2d(0.05)
+    stencil = covered_stencil(node_x, slave, master, pairs)
+    q = evaluate(stencil, node_x, crosspoint=np.array([[False, True]]))
+    np.testing.assert_allclose(q.area.value[0], [0.68, 0.0], atol=1e-14)
+    np.testing.assert_allclose(q.gap.value[0], [0.05 * 0.68, 0.0], atol=1e-14)
+    node_x, slave_facets, master_facets, pairs = curved_2d(0.05)
+    stencil = covered_stencil(node_x, slave_facets, master_facets, pairs)
+    crosspoint = stencil.slave_nodes == 1
+    slopes = taylor_slopes(stencil, node_x, "averaged", crosspoint=crosspoint)
+    for name, slope in slopes.items():
+        assert abs(slope - 2.0) < 0.1, (name, slopes)
+
+
 def curved_3d(slave_kind, gap):
     """Two slave facets (bent along x = 1) under three tilted master strips; the first
     strip starts inside the first slave facet."""
@@ -310,6 +327,82 @@ def test_taylor_3d(normals, slave_kind, gap):
     slopes = taylor_slopes(stencil, node_x, normals)
     for name, slope in slopes.items():
         assert abs(slope - 2.0) < 0.1, (name, slopes)
+
+
+def test_objectivity_3d():
+    """A rotated and translated partly covered configuration: the same D, M, gaps and
+    areas, and Dn, Mn rotated."""
+    node_x, slave_facets, master_facets, pairs = curved_3d("quad", 0.05)
+    rotation, _ = np.linalg.qr(np.random.default_rng(4).standard_normal((3, 3)))
+    rotation *= np.sign(np.linalg.det(rotation))
+    moved = node_x @ rotation.T + np.array([3.0, -1.0, 2.0])
+    results = []
+    for x in (node_x, moved):
+        stencil = covered_stencil(x, slave_facets, master_facets, pairs)
+        results.append(evaluate(stencil, x))
+    first, second = results
+    for name in ("D", "M"):
+        np.testing.assert_allclose(getattr(second, name), getattr(first, name), atol=1e-13)
+    for name in ("gap", "area"):
+        np.testing.assert_allclose(getattr(second, name).value, getattr(first, name).value,
+                                   atol=1e-13)
+    for name in ("Dn", "Mn"):
+        np.testing.assert_allclose(getattr(second, name).value,
+                                   getattr(first, name).value @ rotation.T, atol=1e-13)
+
+
+# -- slivers: M_e nearly singular ------------------------------------------------------------
+
+
+def sliver_check(stencil, node_x, gap, num_slave):
+    """Values, Jacobians and a 1e-12 perturbation of a sliver-covered slave facet: finite,
+    the gap's sign and value kept, derivatives bounded, the values continuous."""
+    z = np.ones(node_x.shape[0])
+    q = evaluate(stencil, node_x)
+    values = assembled(stencil, q, node_x, z)
+    jacobians = assembled_jacobians(stencil, q, node_x, z)
+    assert all(np.isfinite(a).all() for a in list(values.values()) + list(jacobians.values()))
+    area = values["area"][:num_slave]
+    assert np.all(area > 0.0)
+    np.testing.assert_allclose(values["gap"][:num_slave] / area, gap, rtol=1e-2)
+    assert max(np.abs(J).max() for J in jacobians.values()) < 1.0
+    direction = np.random.default_rng(1).standard_normal(node_x.shape)
+    moved = node_x + 1e-12 * direction
+    perturbed = assembled(stencil, evaluate(stencil, moved), moved, z)
+    assert max(np.abs(perturbed[n] - values[n]).max() for n in values) < 2e-12
+    return area
+
+
+@pytest.mark.parametrize("side", ["a", "b"])
+@pytest.mark.parametrize("gap", [0.05, -0.05])
+def test_sliver_2d(side, gap):
+    """A master covering [1 - s, 1] (node a) or [0, s] (node b) of the slave facet, s down
+    to 1e-12: the weights are int N_j over the sliver (s and s^2 / 2 to first order)."""
+    for s in (1e-4, 1e-8, 1e-12):
+        if side == "a":
+            node_x = np.array([[1.0, 0.0], [0.0, 0.0], [1.0 - s, gap], [1.6, gap]])
+        else:
+            node_x = np.array([[1.0, 0.0], [0.0, 0.0], [-0.6, gap], [s, gap]])
+        stencil = covered_stencil(node_x, [[0, 1]], [[2, 3]], [[0, 0]])
+        area = sliver_check(stencil, node_x, gap, 2)
+        near, far = (area[0], area[1]) if side == "a" else (area[1], area[0])
+        assert near == pytest.approx(s, rel=1e-3)
+        assert far == pytest.approx(s * s / 2, rel=1e-2)
+
+
+@pytest.mark.parametrize("gap", [0.1, -0.1])
+def test_sliver_3d(gap):
+    """A strip x >= 1 - s of the square (near-singular M_e of rank 2), a strip y <= s along
+    an edge of the triangle and a corner x >= 1 - s of the triangle, s to 1e-8."""
+    for s in (1e-4, 1e-8):
+        for slave, box in ((SLAVE_QUAD, ([1 - s, 1.5], (-0.5, 1.5))),
+                           (SLAVE_TRIANGLE, ([-0.5, 1.5], (-0.5, s))),
+                           (SLAVE_TRIANGLE, ([1 - s**0.5, 1.5], (-0.5, 1.5)))):
+            master_x, master_facets = master_strips(box[0], -gap, y0=box[1][0], y1=box[1][1])
+            ns = slave.shape[0]
+            node_x = np.vstack([slave, master_x])
+            stencil = covered_stencil(node_x, [list(range(ns))], master_facets + ns, [[0, 0]])
+            sliver_check(stencil, node_x, gap, ns)
 
 
 # -- on a mesh: the interface's matrices, serial = 2 ranks ----------------------------------

@@ -599,7 +599,10 @@ def pair_quantities(
             ``element`` uses fixed Gauss points on the slave facet and keeps
             those whose projection lands on the master facet ("concentrated").
         basis: multiplier basis Phi; ``dual`` is biorthogonal to N on the
-            whole slave facet (see :func:`dual_basis_coefficients`).
+            whole slave facet (see :func:`dual_basis_coefficients`), pair by pair;
+            :class:`~dolfinx_mortar.mortar.MortarInterface` instead builds it over the
+            covered part of each slave facet from this kernel's standard outputs
+            (:mod:`dolfinx_mortar.covered`).
         num_gauss_points: Gauss points per segment (or per slave facet).
         crosspoint: (n, 2) bool, slave nodes a, b that carry no multiplier
             (their displacement is prescribed). Their basis function is added
@@ -754,8 +757,9 @@ def dual_basis_coefficients(jacobian_at_points=None, num_gauss_points: int = 2) 
     the same for every facet, long or short: [[2, -1], [-1, 2]]
     (Phi_1 = (1 - 3 xi)/2, Phi_2 = (1 + 3 xi)/2). The coefficients are taken
     on the whole facet, not on the part in contact, so they do not depend on
-    the contact state; on a partly covered facet D keeps off-diagonal terms,
-    which keeps D and M integrated over the same domain (patch test).
+    the contact state; on a partly covered facet D keeps off-diagonal terms
+    and a nodal weight can be <= 0 (the interface uses the covered version of
+    :mod:`dolfinx_mortar.covered` instead).
     """
     points, weights = gauss_legendre(num_gauss_points)
     if jacobian_at_points is None:
