@@ -222,8 +222,23 @@ class CoveredStencil:
             has = member < counts[group]
             partners[has, slot] = order[starts[group[has]] + member[has]]
         self.partners = partners
-        extra = base.master_nodes[np.maximum(partners, 0)].reshape(n, width * base.nm)
-        extra_present = np.repeat(partners >= 0, base.nm, axis=1)
+        # the facet's master nodes, one slot each, the same list for its pairs
+        nm = base.nm
+        keys = np.stack([np.repeat(group, nm), base.master_nodes.reshape(-1)], axis=1)
+        unique_keys, node_slot = np.unique(keys, axis=0, return_inverse=True) if n else (
+            np.zeros((0, 2), dtype=np.int64), np.zeros(0, dtype=np.int64))
+        node_slot = node_slot.reshape(-1)
+        group_start = np.searchsorted(unique_keys[:, 0], np.arange(starts.size))
+        group_count = np.diff(np.r_[group_start, unique_keys.shape[0]]).astype(np.int64)
+        slots = int(group_count.max()) if n else 0
+        node_slot = (node_slot - group_start[np.repeat(group, nm)]).reshape(n, nm)
+        extra = np.zeros((n, slots), dtype=np.int64)
+        extra_present = np.arange(slots)[None, :] < group_count[group][:, None]
+        member = group_start[group][:, None] + np.minimum(np.arange(slots)[None, :],
+                                                          group_count[group][:, None] - 1)
+        if n:
+            extra[:] = unique_keys[member, 1]
+        self.node_slots = node_slot  # (n, nm) slot of each pair's master nodes in its facet's list
         self.nodes = np.concatenate([base.nodes, extra], axis=1)
         self.present = np.concatenate([base.present, extra_present], axis=1)
         self.slave_facets = facet
@@ -249,16 +264,29 @@ class CoveredStencil:
         return transformed_quantities(self, q_std, np.asarray(crosspoint, dtype=bool),
                                       keep_scalars)
 
-    def _partner_gradients(self, q) -> np.ndarray:
-        """(ns ns, base width gdim, contributing) d D^std of every contributing pair."""
-        cached = getattr(q, "_covered_dD", None)
+    def _facet_gradients(self, q):
+        """Per evaluation: d D^std of the contributing pairs on their master columns
+        (contributing, ns ns, nm gdim) and its facet sums on the other columns
+        (facets, ns ns, other columns)."""
+        cached = getattr(q, "_covered_gradients", None)
         if cached is None:
-            q_std, _, contributing = q.covered
+            q_std, coefficients, contributing = q.covered
             ns = self.ns
             terms = [[(self.base.d(i, m), 1.0)] for i in range(ns) for m in range(ns)]
-            cached = self.base.combined_gradients(q_std, contributing, terms)
-            q._covered_dD = cached
+            dD = self.base.combined_gradients(q_std, contributing, terms).transpose(2, 0, 1)
+            master, shared = self._column_split()
+            summed = np.zeros((coefficients.facets.size, ns * ns, shared.size))
+            np.add.at(summed, coefficients.index, dD[:, :, shared])
+            cached = (np.ascontiguousarray(dD[:, :, master]), summed)
+            q._covered_gradients = cached
         return cached
+
+    def _column_split(self):
+        """The base stencil's master-node columns and its other columns."""
+        gdim = self.gdim
+        master = (self.base.master_slots[:, None] * gdim + np.arange(gdim)).reshape(-1)
+        shared = np.setdiff1d(np.arange(self.base.width * gdim), master)
+        return master, shared
 
     def combined_gradients(self, q, rows, terms) -> np.ndarray:
         gdim, base_columns = self.gdim, self.base.width * self.gdim
@@ -267,35 +295,32 @@ class CoveredStencil:
             # frozen (reference-configuration) quantities: pair-local, as the base's
             result[:, :base_columns] = self.base.combined_gradients(q, rows, terms)
             return result
-        q_std, _, contributing = q.covered
-        ns, nm = self.ns, self.nm
+        _, coefficients, contributing = q.covered
         translated, W = translated_terms(self, q, rows, terms)
-        result[:, :base_columns] = self.base.combined_gradients(q_std, rows, translated)
+        result[:, :base_columns] = self.base.combined_gradients(q.covered[0], rows, translated)
         if contributing.size == 0 or rows.size == 0:
             return result
-        dD = self._partner_gradients(q)  # (ns ns, base columns, contributing)
-        weights = W.reshape(len(terms), rows.size, ns * ns)
-        master_columns = (self.base.master_slots[:, None] * gdim
-                          + np.arange(gdim)).reshape(-1)
-        shared = np.ones(base_columns, dtype=bool)
-        shared[master_columns] = False
-        own_position = np.searchsorted(contributing, rows)
-        own_inside = (own_position < contributing.size) & (
-            contributing[np.minimum(own_position, contributing.size - 1)] == rows)
-        # p' = p: the own pair's D^std with weights W, over all of its columns
-        own = np.einsum("tnq,qvn->tvn", weights,
-                        dD[:, :, np.minimum(own_position, contributing.size - 1)])
-        result[:, :base_columns] += own * own_inside[None, None, :]
+        master_dD, summed_dD = self._facet_gradients(q)
+        master, shared = self._column_split()
+        # W is zero on rows outside the contributing pairs: their lookups may be anything
+        weights = np.ascontiguousarray(W.reshape(len(terms), rows.size, -1).transpose(1, 0, 2))
+        position = np.minimum(np.searchsorted(contributing, rows), contributing.size - 1)
+        # every pair of the facet on the slave nodes and normal stars (shared by them)
+        result[:, shared] += (weights @ summed_dD[coefficients.index[position]]).transpose(1, 2, 0)
+        # the pair's own master nodes
+        result[:, master] += (weights @ master_dD[position]).transpose(1, 2, 0)
+        # the other pairs' master nodes, in the facet's node slots
+        nm = self.nm
         for r in range(self.partners.shape[1]):
             partner = self.partners[rows, r]
-            position = np.searchsorted(contributing, partner)
-            inside = (partner >= 0) & (position < contributing.size) & (
-                contributing[np.minimum(position, contributing.size - 1)] == partner)
-            if not inside.any():
+            found = np.minimum(np.searchsorted(contributing, partner), contributing.size - 1)
+            selected = np.flatnonzero((partner >= 0) & (contributing[found] == partner))
+            if selected.size == 0:
                 continue
-            G = dD[:, :, np.minimum(position, contributing.size - 1)]
-            part = np.einsum("tnq,qvn->tvn", weights, G) * inside[None, None, :]
-            result[:, :base_columns][:, shared] += part[:, shared]
-            start = base_columns + r * nm * gdim
-            result[:, start:start + nm * gdim] = part[:, master_columns]
+            part = weights[selected] @ master_dD[found[selected]]  # (m, T, nm gdim)
+            slot = self.node_slots[partner[selected]]  # (m, nm)
+            for l in range(nm):  # noqa: E741
+                for c in range(gdim):
+                    column = base_columns + slot[:, l] * gdim + c
+                    result[:, column, selected] += part[:, :, l * gdim + c].T
         return result
