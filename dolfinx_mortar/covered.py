@@ -36,9 +36,9 @@ import numpy as np
 from .dual import RowSubsetDual
 
 COVERAGE_FLOOR = 1e-12
-"""Nodal weights int N_j over the covered part below this fraction of the facet's
-measure / ns are raised to it in the Jacobi scaling of M_e (never reached but by
-slivers; keeps the inverse finite)."""
+"""Nodal weights int N_j over the covered part below this fraction of the covered
+measure / ns are raised to it in the Jacobi scaling of M_e only (which keeps the
+scaling finite on slivers; A_e does not depend on the scaling)."""
 
 
 def merge_matrices(crosspoint: np.ndarray) -> np.ndarray:
@@ -69,10 +69,14 @@ class FacetCoefficients:
         np.add.at(mass, self.index, D_standard)
         mass = 0.5 * (mass + mass.transpose(0, 2, 1))
         lumped = mass.sum(axis=2)
-        floor = COVERAGE_FLOOR * np.maximum(lumped.sum(axis=1, keepdims=True), 1e-300) / ns
+        total = lumped.sum(axis=1, keepdims=True)
+        empty = total[:, 0] <= 0.0  # a degenerate facet: no multiplier weight at all
+        floor = COVERAGE_FLOOR * np.where(empty[:, None], 1.0, total) / ns
         scale = 1.0 / np.sqrt(np.maximum(lumped, floor))
         scaled = mass * scale[:, :, None] * scale[:, None, :]
+        scaled[empty] = np.eye(ns)
         inverse = np.linalg.inv(scaled) * scale[:, :, None] * scale[:, None, :]
+        inverse[empty] = 0.0
         self.mass, self.lumped, self.inverse = mass, lumped, inverse
         self.A = lumped[:, :, None] * inverse
         P = np.zeros((self.facets.size, ns, ns))
@@ -306,7 +310,10 @@ class CoveredStencil:
         weights = np.ascontiguousarray(W.reshape(len(terms), rows.size, -1).transpose(1, 0, 2))
         position = np.minimum(np.searchsorted(contributing, rows), contributing.size - 1)
         # every pair of the facet on the slave nodes and normal stars (shared by them)
-        result[:, shared] += (weights @ summed_dD[coefficients.index[position]]).transpose(1, 2, 0)
+        summed = (weights @ summed_dD[coefficients.index[position]]).transpose(1, 2, 0)
+        first = self.base.master_slots[0] * gdim  # the master columns are one block
+        result[:, :first] += summed[:, :first]
+        result[:, first + master.size:base_columns] += summed[:, first:]
         # the pair's own master nodes
         result[:, master] += (weights @ master_dD[position]).transpose(1, 2, 0)
         # the other pairs' master nodes, in the facet's node slots
