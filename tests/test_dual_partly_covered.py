@@ -153,9 +153,9 @@ def tilted_master_2d(offset, slope):
 
 
 def test_gap_in_the_slave_space_gives_its_nodal_values_2d():
-    """The gap along the facet normal +y, g(x) = offset + slope x with the master's
-    normal, is linear: g~_j / int N_j is g at node j (covered part only),
-    over two master facets; D is diagonal."""
+    """The gap along the facet normal +y, g(x) = 0.03 + 0.02 x > 0, is linear:
+    g~_j / int N_j is g at node j (covered part only), over two master facets; D is
+    diagonal. The whole-facet dual basis gave node b a negative weighted gap."""
     offset, slope = 0.03, 0.02
     node_x, slave, master, pairs = tilted_master_2d(offset, slope)
     stencil = covered_stencil(node_x, slave, master, pairs, normals="slave")
@@ -166,6 +166,12 @@ def test_gap_in_the_slave_space_gives_its_nodal_values_2d():
     assert np.abs(values["D"] - np.diag(np.diag(values["D"]))).max() < 1e-15
     np.testing.assert_allclose(values["gap"][:2] / weights, offset + slope * node_x[:2, 0],
                                rtol=1e-12)
+    # the whole-facet dual basis Phi_b = 2 - 3 x gave g~_b = int_0.32^1 (2 - 3 x) g(x) < 0
+    whole = stencil.base.evaluate(node_x, normals="slave", integration="segment",
+                                  basis="dual", num_gauss_points=3, crosspoint=None)
+    expected = offset * 0.0136 + slope * -(0.32**2 - 0.32**3)
+    assert whole.gap.value[:, 1].sum() == pytest.approx(expected, rel=1e-12)
+    assert expected < 0.0
 
 
 # 3D: the slave facets of tests/test_kernel_surface3.py face -z; master below, x >= c
