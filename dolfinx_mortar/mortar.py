@@ -29,7 +29,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from . import kernels, search, stencils, surface
+from . import covered, kernels, search, stencils, surface
 from .dual import RowSubsetDual
 from .kernels import BasisOption, IntegrationOption, NormalOption
 from .layout import BlockIncidence, CooMatrix
@@ -108,7 +108,8 @@ class MortarInterface:
             master (mortar) surfaces.
         normals: ``averaged`` (default), ``slave`` or ``master`` normal field.
         integration: ``segment`` (default, exact) or ``element``.
-        basis: multiplier basis, ``standard`` (default) or ``dual``.
+        basis: multiplier basis, ``standard`` (default) or ``dual`` (biorthogonal over
+            the covered part of each slave facet: :mod:`~dolfinx_mortar.covered`).
         num_gauss_points: per segment (or per slave facet for ``element``).
         search_margin: boxes are grown by this much; default twice the mean
             slave facet edge length h in 2D and h/2 in 3D, where the number of
@@ -511,6 +512,8 @@ class MortarInterface:
             stencil = stencils.Surface3Stencil.build(
                 self._node_blocks, self._node_x, all_slave_facets, local_slave_facets,
                 all_master_facets, pairs, self.normals, nodal_frames=self.scalar_gradients)
+        if self.basis == "dual":
+            stencil = covered.CoveredStencil(stencil)
         self.stencil = stencil
         self.pair_slave_facets = stencil.slave_facets
         self.pair_multipliers = self.node_multipliers[stencil.slave_nodes]

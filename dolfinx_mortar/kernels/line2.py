@@ -441,7 +441,7 @@ def _integrate(X, has_neighbour, normals, integration, basis, points, weights, c
         directions = [grad_jacobian]
     directions += [grad_na[0], grad_na[1], grad_nb[0], grad_nb[1]]
     num_directions = len(directions)
-    coefficients = np.zeros((20, num_directions, num))
+    coefficients = np.zeros((24, num_directions, num))
     direct = np.empty((10, 8, num))  # d / d (x_a, x_b, x_c, x_d) of Mn (0-7) and gap (8, 9)
 
     # every output F is sum_g w_g f_g with w_g = length/2 W_g J on_g (segment) or W_g J on_g
@@ -484,6 +484,10 @@ def _integrate(X, has_neighbour, normals, integration, basis, points, weights, c
                 direct[o - 8] = dN[k] * Z[j, c, 4:12]
         X_xi = weight * dphi[j] if segment else None
         coefficients[16 + j, :first_normal] = reduce(X_xi, area[j])
+        for k in range(2):
+            # D_jk (no normal): its derivatives through the limits and the Jacobian only
+            X_xi = weight * (dphi[j] * N[k] + phi[j] * dN[k]) if segment else None
+            coefficients[20 + 2 * j + k, :first_normal] = reduce(X_xi, D[:, j, k])
     # gap_j = sum_lc Mn_jlc x^m_lc - sum_kc Dn_jkc x^s_kc
     xm, xs = X[8:12], X[2:6]  # (k c, n)
     master_part = coefficients[8:16].reshape(2, 4, -1, num) * xm[None, :, None, :]
@@ -507,10 +511,11 @@ def _integrate(X, has_neighbour, normals, integration, basis, points, weights, c
 
 
 class PairGradients:
-    """Derivatives of the 20 outputs of each contributing pair, factorized.
+    """Derivatives of the 24 outputs of each contributing pair, factorized.
 
     Outputs: ``Dn`` (0-7, index 4 j + 2 k + c), ``Mn`` (8-15, 8 + 4 j + 2 l + c),
-    ``area`` (16, 17), ``gap`` (18, 19). The derivative of output o with
+    ``area`` (16, 17), ``gap`` (18, 19), ``D`` (20-23, 20 + 2 j + k: the covered dual
+    basis of :mod:`dolfinx_mortar.covered` needs it). The derivative of output o with
     respect to the 12 pair variables is
 
         sum_k coefficients[o, k] directions[k] + direct[o] on (x_a, x_b, x_c, x_d)
@@ -522,7 +527,7 @@ class PairGradients:
     outputs before expanding it to 12 variables, so a consumer that needs,
     say, sum_j z_j Dn_j pays for 8 gradients, not 16. The pairs come in the
     batches they were integrated in: ``parts`` is a list of (start, stop,
-    coefficients (20, directions, batch), directions (list of (12, batch)),
+    coefficients (24, directions, batch), directions (list of (12, batch)),
     direct (10, 8, batch): Mn then gap).
     """
 
@@ -537,7 +542,7 @@ class PairGradients:
     def _direct_row(o: int) -> int | None:
         if 8 <= o < 16:
             return o - 8
-        return o - 10 if o >= 18 else None
+        return o - 10 if 18 <= o < 20 else None
 
     def combine(self, terms) -> np.ndarray:
         """(len(terms), 12, n): row p sums weight * d output / dx over (output, weight) in terms[p].
@@ -594,7 +599,10 @@ def pair_quantities(
             ``element`` uses fixed Gauss points on the slave facet and keeps
             those whose projection lands on the master facet ("concentrated").
         basis: multiplier basis Phi; ``dual`` is biorthogonal to N on the
-            whole slave facet (see :func:`dual_basis_coefficients`).
+            whole slave facet (see :func:`dual_basis_coefficients`), pair by pair;
+            :class:`~dolfinx_mortar.mortar.MortarInterface` instead builds it over the
+            covered part of each slave facet from this kernel's standard outputs
+            (:mod:`dolfinx_mortar.covered`).
         num_gauss_points: Gauss points per segment (or per slave facet).
         crosspoint: (n, 2) bool, slave nodes a, b that carry no multiplier
             (their displacement is prescribed). Their basis function is added
@@ -749,8 +757,9 @@ def dual_basis_coefficients(jacobian_at_points=None, num_gauss_points: int = 2) 
     the same for every facet, long or short: [[2, -1], [-1, 2]]
     (Phi_1 = (1 - 3 xi)/2, Phi_2 = (1 + 3 xi)/2). The coefficients are taken
     on the whole facet, not on the part in contact, so they do not depend on
-    the contact state; on a partly covered facet D keeps off-diagonal terms,
-    which keeps D and M integrated over the same domain (patch test).
+    the contact state; on a partly covered facet D keeps off-diagonal terms
+    and a nodal weight can be <= 0 (the interface uses the covered version of
+    :mod:`dolfinx_mortar.covered` instead).
     """
     points, weights = gauss_legendre(num_gauss_points)
     if jacobian_at_points is None:

@@ -215,7 +215,9 @@ def _triangle_inverse_map(corners: Dual, point: Dual) -> Dual:
 
 
 def _dual_coefficients(slave_x: Dual, nodes: int) -> Dual:
-    """A (n, ns, ns) with Phi = A N biorthogonal on the whole slave facet: A = D_e M_e^-1."""
+    """A (n, ns, ns) with Phi = A N biorthogonal on the whole slave facet: A = D_e M_e^-1
+    (the kernel's own ``dual`` basis; the interface builds it over the covered part of
+    each slave facet instead, :mod:`dolfinx_mortar.covered`)."""
     n = slave_x.shape[0]
     nvar = slave_x.grad.shape[-1]
     if nodes == 3:

@@ -1,0 +1,333 @@
+"""The dual basis over the covered part of each slave facet (2D and 3D).
+
+The whole-facet dual basis (Phi = A N with A from the full facet's mass
+matrix) is pair-local, but on a facet the master covers only in part the
+nodal weights int Phi_j over the covered part can be zero or negative and a
+weighted gap can take the wrong sign. Here, as Popp, Wohlmuth, Gee and Wall
+did for 3D dual mortar, the coefficients are built on the covered part: per
+slave facet e with pairs p,
+
+    M_e = sum_p D^std_p   (int N_j N_k over the union of the overlaps)
+    D_e = diag(M_e 1)     (int N_j over it: positive)
+    A_e = D_e M_e^-1
+
+and every dual quantity of a pair is A_e (then the crosspoint merge P_e)
+applied to its standard-basis one: D_p = P A D^std_p (summed over the facet:
+P D_e, diagonal), M_p, Dn_p, Mn_p, the weighted gaps and the nodal areas. A
+constant gap g gives g~_j = g int N_j over the covered part (right sign);
+a gap in the slave space gives its nodal values. On a fully covered facet
+M_e is the whole facet's mass matrix and nothing changes.
+
+Derivatives: dA = (dD_e - A dM_e) M_e^-1 with dM_e = sum_p' dD^std_p', so a
+linear combination sum w dY_p of a pair's outputs is a combination of its own
+standard outputs (weights A^T P^T w) plus sum_p' W . dD^std_p' over every
+pair p' of the facet. The slave nodes and the normal stars of p' are those
+of p; the master nodes of the facet's other candidate pairs are appended to
+each pair's stencil (:class:`CoveredStencil`), so the Jacobians' patterns
+hold the coupling.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .dual import RowSubsetDual
+
+COVERAGE_FLOOR = 1e-12
+"""Nodal weights int N_j over the covered part below this fraction of the covered
+measure / ns are raised to it in the Jacobi scaling of M_e only (which keeps the
+scaling finite on slivers; A_e does not depend on the scaling)."""
+
+
+def merge_matrices(crosspoint: np.ndarray) -> np.ndarray:
+    """(n, ns, ns) P with Phi_new = P Phi: a crosspoint node's basis function shared
+    equally by the facet's other nodes (rows of crosspoints zero), as the kernels do."""
+    cross = np.asarray(crosspoint, dtype=bool)
+    n, ns = cross.shape
+    others = (~cross).sum(axis=1)
+    share = np.where(others > 0, 1.0 / np.maximum(others, 1), 0.0)
+    keep = (~cross).astype(float)
+    P = keep[:, :, None] * (np.eye(ns)[None] + share[:, None, None] * cross[:, None, :])
+    return P
+
+
+class FacetCoefficients:
+    """A_e, M_e^-1 and the merge P_e of the slave facets of some pairs.
+
+    Args:
+        D_standard: (rows, ns, ns) int N_j N_k over each pair's overlap.
+        facet: (rows,) slave facet of each pair.
+        crosspoint: (rows, ns) crosspoint flags of each pair's slave nodes.
+    """
+
+    def __init__(self, D_standard: np.ndarray, facet: np.ndarray, crosspoint: np.ndarray):
+        ns = D_standard.shape[1]
+        self.facets, self.index = np.unique(facet, return_inverse=True)
+        mass = np.zeros((self.facets.size, ns, ns))
+        np.add.at(mass, self.index, D_standard)
+        mass = 0.5 * (mass + mass.transpose(0, 2, 1))
+        lumped = mass.sum(axis=2)
+        total = lumped.sum(axis=1, keepdims=True)
+        empty = total[:, 0] <= 0.0  # a degenerate facet: no multiplier weight at all
+        floor = COVERAGE_FLOOR * np.where(empty[:, None], 1.0, total) / ns
+        scale = 1.0 / np.sqrt(np.maximum(lumped, floor))
+        scaled = mass * scale[:, :, None] * scale[:, None, :]
+        scaled[empty] = np.eye(ns)
+        inverse = np.linalg.inv(scaled) * scale[:, :, None] * scale[:, None, :]
+        inverse[empty] = 0.0
+        self.mass, self.lumped, self.inverse = mass, lumped, inverse
+        self.A = lumped[:, :, None] * inverse
+        P = np.zeros((self.facets.size, ns, ns))
+        P[self.index] = merge_matrices(crosspoint)
+        self.P = P
+        self.T = P @ self.A
+
+    def pair(self, name: str, rows: np.ndarray | None = None) -> np.ndarray:
+        """A facet array per pair (rows: positions among the pairs given)."""
+        index = self.index if rows is None else self.index[rows]
+        return getattr(self, name)[index]
+
+    def apply(self, X: np.ndarray) -> np.ndarray:
+        """P A X per pair, X (rows, ns, ...)."""
+        T = self.pair("T")
+        return np.einsum("nji,ni...->nj...", T, X)
+
+
+def _family(stencil, o: int):
+    """(name, first-index j, index of the rest) of output o of ``stencil``'s numbering."""
+    ns, nm, g = stencil.ns, stencil.nm, stencil.gdim
+    if o < stencil.MN:
+        j, rest = divmod(o - stencil.DN, ns * g)
+        return "Dn", j, divmod(rest, g), stencil.DN + j * ns * g
+    if o < stencil.AREA:
+        j, rest = divmod(o - stencil.MN, nm * g)
+        return "Mn", j, divmod(rest, g), stencil.MN + j * nm * g
+    if o < stencil.GAP:
+        return "area", o - stencil.AREA, (), stencil.AREA
+    if o < stencil.D:
+        return "gap", o - stencil.GAP, (), stencil.GAP
+    if o < stencil.M:
+        j, k = divmod(o - stencil.D, ns)
+        return "D", j, (k,), stencil.D + j * ns
+    j, l = divmod(o - stencil.M, nm)  # noqa: E741
+    return "M", j, (l,), stencil.M + j * nm
+
+
+def _stride(stencil, name: str) -> int:
+    """How far apart the outputs of consecutive first indices j are."""
+    ns, nm, g = stencil.ns, stencil.nm, stencil.gdim
+    return {"Dn": ns * g, "Mn": nm * g, "area": 1, "gap": 1, "D": ns, "M": nm}[name]
+
+
+def transformed_quantities(stencil, q_std, crosspoint: np.ndarray, keep_scalars: bool):
+    """The covered-dual quantities of the standard-basis ones ``q_std``; the result
+    carries ``covered = (q_std, FacetCoefficients, rows)`` for the derivatives."""
+    rows = q_std.gap.rows
+    coefficients = FacetCoefficients(q_std.D[rows], stencil.slave_facets[rows],
+                                     crosspoint[rows])
+
+    def values(array: np.ndarray) -> np.ndarray:
+        result = np.zeros_like(array)
+        result[rows] = coefficients.apply(array[rows])
+        return result
+
+    def no_gradient():
+        raise NotImplementedError(
+            "covered dual quantities have no per-pair gradients (they couple the pairs of "
+            "a slave facet): use the stencil's combined_gradients")
+
+    def subset(array: np.ndarray) -> RowSubsetDual:
+        return RowSubsetDual(values(array), rows, no_gradient)
+
+    extra = {}
+    if keep_scalars:
+        extra = {"D_dual": subset(q_std.D), "M_dual": subset(q_std.M)}
+    elif hasattr(q_std, "D_dual"):
+        extra = {"D_dual": None, "M_dual": None}
+    q = dataclasses.replace(
+        q_std, D=values(q_std.D), M=values(q_std.M), Dn=subset(q_std.Dn.value),
+        Mn=subset(q_std.Mn.value), gap=subset(q_std.gap.value),
+        area=subset(q_std.area.value), **extra)
+    q.covered = (q_std, coefficients, rows)
+    return q
+
+
+def _standard_values(q_std, name: str) -> np.ndarray:
+    return {"Dn": q_std.Dn.value, "Mn": q_std.Mn.value, "area": q_std.area.value,
+            "gap": q_std.gap.value, "D": q_std.D, "M": q_std.M}[name]
+
+
+def translated_terms(stencil, q, rows: np.ndarray, terms):
+    """Terms over the covered-dual outputs of pairs ``rows`` as terms over the standard
+    outputs of the same pairs, and W (len(terms), rows, ns, ns): the weights of dM_e."""
+    q_std, coefficients, contributing = q.covered
+    ns = stencil.ns
+    position = np.searchsorted(contributing, rows)
+    inside = (position < contributing.size) & (
+        contributing[np.minimum(position, contributing.size - 1)] == rows)
+    position = np.where(inside, position, 0)
+    mask = inside.astype(float)
+    T = coefficients.pair("T", position) * mask[:, None, None]
+    P = coefficients.pair("P", position) * mask[:, None, None]
+    A = coefficients.pair("A", position)
+    inverse = coefficients.pair("inverse", position)
+    translated, W = [], np.zeros((len(terms), rows.size, ns, ns))
+    for t, row in enumerate(terms):
+        own = []
+        for o, w in row:
+            if o >= stencil.NORMAL:
+                own.append((o, w))
+                continue
+            name, j, rest, first = _family(stencil, o)
+            stride = _stride(stencil, name)
+            offset = o - first
+            w = np.broadcast_to(np.asarray(w, dtype=float), (rows.size,))
+            for i in range(ns):
+                own.append((first + (i - j) * stride + offset, T[:, j, i] * w))
+            X = _standard_values(q_std, name)[rows]  # (rows, ns, ...)
+            X = X[(slice(None), slice(None)) + tuple(rest)]
+            y = np.einsum("nik,nk->ni", inverse, X)
+            z = P[:, j, :] * w[:, None]
+            W[t] += (z * y)[:, :, None] - np.einsum("nli,nl->ni", A, z)[:, :, None] * y[:, None, :]
+        translated.append(own)
+    return translated, W
+
+
+class CoveredStencil:
+    """A pair stencil whose pairs carry the covered dual basis of their slave facet.
+
+    Wraps a :class:`~dolfinx_mortar.stencils.PairStencil` (everything not overridden
+    is the wrapped stencil's): the kernel runs with the standard basis, the outputs
+    are transformed per slave facet (:func:`transformed_quantities`), and the
+    stencil of each pair is extended by the master nodes of the other candidate pairs
+    of its slave facet (``partners``), on which its dual quantities also depend.
+    """
+
+    def __init__(self, base):
+        self.base = base
+        facet = base.slave_facets
+        n = facet.size
+        order = np.argsort(facet, kind="stable")
+        sorted_facets = facet[order]
+        first = np.r_[True, sorted_facets[1:] != sorted_facets[:-1]] if n else np.zeros(0, bool)
+        starts = np.flatnonzero(first)
+        counts = np.diff(np.r_[starts, n])
+        group = np.empty(n, dtype=np.int64)
+        group[order] = np.repeat(np.arange(starts.size), counts)
+        rank = np.empty(n, dtype=np.int64)
+        rank[order] = np.arange(n) - np.repeat(starts, counts)
+        width = int(counts.max()) - 1 if n else 0
+        partners = np.full((n, width), -1, dtype=np.int64)
+        for slot in range(width):
+            # the facet's other pairs in their order, skipping the pair itself
+            member = np.where(slot < rank, slot, slot + 1)
+            has = member < counts[group]
+            partners[has, slot] = order[starts[group[has]] + member[has]]
+        self.partners = partners
+        # the facet's master nodes, one slot each, the same list for its pairs
+        nm = base.nm
+        keys = np.stack([np.repeat(group, nm), base.master_nodes.reshape(-1)], axis=1)
+        unique_keys, node_slot = np.unique(keys, axis=0, return_inverse=True) if n else (
+            np.zeros((0, 2), dtype=np.int64), np.zeros(0, dtype=np.int64))
+        node_slot = node_slot.reshape(-1)
+        group_start = np.searchsorted(unique_keys[:, 0], np.arange(starts.size))
+        group_count = np.diff(np.r_[group_start, unique_keys.shape[0]]).astype(np.int64)
+        slots = int(group_count.max()) if n else 0
+        node_slot = (node_slot - group_start[np.repeat(group, nm)]).reshape(n, nm)
+        extra = np.zeros((n, slots), dtype=np.int64)
+        extra_present = np.arange(slots)[None, :] < group_count[group][:, None]
+        member = group_start[group][:, None] + np.minimum(np.arange(slots)[None, :],
+                                                          group_count[group][:, None] - 1)
+        if n:
+            extra[:] = unique_keys[member, 1]
+        self.node_slots = node_slot  # (n, nm) slot of each pair's master nodes in its facet's list
+        self.nodes = np.concatenate([base.nodes, extra], axis=1)
+        self.present = np.concatenate([base.present, extra_present], axis=1)
+        self.slave_facets = facet
+
+    def __getattr__(self, name):
+        return getattr(self.base, name)
+
+    @property
+    def num_pairs(self) -> int:
+        return self.nodes.shape[0]
+
+    @property
+    def width(self) -> int:
+        return self.nodes.shape[1]
+
+    def evaluate(self, node_x: np.ndarray, *, crosspoint, basis="dual", **options):
+        keep_scalars = bool(options.get("scalar_gradients", False))
+        if self.base.gdim == 3:
+            options["scalar_gradients"] = True
+        q_std = self.base.evaluate(node_x, basis="standard", crosspoint=None, **options)
+        if crosspoint is None:
+            crosspoint = np.zeros((self.num_pairs, self.ns), dtype=bool)
+        return transformed_quantities(self, q_std, np.asarray(crosspoint, dtype=bool),
+                                      keep_scalars)
+
+    def _facet_gradients(self, q):
+        """Per evaluation: d D^std of the contributing pairs on their master columns
+        (contributing, ns ns, nm gdim) and its facet sums on the other columns
+        (facets, ns ns, other columns)."""
+        cached = getattr(q, "_covered_gradients", None)
+        if cached is None:
+            q_std, coefficients, contributing = q.covered
+            ns = self.ns
+            terms = [[(self.base.d(i, m), 1.0)] for i in range(ns) for m in range(ns)]
+            dD = self.base.combined_gradients(q_std, contributing, terms).transpose(2, 0, 1)
+            master, shared = self._column_split()
+            summed = np.zeros((coefficients.facets.size, ns * ns, shared.size))
+            np.add.at(summed, coefficients.index, dD[:, :, shared])
+            cached = (np.ascontiguousarray(dD[:, :, master]), summed)
+            q._covered_gradients = cached
+        return cached
+
+    def _column_split(self):
+        """The base stencil's master-node columns and its other columns."""
+        gdim = self.gdim
+        master = (self.base.master_slots[:, None] * gdim + np.arange(gdim)).reshape(-1)
+        shared = np.setdiff1d(np.arange(self.base.width * gdim), master)
+        return master, shared
+
+    def combined_gradients(self, q, rows, terms) -> np.ndarray:
+        gdim, base_columns = self.gdim, self.base.width * self.gdim
+        result = np.zeros((len(terms), self.width * gdim, rows.size))
+        if not hasattr(q, "covered"):
+            # frozen (reference-configuration) quantities: pair-local, as the base's
+            result[:, :base_columns] = self.base.combined_gradients(q, rows, terms)
+            return result
+        _, coefficients, contributing = q.covered
+        translated, W = translated_terms(self, q, rows, terms)
+        result[:, :base_columns] = self.base.combined_gradients(q.covered[0], rows, translated)
+        if contributing.size == 0 or rows.size == 0:
+            return result
+        master_dD, summed_dD = self._facet_gradients(q)
+        master, shared = self._column_split()
+        # W is zero on rows outside the contributing pairs: their lookups may be anything
+        weights = np.ascontiguousarray(W.reshape(len(terms), rows.size, -1).transpose(1, 0, 2))
+        position = np.minimum(np.searchsorted(contributing, rows), contributing.size - 1)
+        # every pair of the facet on the slave nodes and normal stars (shared by them)
+        summed = (weights @ summed_dD[coefficients.index[position]]).transpose(1, 2, 0)
+        first = self.base.master_slots[0] * gdim  # the master columns are one block
+        result[:, :first] += summed[:, :first]
+        result[:, first + master.size:base_columns] += summed[:, first:]
+        # the pair's own master nodes
+        result[:, master] += (weights @ master_dD[position]).transpose(1, 2, 0)
+        # the other pairs' master nodes, in the facet's node slots
+        nm = self.nm
+        for r in range(self.partners.shape[1]):
+            partner = self.partners[rows, r]
+            found = np.minimum(np.searchsorted(contributing, partner), contributing.size - 1)
+            selected = np.flatnonzero((partner >= 0) & (contributing[found] == partner))
+            if selected.size == 0:
+                continue
+            part = weights[selected] @ master_dD[found[selected]]  # (m, T, nm gdim)
+            slot = self.node_slots[partner[selected]]  # (m, nm)
+            for l in range(nm):  # noqa: E741
+                for c in range(gdim):
+                    column = base_columns + slot[:, l] * gdim + c
+                    result[:, column, selected] += part[:, :, l * gdim + c].T
+        return result
