@@ -6,7 +6,10 @@ displacement-only solve (:mod:`dolfinx_mortar.condensation`): MUMPS LU
 (``linear_solver="direct"``) or GMRES with algebraic multigrid whose
 near-nullspace is the rigid-body modes of each body
 (``linear_solver="iterative"``; BoomerAMG, with :data:`BOOMERAMG_3D_OPTIONS` in
-3D). ``petsc_options``
+3D). The option ``condensed_keep_products`` (default true) keeps the
+condensation's sub-matrices and products between Newton iterations, so that a
+Jacobian of the same pattern only recomputes values; false frees them after
+each set-up (less memory, every product built anew). ``petsc_options``
 given to the problem override the defaults, and the user's options database
 under the problem's prefix overrides both.
 
@@ -283,10 +286,12 @@ def condensed_preconditioner(ksp: PETSc.KSP, layout, interfaces, block_size: int
             if not options.hasName(name):
                 options[name] = value
                 added.append(name)
+    keep_products = options.getBool(f"{prefix}condensed_keep_products", True)
     try:
         condenser = CondensedPreconditioner(comm, u_rows, z_rows, node_dofs,
                                             prefix=f"{prefix}condensed_",
-                                            near_nullspace=near_nullspace)
+                                            near_nullspace=near_nullspace,
+                                            keep_products=keep_products)
     finally:
         for name in added:
             options.delValue(name)
