@@ -54,7 +54,33 @@ DEFAULT_OPTIONS = {
     "mat_mumps_cntl_3": 1e-8,
 }
 
-LINEAR_SOLVERS = ("direct", "iterative")
+LINEAR_SOLVERS = ("auto", "direct", "iterative")
+
+AUTO_ITERATIVE_MIN_DOFS = 20_000
+"""``linear_solver="auto"`` takes the iterative solver from this many displacement dofs
+(global) in 3D; see :func:`automatic_linear_solver`."""
+
+
+def automatic_linear_solver(gdim: int, num_dofs: int, multipliers: str,
+                            has_friction: bool) -> str:
+    """What ``linear_solver="auto"`` (the default) means for a problem: ``iterative`` in
+    3D from :data:`AUTO_ITERATIVE_MIN_DOFS` displacement dofs on, with dual multipliers
+    and without friction (what the iterative path supports); ``direct`` otherwise.
+
+    Why, as measured on the Hertz problems (benchmarks/README.md, "Direct or iterative
+    by default"): in 2D MUMPS was faster than the condensed GMRES + BoomerAMG solve at
+    every size measured, serial and on 2 ranks; in 3D the LU factor fills in far
+    faster with the dofs, the iterative solve was faster per Newton iteration from
+    about this size on, by an order of magnitude a few refinements later, and it is
+    the only one whose memory grows about linearly (MUMPS does not reach the issue's
+    1e6 dofs on this machine). Below the threshold the two are close and LU is the
+    more robust. Both give the same Newton iterates (the iterative solve
+    preconditions FGMRES on the full system, rtol 1e-12).
+    """
+    if (gdim == 3 and num_dofs >= AUTO_ITERATIVE_MIN_DOFS and multipliers == "dual"
+            and not has_friction):
+        return "iterative"
+    return "direct"
 
 ITERATIVE_OPTIONS = {
     # the inner solve only preconditions fgmres on [u | z] (which makes the Newton
