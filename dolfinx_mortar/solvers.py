@@ -1,17 +1,17 @@
 """SNES and linear solver set-up: our defaults, the user's options the PETSc way.
 
-Defaults are Newton with full steps and MUMPS LU on the monolithic [u | z]
-system, or, with condensation, fgmres on it preconditioned by a condensed
-displacement-only solve (:mod:`dolfinx_mortar.condensation`): MUMPS LU
-(``linear_solver="direct"``) or GMRES with algebraic multigrid whose
-near-nullspace is the rigid-body modes of each body
-(``linear_solver="iterative"``; BoomerAMG, with :data:`BOOMERAMG_3D_OPTIONS` in
-3D). The option ``condensed_keep_products`` (default true) keeps the
-condensation's sub-matrices and products between Newton iterations, so that a
-Jacobian of the same pattern only recomputes values; false frees them after
-each set-up (less memory, every product built anew). ``petsc_options``
-given to the problem override the defaults, and the user's options database
-under the problem's prefix overrides both.
+Defaults are Newton with full steps and MUMPS LU on the monolithic [u | z] system,
+or, with condensation, fgmres on it preconditioned by a condensed displacement-only
+solve (:mod:`dolfinx_mortar.condensation`): MUMPS LU (``linear_solver="direct"``) or
+GMRES with algebraic multigrid whose near-nullspace is the rigid-body modes of each
+body (``linear_solver="iterative"``; BoomerAMG, with :data:`BOOMERAMG_3D_OPTIONS` in
+3D). ``linear_solver="auto"``, the problem's default, is one of the two by dimension
+and size (:func:`automatic_linear_solver`). The option ``condensed_keep_products``
+(default true) keeps the condensation's sub-matrices and products between Newton
+iterations, so that a Jacobian of the same pattern only recomputes values; false
+frees them after each set-up (less memory, every product built anew).
+``petsc_options`` given to the problem override the defaults, and the user's options
+database under the problem's prefix overrides both.
 
 Defaults are put into the options database only for ``setFromOptions`` and
 removed again, except the factorization ones (``mat_*``): PETSc reads those at
