@@ -70,11 +70,11 @@ def automatic_linear_solver(gdim: int, num_dofs: int, multipliers: str,
     Why, as measured on the Hertz problems (benchmarks/README.md, "Direct or iterative
     by default"): in 2D MUMPS was faster than the condensed GMRES + BoomerAMG solve at
     every size measured, serial and on 2 ranks; in 3D the LU factor fills in far
-    faster with the dofs, the iterative solve was faster per Newton iteration from
-    about this size on, by an order of magnitude a few refinements later, and it is
-    the only one whose memory grows about linearly (MUMPS does not reach the issue's
-    1e6 dofs on this machine). Below the threshold the two are close and LU is the
-    more robust. Both give the same Newton iterates (the iterative solve
+    faster with the dofs: the iterative solve was faster per Newton iteration from
+    about this size on, serially and on 2 ranks, by an order of magnitude a few
+    refinements later, and its memory grows about linearly with the dofs. Below the
+    threshold the two are close (on 2 ranks of a loaded machine LU was faster) and LU
+    is the more robust. Both give the same Newton iterates (the iterative solve
     preconditions FGMRES on the full system, rtol 1e-12).
     """
     if (gdim == 3 and num_dofs >= AUTO_ITERATIVE_MIN_DOFS and multipliers == "dual"
