@@ -330,6 +330,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         "material": args.material,
         "configuration": configuration,
         **problem_options(args),
+        "linear_solver": problem.linear_solver,
         "c_n": problem.c_n,
         "penalty_used": problem.penalty,
         "refinement": args.refinement,

@@ -128,10 +128,11 @@ def add_common_arguments(
     )
     parser.add_argument(
         "--linear-solver",
-        choices=("direct", "iterative"),
-        default="direct",
+        choices=("auto", "direct", "iterative"),
+        default="auto",
         help="direct: MUMPS LU; iterative: condensed system, GMRES + BoomerAMG (GAMG "
-        "selectable) with rigid-body modes (dual multipliers)",
+        "selectable) with rigid-body modes (dual multipliers); auto (default): iterative "
+        "for large 3D problems with dual multipliers, else direct",
     )
     parser.add_argument(
         "--search-margin",

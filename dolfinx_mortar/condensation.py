@@ -52,11 +52,19 @@ class CondensedPreconditioner:
         near_nullspace: this rank's part (owned displacement dofs, in order) of
             the vectors K_c is given as near-nullspace (the rigid-body modes of
             each body, for algebraic multigrid); orthonormal.
+        keep_products: keep every sub-matrix and product between set-ups, so that
+            a Jacobian of the same pattern only recomputes their values (the
+            default). False keeps only what ``apply`` needs (A', G, C, T and the
+            inner solver's matrix) and frees the rest as soon as it is used: the
+            products are then built anew at every set-up, and the set-up's peak
+            memory and the memory held between set-ups are several
+            displacement-sized matrices smaller (for problems that would not fit).
     """
 
     def __init__(self, comm: MPI.Intracomm, u_rows, z_rows, z_node_dofs, prefix: str,
-                 near_nullspace: list[np.ndarray] | None = None):
+                 near_nullspace: list[np.ndarray] | None = None, keep_products: bool = True):
         self.comm = comm
+        self.keep_products = keep_products
         self.is_u = PETSc.IS().createGeneral(np.asarray(u_rows, dtype=PETSc.IntType), comm=comm)
         self.is_z = PETSc.IS().createGeneral(np.asarray(z_rows, dtype=PETSc.IntType), comm=comm)
         self.num_u = len(u_rows)
@@ -88,7 +96,8 @@ class CondensedPreconditioner:
         # reused and only their values computed again.
         J = pc.getOperators()[0]
         fingerprint = _pattern_fingerprint(J, self.comm)
-        reuse = fingerprint == self._fingerprint and bool(self._matrices)
+        reuse = (self.keep_products and fingerprint == self._fingerprint
+                 and bool(self._matrices))
         if not reuse:
             self._release_matrices()
         self._fingerprint = fingerprint
@@ -140,20 +149,33 @@ class CondensedPreconditioner:
             m[name] = multiply(right, result=m.get(name))
             return m[name]
 
+        def release(*names):
+            """Without ``keep_products``: free what the rest of the set-up and apply
+            do not need."""
+            if not self.keep_products:
+                for name in names:
+                    m.pop(name).destroy()
+
         # A' = A - G d^-1 C: the exact elimination of the rows with d != 0
         scaled = scaled_copy("scaled_C", C, left=v["inverse_d"])
         A_prime = combination("A_prime", [(1.0, A), (-1.0, product("G_C", G, scaled))])
+        release("A", "scaled_C", "G_C")
         # B1 = (I - G P^-1 T) A'
         G_p = scaled_copy("G_p", G, right=v["inverse_p"])
         correction = product("G_p_T_A", G_p, product("T_A", T, A_prime))
+        release("T_A")
         B1 = combination("B1", [(1.0, A_prime), (-1.0, correction)])
+        release("G_p_T_A")
         # K_c = B1 - T^T (T B1 + C_a): the normal rows at active nodes become the
         # constraints, negated so that their diagonal (c_n D_jj) is positive as the
         # stiffness is (the constraints row C_a is -c_n D n on the slave node)
         C_a = scaled_copy("C_a", C, left=v["active"])
         normal_rows = combination("normal_rows", [(1.0, product("T_B1", T, B1)), (1.0, C_a)])
+        release("T_B1", "C_a")
         replaced = product("replaced", T, normal_rows, transpose=True)
+        release("normal_rows")
         K_c = combination("K_c", [(1.0, B1), (-1.0, replaced)])
+        release("B1", "replaced")
         if reuse:
             self.reuses += 1
         else:
@@ -169,6 +191,7 @@ class CondensedPreconditioner:
             m["K_inner"] = inner
             self._set_near_nullspace(inner)
             self.ksp.setOperators(inner)
+        release("K_c")
         self.ksp.setUp()
 
     def apply(self, pc: PETSc.PC, x: PETSc.Vec, y: PETSc.Vec) -> None:

@@ -127,12 +127,16 @@ class ContactProblem:
             MUMPS LU) and preconditions fgmres on the monolithic system
             (``<prefix>ksp_``, default rtol 1e-12), so the solution is the
             uncondensed one (:mod:`dolfinx_mortar.condensation`).
-        linear_solver: ``direct`` (default: MUMPS LU, of the monolithic
-            system, or of the condensed one with ``condensation``) or
-            ``iterative``: condensation (dual multipliers only) with GMRES and
-            PETSc's GAMG on the condensed matrix, its block size set and the
-            rigid-body modes of each body as near-nullspace (options under
-            ``<prefix>condensed_``, e.g. ``pc_type: hypre`` for BoomerAMG).
+        linear_solver: ``auto`` (default: ``iterative`` for 3D problems of at
+            least :data:`~dolfinx_mortar.solvers.AUTO_ITERATIVE_MIN_DOFS`
+            displacement dofs with dual multipliers and no friction, else
+            ``direct``; why: :func:`~dolfinx_mortar.solvers.automatic_linear_solver`),
+            ``direct`` (MUMPS LU, of the monolithic system, or of the condensed one
+            with ``condensation``) or ``iterative``: condensation (dual
+            multipliers only) with GMRES and hypre's BoomerAMG on the condensed
+            matrix, its block size set and the rigid-body modes of each body as
+            near-nullspace (options under ``<prefix>condensed_``, e.g. ``pc_type:
+            gamg`` for PETSc's GAMG). ``problem.linear_solver`` is the one chosen.
         friction: ``None`` (frictionless, the default), ``("coulomb", mu)``,
             ``("tresca", bound)`` (a pressure), or a list of these, one per
             pair (:mod:`dolfinx_mortar.friction`; direct linear solver, with
@@ -167,7 +171,7 @@ class ContactProblem:
         search_margin: float | None = None,
         configuration: str = "current",
         condensation: bool = False,
-        linear_solver: str = "direct",
+        linear_solver: str = "auto",
         friction=None,
         c_t: float | None = None,
         petsc_options: dict | None = None,
@@ -179,6 +183,12 @@ class ContactProblem:
         _check_choice("normals", normals, kernels.NORMAL_OPTIONS)
         _check_choice("multipliers", multipliers, kernels.BASIS_OPTIONS)
         _check_choice("linear_solver", linear_solver, solvers.LINEAR_SOLVERS)
+        if linear_solver == "auto":
+            V = u.function_space
+            linear_solver = solvers.automatic_linear_solver(
+                V.mesh.geometry.dim, V.dofmap.index_map.size_global * V.dofmap.index_map_bs,
+                multipliers, any(law is not None for law in
+                                 friction_rules.laws_per_pair(friction, max(len(pairs), 1))))
         if linear_solver == "iterative":
             if multipliers != "dual":
                 raise ValueError(

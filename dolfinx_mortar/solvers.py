@@ -1,14 +1,17 @@
 """SNES and linear solver set-up: our defaults, the user's options the PETSc way.
 
-Defaults are Newton with full steps and MUMPS LU on the monolithic [u | z]
-system, or, with condensation, fgmres on it preconditioned by a condensed
-displacement-only solve (:mod:`dolfinx_mortar.condensation`): MUMPS LU
-(``linear_solver="direct"``) or GMRES with algebraic multigrid whose
-near-nullspace is the rigid-body modes of each body
-(``linear_solver="iterative"``; BoomerAMG, with :data:`BOOMERAMG_3D_OPTIONS` in
-3D). ``petsc_options``
-given to the problem override the defaults, and the user's options database
-under the problem's prefix overrides both.
+Defaults are Newton with full steps and MUMPS LU on the monolithic [u | z] system,
+or, with condensation, fgmres on it preconditioned by a condensed displacement-only
+solve (:mod:`dolfinx_mortar.condensation`): MUMPS LU (``linear_solver="direct"``) or
+GMRES with algebraic multigrid whose near-nullspace is the rigid-body modes of each
+body (``linear_solver="iterative"``; BoomerAMG, with :data:`BOOMERAMG_3D_OPTIONS` in
+3D). ``linear_solver="auto"``, the problem's default, is one of the two by dimension
+and size (:func:`automatic_linear_solver`). The option ``condensed_keep_products``
+(default true) keeps the condensation's sub-matrices and products between Newton
+iterations, so that a Jacobian of the same pattern only recomputes values; false
+frees them after each set-up (less memory, every product built anew).
+``petsc_options`` given to the problem override the defaults, and the user's options
+database under the problem's prefix overrides both.
 
 Defaults are put into the options database only for ``setFromOptions`` and
 removed again, except the factorization ones (``mat_*``): PETSc reads those at
@@ -51,7 +54,33 @@ DEFAULT_OPTIONS = {
     "mat_mumps_cntl_3": 1e-8,
 }
 
-LINEAR_SOLVERS = ("direct", "iterative")
+LINEAR_SOLVERS = ("auto", "direct", "iterative")
+
+AUTO_ITERATIVE_MIN_DOFS = 20_000
+"""``linear_solver="auto"`` takes the iterative solver from this many displacement dofs
+(global) in 3D; see :func:`automatic_linear_solver`."""
+
+
+def automatic_linear_solver(gdim: int, num_dofs: int, multipliers: str,
+                            has_friction: bool) -> str:
+    """What ``linear_solver="auto"`` (the default) means for a problem: ``iterative`` in
+    3D from :data:`AUTO_ITERATIVE_MIN_DOFS` displacement dofs on, with dual multipliers
+    and without friction (what the iterative path supports); ``direct`` otherwise.
+
+    Why, as measured on the Hertz problems (benchmarks/README.md, "Direct or iterative
+    by default"): in 2D MUMPS was faster than the condensed GMRES + BoomerAMG solve at
+    every size measured, serial and on 2 ranks; in 3D the LU factor fills in far
+    faster with the dofs: the iterative solve was faster per Newton iteration from
+    about this size on, serially and on 2 ranks, by an order of magnitude a few
+    refinements later, and its memory grows about linearly with the dofs. Below the
+    threshold the two are close (on 2 ranks of a loaded machine LU was faster) and LU
+    is the more robust. Both give the same Newton iterates (the iterative solve
+    preconditions FGMRES on the full system, rtol 1e-12).
+    """
+    if (gdim == 3 and num_dofs >= AUTO_ITERATIVE_MIN_DOFS and multipliers == "dual"
+            and not has_friction):
+        return "iterative"
+    return "direct"
 
 ITERATIVE_OPTIONS = {
     # the inner solve only preconditions fgmres on [u | z] (which makes the Newton
@@ -283,10 +312,12 @@ def condensed_preconditioner(ksp: PETSc.KSP, layout, interfaces, block_size: int
             if not options.hasName(name):
                 options[name] = value
                 added.append(name)
+    keep_products = options.getBool(f"{prefix}condensed_keep_products", True)
     try:
         condenser = CondensedPreconditioner(comm, u_rows, z_rows, node_dofs,
                                             prefix=f"{prefix}condensed_",
-                                            near_nullspace=near_nullspace)
+                                            near_nullspace=near_nullspace,
+                                            keep_products=keep_products)
     finally:
         for name in added:
             options.delValue(name)

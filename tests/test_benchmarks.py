@@ -150,3 +150,29 @@ def test_patch3d_smallest_case_is_exact():
     assert max(run["deviations"].values()) < 1e-10
     assert run["exact"] and data["all_exact"] and data["max_deviation"] < 1e-10
     assert run["timings"]["total"] > 0.0
+
+
+def test_scaling3d_stored_run_becomes_a_marked_row(tmp_path):
+    """A worker record saved apart (a run too long for the benchmark command) is read by
+    --scaling-stored, gets its per-Newton times (total / Newton iterations) and is shown
+    as stored with the load of its own run."""
+    record = {"num_dofs": 1000, "num_ranks": 2, "elements_per_radius": 2, "refinement": 4,
+              "linear_solver": "iterative", "newton_iterations": [3, 2],
+              "krylov_iterations": [12, 9], "krylov_per_linear_solve": 4.2,
+              "inner_krylov_iterations": [4, 9, 6, 7],
+              "timings": {"total": 10.0, "linear solve": 5.0}, "wall_time_s": 12.0,
+              "process_run_s": 13.0, "peak_rss_mib_per_rank": [300.0, 200.0],
+              "errors": {"l2_pressure_error_rel": 0.01}, "load_1min_start": 2.0,
+              "load_1min_end": 3.5, "command": "mpirun -n 2 python3 x"}
+    path = tmp_path / "stored.json"
+    path.write_text(json.dumps(record))
+    args = cli.build_parser().parse_args(["--only", "scaling3d", "--scaling-stored", str(path)])
+    assert args.scaling_stored == [path]
+    runs = three_d.stored_runs(path)
+    assert len(runs) == 1 and runs[0]["time_per_newton_s"] == 2.0
+    assert runs[0]["linear_solve_per_newton_s"] == 1.0 and runs[0]["process_wall_s"] == 13.0
+    data = {"runs": runs, "solvers": ["iterative"], "ranks": [2]}
+    lines = report3d.scaling3d_markdown(data).splitlines()
+    assert lines[2] == ("| iterative (stored) | 2 | 2:4 | 1000 | 3+2 | 4.2 | 6.5 / 9 | 2 | 1 | "
+                        "10 | 12 | 13 | 300, 200 | 0.01 | 2.0 / 3.5 |")
+    assert "commands: `mpirun -n 2 python3 x`" in lines

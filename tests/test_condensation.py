@@ -271,3 +271,27 @@ def test_rigid_body_modes_are_the_kernel_of_elasticity(cell):
 def test_iterative_linear_solver_needs_dual_multipliers():
     with pytest.raises(ValueError, match="multipliers='dual'"):
         hertz(refinement=0, linear_solver="iterative", multipliers="standard")
+
+
+@pytest.mark.parallel
+@pytest.mark.timeout(600)
+def test_condensation_without_kept_products_gives_the_same_newton_steps():
+    """``condensed_keep_products: False`` (the low-memory set-up) frees every product
+    after use and builds them again at each set-up: the preconditioner, and so every
+    outer and Newton iteration and the solution, must be the kept-products one."""
+    solutions, linear, kept = {}, {}, {}
+    for keep in (True, False):
+        setup = hertz(refinement=0, condensation=True,
+                      petsc_options={"condensed_keep_products": keep})
+        outcome = setup.steps(2)
+        assert outcome.converged
+        records = outcome.extra["records"]
+        linear[keep] = [r.report.linear_iterations for r in records]
+        solutions[keep] = solution(setup.problem, setup.tagged.cell_tags)
+        condenser = setup.problem._condenser
+        kept[keep] = (sorted(condenser._matrices), condenser.reuses)
+        setup.destroy()
+    assert linear[True] == linear[False]
+    assert_same_solution(solutions[False], solutions[True], tolerance=1e-12)
+    assert kept[True][1] > 0 and kept[False][1] == 0
+    assert kept[False][0] == ["A_prime", "C", "G", "G_p", "K_inner", "T"]

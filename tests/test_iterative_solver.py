@@ -86,3 +86,31 @@ def test_boomeramg_options_follow_the_dimension(dim, petsc_options, coarsening,
     names = [name for name in PETSc.Options().getAll() if "boomeramg" in name]
     assert names == []
     problem.destroy()
+
+
+def test_automatic_choice_follows_dimension_size_and_support():
+    """``auto``: iterative only where it was measured faster and is supported (3D, at
+    least AUTO_ITERATIVE_MIN_DOFS, dual multipliers, no friction); direct elsewhere."""
+    from dolfinx_mortar.solvers import AUTO_ITERATIVE_MIN_DOFS, automatic_linear_solver
+
+    large = AUTO_ITERATIVE_MIN_DOFS
+    assert automatic_linear_solver(3, large, "dual", False) == "iterative"
+    assert automatic_linear_solver(3, large - 1, "dual", False) == "direct"
+    assert automatic_linear_solver(2, 100 * large, "dual", False) == "direct"
+    assert automatic_linear_solver(3, large, "standard", False) == "direct"
+    assert automatic_linear_solver(3, large, "dual", True) == "direct"
+
+
+@pytest.mark.parallel
+def test_default_linear_solver_is_resolved_by_the_problem(monkeypatch):
+    """The default ``auto`` becomes ``direct`` on a small 3D problem and ``iterative`` (with
+    its condensation) once the threshold is below the problem's size."""
+    from dolfinx_mortar import solvers
+
+    problem, _ = curved_punch(MPI.COMM_WORLD)
+    assert problem.linear_solver == "direct" and problem._condenser is None
+    problem.destroy()
+    monkeypatch.setattr(solvers, "AUTO_ITERATIVE_MIN_DOFS", 1)
+    problem, _ = curved_punch(MPI.COMM_WORLD)
+    assert problem.linear_solver == "iterative" and problem.condensation
+    problem.destroy()

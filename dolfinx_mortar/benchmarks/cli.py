@@ -72,6 +72,9 @@ def build_parser() -> argparse.ArgumentParser:
                             "4:1 2:2 4:2 2:3 2:4, i.e. 1.3e4 .. 1.6e6 dofs; quick 2:0 2:1)")
     three.add_argument("--scaling-solvers", nargs="+", default=list(three_d.SCALING3D_SOLVERS),
                        choices=three_d.SCALING3D_SOLVERS)
+    three.add_argument("--scaling-stored", nargs="+", type=pathlib.Path, default=None,
+                       metavar="JSON", help="scaling3d: add runs made separately (worker "
+                       "records with their command, e.g. a >= 1e6-dof run), marked stored")
     three.add_argument("--stop-at", default=None, metavar="HH:MM",
                        help="scaling3d: UTC time by which every run must have ended")
     parser.add_argument("--worker-json", type=pathlib.Path, help=argparse.SUPPRESS)
@@ -170,7 +173,7 @@ def main(argv=None) -> int:
             meshes = args.scaling_meshes or (
                 [(2, 0), (2, 1)] if args.quick else list(three_d.SCALING3D_MESHES))
             three["scaling3d"] = three_d.scaling3d(meshes, args.scaling_solvers, args.ranks,
-                                                   args.stop_at)
+                                                   args.stop_at, args.scaling_stored)
             timings["scaling3d"] = time.perf_counter() - start
     elapsed = time.perf_counter() - begin
     load = monitor.summary()

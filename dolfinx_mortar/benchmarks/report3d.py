@@ -89,7 +89,8 @@ def hertz3d_markdown(data: dict) -> str:
 def scaling3d_markdown(data: dict) -> str:
     header = ["solver", "ranks", "n0:ref", "dofs", "Newton its", "Krylov per linear solve",
               "inner GMRES", "per Newton iteration [s]", "of which linear solve [s]", "solve [s]",
-              "demo wall [s]", "process [s]", "peak RSS per rank [MiB]", "L2 pressure error"]
+              "demo wall [s]", "process [s]", "peak RSS per rank [MiB]", "L2 pressure error",
+              "load (1 min) start / end"]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for r in data["runs"]:
         mesh = f"{r['elements_per_radius']}:{r['refinement']}"
@@ -97,14 +98,17 @@ def scaling3d_markdown(data: dict) -> str:
             lines.append(f"| {r['linear_solver']} | {r['num_ranks']} | {mesh} | "
                          f"{r['error'][:200]} |" + " |" * (len(header) - 4))
             continue
+        load = (f"{r['load_1min_start']:.1f} / {r['load_1min_end']:.1f}"
+                if "load_1min_start" in r else "-")
+        solver = r["linear_solver"] + (" (stored)" if r.get("stored") else "")
         lines.append("| " + " | ".join([
-            r["linear_solver"], str(r["num_ranks"]), mesh, str(r["num_dofs"]),
+            solver, str(r["num_ranks"]), mesh, str(r["num_dofs"]),
             _its(r["newton_iterations"]), f"{r['krylov_per_linear_solve']:.1f}", _inner(r),
             f"{r['time_per_newton_s']:.3g}", f"{r['linear_solve_per_newton_s']:.3g}",
             f"{r['timings']['total']:.3g}", f"{r['wall_time_s']:.3g}",
             f"{r['process_wall_s']:.3g}",
             ", ".join(f"{m:.0f}" for m in r["peak_rss_mib_per_rank"]),
-            fmt(r["errors"]["l2_pressure_error_rel"])]) + " |")
+            fmt(r["errors"]["l2_pressure_error_rel"]), load]) + " |")
     lines += ["", "One process per run (a fresh high-water mark of its memory). Hertz sphere "
               "on a block, quarter model, linear, 2 load steps; n0:ref = --elements-per-radius:"
               "--refinement. direct: MUMPS LU of the monolithic [u, z] system; iterative: "
@@ -114,7 +118,9 @@ def scaling3d_markdown(data: dict) -> str:
               " (summed over the steps), 'demo wall' adds mesh generation and setup, 'process' "
               "adds start-up and JIT; peak RSS: VmHWM of each rank's process (ru_maxrss, "
               "also in the JSON, carries the starting process's high-water mark over fork + "
-              "exec: for the serial runs it is the driver's).", "", "commands: "
+              "exec: for the serial runs it is the driver's). 'stored': a run made apart "
+              "from this command (--scaling-stored), with its own command below.", "",
+              "commands: "
               + "; ".join(f"`{r['command']}`" for r in data["runs"]), ""]
     return "\n".join(lines)
 

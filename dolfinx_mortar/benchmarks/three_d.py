@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import datetime
 import json
+import math
 import os
 import pathlib
 import resource
@@ -224,6 +225,7 @@ def scaling_worker(demo_name: str, argv: list[str], path: pathlib.Path) -> None:
     peak resident memory (VmHWM, and ru_maxrss as the brief asked for)."""
     comm = MPI.COMM_WORLD
     start = time.perf_counter()
+    load_start = os.getloadavg()[0]
     summary = (run_hertz_sphere(argv, comm) if demo_name == "hertz_sphere"
                else run_demo(demo_name, argv, comm=comm))
     hwm = comm.gather(peak_rss_mib(), root=0)
@@ -232,7 +234,9 @@ def scaling_worker(demo_name: str, argv: list[str], path: pathlib.Path) -> None:
         record = hertz3d_record(summary)
         record.update(peak_rss_mib_per_rank=hwm, ru_maxrss_mib_per_rank=maxrss,
                       process_run_s=time.perf_counter() - start,
-                      argv=argv, solve_cpu_s_rank0=summary["probe"]["solve_cpu_s"])
+                      argv=argv, solve_cpu_s_rank0=summary["probe"]["solve_cpu_s"],
+                      load_1min_start=load_start, load_1min_end=os.getloadavg()[0],
+                      petsc_options_env=os.environ.get("PETSC_OPTIONS", ""))
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(record, indent=1))
 
@@ -264,12 +268,36 @@ def scaling_command(n0: int, refinement: int, solver: str, ranks: int,
     return (["mpirun", "-n", str(ranks)] if ranks > 1 else []) + command
 
 
+def complete_run(record: dict) -> dict:
+    """Per-Newton-iteration times of a finished run's record (in place)."""
+    iterations = max(sum(record["newton_iterations"]), 1)
+    record["time_per_newton_s"] = record["timings"]["total"] / iterations
+    record["linear_solve_per_newton_s"] = record["timings"]["linear solve"] / iterations
+    return record
+
+
+def stored_runs(path: pathlib.Path) -> list[dict]:
+    """Runs made apart from this command (a run too long for it, e.g. >= 1e6 dofs), from
+    a JSON file of one worker record or a list of them, each with its ``command``: shown
+    in the table as stored, with the load average of its own run."""
+    data = json.loads(pathlib.Path(path).read_text())
+    runs = []
+    for record in data if isinstance(data, list) else [data]:
+        record = dict(record, stored=str(path), failed=bool(record.get("failed", False)))
+        if not record["failed"]:
+            record.setdefault("process_wall_s", record.get("process_run_s", math.nan))
+            complete_run(record)
+        runs.append(record)
+    return runs
+
+
 def scaling3d(meshes: list[tuple[int, int]], solvers=SCALING3D_SOLVERS, ranks=(1, 2),
-              stop_at: str | None = None) -> dict:
+              stop_at: str | None = None, stored: list[pathlib.Path] | None = None) -> dict:
     """Each mesh (in the order given, growing) x solver x rank count as its own process.
     With ``stop_at`` ("HH:MM" UTC) a run is not started if its estimate (the last run
     of its solver and rank count, scaled by dofs^SCALING3D_EXPONENT) would end later,
-    and a started run is stopped at that time; both are recorded."""
+    and a started run is stopped at that time; both are recorded. ``stored``: JSON
+    files of runs made separately (:func:`stored_runs`), added after the measured ones."""
     scratch = pathlib.Path(tempfile.mkdtemp(prefix="dolfinx_mortar_scaling3d_"))
     env = _clean_env()
     runs, last = [], {}
@@ -326,10 +354,7 @@ def scaling3d(meshes: list[tuple[int, int]], solvers=SCALING3D_SOLVERS, ranks=(1
                     continue
                 record.update(json.loads(path.read_text()), failed=False, process_wall_s=wall)
                 path.unlink()
-                iterations = max(sum(record["newton_iterations"]), 1)
-                record["time_per_newton_s"] = record["timings"]["total"] / iterations
-                record["linear_solve_per_newton_s"] = (record["timings"]["linear solve"]
-                                                       / iterations)
+                complete_run(record)
                 last[(solver, n)] = record
                 runs.append(record)
                 log(f"[scaling3d] {record['num_dofs']} dofs {solver} n={n}: Newton "
@@ -339,6 +364,8 @@ def scaling3d(meshes: list[tuple[int, int]], solvers=SCALING3D_SOLVERS, ranks=(1
     for path in scratch.glob("*"):
         path.unlink()
     scratch.rmdir()
+    for path in stored or []:
+        runs += stored_runs(path)
     return {"meshes": [list(m) for m in meshes], "solvers": list(solvers), "ranks": list(ranks),
             "stop_at": stop_at, "exponents": SCALING3D_EXPONENT, "runs": runs}
 
