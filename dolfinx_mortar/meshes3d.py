@@ -61,6 +61,26 @@ def hertz_contact_radius(load: float, radius: float, E_star: float) -> float:
     return (3.0 * F * R / (4.0 * _check_positive("E_star", E_star))) ** (1.0 / 3.0)
 
 
+def _hertz_arguments(case, slave, refinement, elements_per_radius, radius, contact_radius,
+                     block_size) -> tuple[int, int, float, float, float]:
+    """Checked (level, n0, R, a / R, L / R) of the Hertz sphere builders."""
+    if case not in HERTZ_SPHERE_CASES:
+        raise ValueError(f"case must be one of {HERTZ_SPHERE_CASES}, got {case!r}")
+    if slave not in ("sphere", "block"):
+        raise ValueError(f"slave must be 'sphere' or 'block', got {slave!r}")
+    level = _check_refinement(refinement)
+    n0 = _check_refinement(elements_per_radius)
+    if n0 < 1:
+        raise ValueError(f"elements_per_radius must be >= 1, got {elements_per_radius!r}")
+    unit = _check_positive("radius", radius)
+    a = float(f"{_check_positive('contact_radius', contact_radius) / unit:.12g}")
+    L = float(f"{_check_positive('block_size', block_size):.12g}")
+    if not 1.5 * a < CAP_RADIUS:
+        raise ValueError(f"contact_radius must be below {CAP_RADIUS / 1.5:.4g} R = "
+                         f"{CAP_RADIUS / 1.5 * unit:.6g}, got {contact_radius!r}")
+    return level, n0, unit, a, L
+
+
 def hertz_sphere(
     case: str = "block",
     refinement: int = 0,
@@ -108,20 +128,8 @@ def hertz_sphere(
         curved surfaces); the aliases "contact_slave", "contact_master"; ``h_contact``
         is the nominal element size of the contact zone.
     """
-    if case not in HERTZ_SPHERE_CASES:
-        raise ValueError(f"case must be one of {HERTZ_SPHERE_CASES}, got {case!r}")
-    if slave not in ("sphere", "block"):
-        raise ValueError(f"slave must be 'sphere' or 'block', got {slave!r}")
-    level = _check_refinement(refinement)
-    n0 = _check_refinement(elements_per_radius)
-    if n0 < 1:
-        raise ValueError(f"elements_per_radius must be >= 1, got {elements_per_radius!r}")
-    unit = _check_positive("radius", radius)
-    a = float(f"{_check_positive('contact_radius', contact_radius) / unit:.12g}")
-    L = float(f"{_check_positive('block_size', block_size):.12g}")
-    if not 1.5 * a < CAP_RADIUS:
-        raise ValueError(f"contact_radius must be below {CAP_RADIUS / 1.5:.4g} R = "
-                         f"{CAP_RADIUS / 1.5 * unit:.6g}, got {contact_radius!r}")
+    level, n0, unit, a, L = _hertz_arguments(case, slave, refinement, elements_per_radius,
+                                             radius, contact_radius, block_size)
     cap = 1.0 - math.sqrt(1.0 - CAP_RADIUS**2)
     scale = 0.5**level
     h_contact = a / n0 * scale
@@ -266,20 +274,8 @@ def hertz_sphere_hexahedral(
     curvature at the contact and the bodies' elasticity; the column differs from the
     ball away from the contact zone. Same groups and aliases as :func:`hertz_sphere`.
     """
-    if case not in HERTZ_SPHERE_CASES:
-        raise ValueError(f"case must be one of {HERTZ_SPHERE_CASES}, got {case!r}")
-    if slave not in ("sphere", "block"):
-        raise ValueError(f"slave must be 'sphere' or 'block', got {slave!r}")
-    level = _check_refinement(refinement)
-    n0 = _check_refinement(elements_per_radius)
-    if n0 < 1:
-        raise ValueError(f"elements_per_radius must be >= 1, got {elements_per_radius!r}")
-    unit = _check_positive("radius", radius)
-    a = float(f"{_check_positive('contact_radius', contact_radius) / unit:.12g}")
-    L = float(f"{_check_positive('block_size', block_size):.12g}")
-    if not 1.5 * a < CAP_RADIUS:
-        raise ValueError(f"contact_radius must be below {CAP_RADIUS / 1.5:.4g} R = "
-                         f"{CAP_RADIUS / 1.5 * unit:.6g}, got {contact_radius!r}")
+    level, n0, unit, a, L = _hertz_arguments(case, slave, refinement, elements_per_radius,
+                                             radius, contact_radius, block_size)
     h_contact = a / n0 * 0.5**level
     h_max = 0.25
 
