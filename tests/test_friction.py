@@ -27,6 +27,10 @@ sheared_blocks = PATCH.sheared_blocks
 E, NU, PRESSURE, SHEAR_MODULUS = PATCH.E, PATCH.NU, PATCH.PRESSURE, PATCH.SHEAR_MODULUS
 
 
+# the 1e-10 checks below need the iterate well inside them (snes_rtol 1e-10 stopped one 3-rank run at 1.2e-10)
+TIGHT = {"snes_rtol": 1e-12, "snes_atol": 0.0}
+
+
 def solved(problem):
     report = problem.solve()
     assert report.converged, report
@@ -291,22 +295,40 @@ def test_friction_per_pair():
     """The slave surface as two pairs (cut at x = 0.5). The same law on both: the one-pair
     full-slip answer, y_j = mu p at every node of both pairs. Coulomb on the right pair
     only: the left pair's tangential multipliers stay exactly 0, the right pair's slipping
-    nodes carry y_j = mu z_j."""
+    nodes carry y_j = mu z_j.
+
+    The node at the cut carries a multiplier in each pair. Their area-weighted mean is the
+    physical traction and is checked like every other node; how it splits between the two
+    pairs is a nearly singular direction of the system (a self-equilibrated pair of master
+    forces): with the residual at 3e-15 of its start the split moved 2.5e-11 .. 1.2e-10 of
+    mu p with the partition (serial, 2 and 3 ranks, trixie and sid), so it is held to 1e-8."""
     mu, shift = 0.2, 3 * 0.2 * PRESSURE / SHEAR_MODULUS
     law = ("coulomb", mu)
-    both = sheared_blocks((3, 7), "upper", [law, law], shift, mu * PRESSURE, split_at=0.5)
+    both = sheared_blocks((3, 7), "upper", [law, law], shift, mu * PRESSURE, split_at=0.5,
+                         petsc_options=TIGHT)
     solved(both)
     comm = both.comm
     # friction_state is collective: every rank gathers its states before any assert
     states = [both.friction_state(k) for k in range(2)]
+    nodes = []
     for k, state in enumerate(states):
         assert comm.allreduce(int(both.active[k].sum()), op=MPI.SUM) > 0
-        all_slip = comm.allreduce(bool(state["slipping"].all()), op=MPI.LAND)
-        error = comm.allreduce(float(np.max(np.abs(state["traction"] / (mu * PRESSURE) - 1.0),
-                                            initial=0.0)), op=MPI.MAX)
-        assert all_slip, f"pair {k}: a node sticks"
-        assert error <= 1e-10, f"pair {k}: traction off mu p by {error:.3e}"
-    mixed = sheared_blocks((3, 7), "upper", [None, law], shift, mu * PRESSURE, split_at=0.5)
+        assert comm.allreduce(bool(state["slipping"].all()), op=MPI.LAND), f"pair {k}: a node sticks"
+        rows = np.column_stack([state["coordinates"][:, 0], state["traction"], both.areas[k]])
+        nodes.append(np.concatenate(comm.allgather(rows)))
+    deviation = {}
+    for k, rows in enumerate(nodes):
+        for x, traction, area in rows:
+            deviation.setdefault(round(x, 12), []).append((traction / (mu * PRESSURE) - 1.0, area))
+    shared = {x: v for x, v in deviation.items() if len(v) == 2}
+    assert len(shared) == 1, sorted(shared)
+    for x, values in deviation.items():
+        devs, areas = np.array(values).T
+        mean = float(np.dot(devs, areas) / areas.sum())
+        assert abs(mean) <= 1e-10, f"x = {x}: traction off mu p by {mean:.3e}"
+        assert np.max(np.abs(devs)) <= (1e-8 if len(values) == 2 else 1e-10), (x, devs)
+    mixed = sheared_blocks((3, 7), "upper", [None, law], shift, mu * PRESSURE, split_at=0.5,
+                           petsc_options=TIGHT)
     solved(mixed)
     left, right = mixed.friction_state(0), mixed.friction_state(1)
     assert not comm.allreduce(bool(np.any(left["traction"])), op=MPI.LOR)
