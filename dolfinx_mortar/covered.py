@@ -195,18 +195,53 @@ def translated_terms(stencil, q, rows: np.ndarray, terms):
     return translated, W
 
 
+def boundary_nodes(facets: np.ndarray, num_nodes: int) -> np.ndarray:
+    """Mask of the nodes on the boundary of the surface of ``facets`` (2D: nodes of one
+    segment only; triangles: nodes of an edge of one triangle only). Quadrilateral
+    facets give none (their facets are always coupled, see CoveredStencil)."""
+    facets = np.asarray(facets, dtype=np.int64)
+    mask = np.zeros(num_nodes, dtype=bool)
+    if facets.size == 0 or facets.shape[1] > 3:
+        return mask
+    if facets.shape[1] == 2:
+        nodes, counts = np.unique(facets, return_counts=True)
+    else:
+        edges = np.sort(np.stack([facets, np.roll(facets, -1, axis=1)], axis=2), axis=2)
+        nodes, counts = np.unique(edges.reshape(-1, 2), axis=0, return_counts=True)
+    mask[nodes[counts == 1].reshape(-1)] = True
+    return mask
+
+
+FULL_COVERAGE = 1e-10
+"""A slave facet whose covered measure (the sum of its pairs' overlaps) equals its own
+to this fraction counts as fully covered: its M_e is the whole facet's mass matrix,
+which no master node moves, so its pairs need no coupling to the facet's other master nodes - unless
+a candidate master facet touches the master surface's boundary (where moving a master
+node can uncover the facet: the derivative has a kink there)."""
+
+
 class CoveredStencil:
     """A pair stencil whose pairs carry the covered dual basis of their slave facet.
 
     Wraps a :class:`~dolfinx_mortar.stencils.PairStencil` (everything not overridden
     is the wrapped stencil's): the kernel runs with the standard basis, the outputs
-    are transformed per slave facet (:func:`transformed_quantities`), and the
-    stencil of each pair is extended by the master nodes of the other candidate pairs
-    of its slave facet (``partners``), on which its dual quantities also depend.
+    are transformed per slave facet (:func:`transformed_quantities`). On a facet the
+    master covers only in part, A_e depends on every master node of the facet's
+    candidate pairs: those facets are ``widened``, each of their pairs' stencils
+    extended by the master nodes of the facet's other pairs (``partners``). A fully
+    covered facet's A_e is the whole facet's and moves with its slave nodes only, so
+    its pairs keep the base stencil (the Jacobians' patterns stay as narrow as the
+    whole-facet basis's). Facets start narrow; every evaluation widens those it finds
+    partly covered (and counts it in ``widenings``): the pattern then changes.
     """
 
-    def __init__(self, base):
+    def __init__(self, base, coupled: bool = True, master_boundary: np.ndarray | None = None):
         self.base = base
+        self.coupled = coupled
+        """False: the pairs never get the partner coupling (quantities frozen in the
+        reference configuration have no derivatives of A_e)"""
+        self.master_boundary = master_boundary
+        """mask over the node table: nodes on the master surface's boundary (None: none)"""
         facet = base.slave_facets
         n = facet.size
         order = np.argsort(facet, kind="stable")
@@ -218,34 +253,83 @@ class CoveredStencil:
         group[order] = np.repeat(np.arange(starts.size), counts)
         rank = np.empty(n, dtype=np.int64)
         rank[order] = np.arange(n) - np.repeat(starts, counts)
-        width = int(counts.max()) - 1 if n else 0
+        self._facets = sorted_facets[starts]
+        self._order, self._starts, self._counts = order, starts, counts
+        self._group, self._rank = group, rank
+        self.widened = np.zeros(starts.size, dtype=bool)
+        """per slave facet (sorted ids): whether its pairs carry the partner coupling"""
+        self.slave_facets = facet
+        self.widenings = 0
+        self._build_slots()
+
+    def _build_slots(self) -> None:
+        """``partners``, ``node_slots``, ``nodes`` and ``present`` for the widened facets."""
+        base, group, rank = self.base, self._group, self._rank
+        order, starts, counts = self._order, self._starts, self._counts
+        n, nm = group.size, base.nm
+        wide = self.widened[group] if n else np.zeros(0, dtype=bool)
+        width = int(counts[self.widened].max()) - 1 if self.widened.any() else 0
         partners = np.full((n, width), -1, dtype=np.int64)
         for slot in range(width):
             # the facet's other pairs in their order, skipping the pair itself
             member = np.where(slot < rank, slot, slot + 1)
-            has = member < counts[group]
+            has = wide & (member < counts[group])
             partners[has, slot] = order[starts[group[has]] + member[has]]
         self.partners = partners
-        # the facet's master nodes, one slot each, the same list for its pairs
-        nm = base.nm
-        keys = np.stack([np.repeat(group, nm), base.master_nodes.reshape(-1)], axis=1)
-        unique_keys, node_slot = np.unique(keys, axis=0, return_inverse=True) if n else (
+        # a widened facet's master nodes, one slot each, the same list for its pairs
+        rows = np.flatnonzero(wide)
+        keys = np.stack([np.repeat(group[rows], nm), base.master_nodes[rows].reshape(-1)],
+                        axis=1)
+        unique_keys, node_slot = np.unique(keys, axis=0, return_inverse=True) if rows.size else (
             np.zeros((0, 2), dtype=np.int64), np.zeros(0, dtype=np.int64))
         node_slot = node_slot.reshape(-1)
-        group_start = np.searchsorted(unique_keys[:, 0], np.arange(starts.size))
+        num_groups = starts.size
+        group_start = np.searchsorted(unique_keys[:, 0], np.arange(num_groups))
         group_count = np.diff(np.r_[group_start, unique_keys.shape[0]]).astype(np.int64)
-        slots = int(group_count.max()) if n else 0
-        node_slot = (node_slot - group_start[np.repeat(group, nm)]).reshape(n, nm)
-        extra = np.zeros((n, slots), dtype=np.int64)
+        slots = int(group_count.max()) if num_groups else 0
+        node_slots = np.zeros((n, nm), dtype=np.int64)
+        node_slots[rows] = (node_slot - group_start[np.repeat(group[rows], nm)]).reshape(-1, nm)
+        extra = np.repeat(base.nodes[:, :1], slots, axis=1)  # absent slots: any valid node
         extra_present = np.arange(slots)[None, :] < group_count[group][:, None]
-        member = group_start[group][:, None] + np.minimum(np.arange(slots)[None, :],
-                                                          group_count[group][:, None] - 1)
-        if n:
-            extra[:] = unique_keys[member, 1]
-        self.node_slots = node_slot  # (n, nm) slot of each pair's master nodes in its facet's list
+        if rows.size and slots:
+            member = group_start[group[rows]][:, None] + np.minimum(
+                np.arange(slots)[None, :], group_count[group[rows]][:, None] - 1)
+            extra[rows] = np.where(extra_present[rows], unique_keys[member, 1], extra[rows])
+        self.node_slots = node_slots  # (n, nm) slot of each pair's master nodes in its facet's list
         self.nodes = np.concatenate([base.nodes, extra], axis=1)
         self.present = np.concatenate([base.present, extra_present], axis=1)
-        self.slave_facets = facet
+
+    def _partly_covered(self, coefficients: FacetCoefficients, node_x: np.ndarray):
+        """Facets (sorted ids) partly covered at ``node_x`` (or touching the master
+        boundary) and not widened yet.
+        Quadrilaterals always count as partly covered: their covered measure is a sum over
+        clip cells, equal to the facet's own area only to the rules' accuracy."""
+        covered = coefficients.lumped.sum(axis=1)
+        group = np.searchsorted(self._facets, coefficients.facets)
+        corners = node_x[self.base.slave_nodes[self._order[self._starts[group]]]]
+        if corners.shape[1] == 2:
+            measure = np.linalg.norm(corners[:, 1] - corners[:, 0], axis=1)
+        elif corners.shape[1] == 3:
+            measure = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
+                                                    corners[:, 2] - corners[:, 0]), axis=1)
+        else:
+            measure = np.full(group.size, np.nan)  # never "fully covered"
+        # the pairs' overlaps may also overlap each other (masters projected along their
+        # own normals): then too M_e moves with the master nodes
+        partial = ~(np.abs(covered - measure) <= FULL_COVERAGE * measure)
+        if self.master_boundary is not None and self._group.size:
+            touches = self.master_boundary[self.base.master_nodes].any(axis=1)
+            by_facet = np.bincount(self._group, weights=touches, minlength=self.widened.size)
+            partial |= by_facet[group] > 0
+        return group[partial & ~self.widened[group]]
+
+    def widen(self, groups: np.ndarray) -> None:
+        """Give the pairs of these facets (sorted ids) the partner coupling."""
+        groups = np.asarray(groups, dtype=np.int64)
+        if groups.size and not self.widened[groups].all():
+            self.widened[groups] = True
+            self.widenings += 1
+            self._build_slots()
 
     def __getattr__(self, name):
         return getattr(self.base, name)
@@ -265,8 +349,11 @@ class CoveredStencil:
         q_std = self.base.evaluate(node_x, basis="standard", crosspoint=None, **options)
         if crosspoint is None:
             crosspoint = np.zeros((self.num_pairs, self.ns), dtype=bool)
-        return transformed_quantities(self, q_std, np.asarray(crosspoint, dtype=bool),
-                                      keep_scalars)
+        q = transformed_quantities(self, q_std, np.asarray(crosspoint, dtype=bool),
+                                   keep_scalars)
+        if self.coupled:
+            self.widen(self._partly_covered(q.covered[1], node_x))
+        return q
 
     def _facet_gradients(self, q):
         """Per evaluation: d D^std of the contributing pairs on their master columns
@@ -314,8 +401,11 @@ class CoveredStencil:
         first = self.base.master_slots[0] * gdim  # the master columns are one block
         result[:, :first] += summed[:, :first]
         result[:, first + master.size:base_columns] += summed[:, first:]
-        # the pair's own master nodes
-        result[:, master] += (weights @ master_dD[position]).transpose(1, 2, 0)
+        # the pair's own master nodes, on partly covered facets (on a fully covered one
+        # they cancel with the other pairs' to rounding: M_e is the whole facet's)
+        wide = np.flatnonzero(self.widened[self._group[rows]])
+        result[:, master[:, None], wide] += (
+            weights[wide] @ master_dD[position[wide]]).transpose(1, 2, 0)
         # the other pairs' master nodes, in the facet's node slots
         nm = self.nm
         for r in range(self.partners.shape[1]):

@@ -48,6 +48,9 @@ class MortarStatistics:
     searches_skipped: int = 0
     evaluations: int = 0
     evaluations_skipped: int = 0
+    widenings: int = 0
+    """patterns widened between searches for slave facets found partly covered
+    (covered dual basis)"""
     time_search: float = 0.0
     time_exchange: float = 0.0
     time_integration: float = 0.0
@@ -348,16 +351,38 @@ class MortarInterface:
             # nothing moved since the last evaluation (a Jacobian after its
             # residual, a repeated line-search point): keep the quantities
             stats.evaluations_skipped += 1
+            self._widen_partly_covered()
             stats.time_integration += time.perf_counter() - start
             return self.quantities
         else:
             self.quantities = self._evaluate(self._node_x)
             self._evaluated_x = self._node_x.copy()
             self._evaluated_version = self._pattern_version
+            self._widen_partly_covered()
         stats.segments = int(np.count_nonzero(self.quantities.valid))
         stats.evaluations += 1
         stats.time_integration += time.perf_counter() - start
         return self.quantities
+
+    def _widen_partly_covered(self) -> None:
+        """With the covered dual basis, the slave facets an evaluation found partly covered
+        were given their coupling to the facet's other master nodes
+        (:class:`covered.CoveredStencil`): then every rank takes the new pattern.
+        Collective: every rank calls it at every update of the current configuration."""
+        stencil = self.stencil
+        if not isinstance(stencil, covered.CoveredStencil) or not stencil.coupled:
+            return
+        changed = stencil.widenings != self._stencil_widenings
+        if not self.comm.allreduce(changed, op=MPI.LOR):
+            return
+        self._stencil_widenings = stencil.widenings
+        self.pair_node_blocks = self._node_blocks[stencil.nodes]
+        self._pair_dofs = None
+        self._pair_col_blocks = np.where(stencil.present, self.pair_node_blocks, -1)
+        self._pattern_version += 1
+        # the quantities do not depend on the partner slots: no new evaluation
+        self._evaluated_version = self._pattern_version
+        self.statistics.widenings += 1
 
     def _evaluate(self, node_x: np.ndarray) -> kernels.PairQuantities:
         extra = {"scalar_gradients": True} if self.scalar_gradients else {}
@@ -513,8 +538,12 @@ class MortarInterface:
                 self._node_blocks, self._node_x, all_slave_facets, local_slave_facets,
                 all_master_facets, pairs, self.normals, nodal_frames=self.scalar_gradients)
         if self.basis == "dual":
-            stencil = covered.CoveredStencil(stencil)
+            stencil = covered.CoveredStencil(
+                stencil, coupled=self.configuration != "reference",
+                master_boundary=covered.boundary_nodes(all_master_facets,
+                                                       self._node_blocks.size))
         self.stencil = stencil
+        self._stencil_widenings = getattr(stencil, "widenings", 0)
         self.pair_slave_facets = stencil.slave_facets
         self.pair_multipliers = self.node_multipliers[stencil.slave_nodes]
         slave_blocks = self._node_blocks[stencil.slave_nodes]

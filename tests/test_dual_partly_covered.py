@@ -247,6 +247,52 @@ def test_gap_in_the_slave_space_gives_its_nodal_values_3d(slave):
                                rtol=1e-11)
 
 
+@pytest.mark.parametrize("normals", ["averaged", "slave", "master"])
+@pytest.mark.parametrize("dim", [2, 3])
+def test_fully_covered_facets_need_no_partner_coupling(dim, normals):
+    """A facet covered by two masters: its M_e is the whole facet's mass matrix, so the
+    pairs' derivatives with respect to the master nodes through A_e sum to zero. The
+    stencil leaves it narrow; its Jacobians equal those of the same stencil widened
+    by hand (the coupling computed and summed) to rounding, and they pass Taylor.
+    With master normals the two masters, projected along their own normals, leave a
+    gap at their common node or edge (2D: 5e-4 of the facet): partly covered, widened.
+    Masters of two surfaces meeting under the facet (their boundaries there): widened."""
+    if dim == 3:
+        # two master triangles of one surface, their common edge across the facet
+        master = np.array([[-0.5, -0.5, -0.1], [1.4, -0.5, -0.12], [-0.5, 1.0, -0.08],
+                           [1.5, 1.5, -0.1]])
+        node_x = np.vstack([SLAVE_TRIANGLE, master])
+        slave_facets, master_facets, pairs = [[0, 1, 2]], [[3, 4, 5], [4, 6, 5]], [[0, 0], [0, 1]]
+    else:
+        node_x = np.array([[1.0, 0.0], [0.0, 0.0], [-0.2, 0.05], [0.45, 0.06], [1.3, 0.08]])
+        slave_facets, master_facets, pairs = [[0, 1]], [[2, 3], [3, 4]], [[0, 0], [0, 1]]
+    narrow = covered_stencil(node_x, slave_facets, master_facets, pairs)
+    z = np.random.default_rng(3).uniform(0.5, 1.5, node_x.shape[0])
+    q = evaluate(narrow, node_x, normals)
+    partly = normals == "master"
+    assert narrow.widened.tolist() == [partly] and narrow.widenings == int(partly)
+    wide = covered_stencil(node_x, slave_facets, master_facets, pairs)
+    wide.widen(np.arange(wide.widened.size))
+    assert wide.width > narrow.width or partly
+    q_wide = evaluate(wide, node_x, normals)
+    expected = assembled_jacobians(wide, q_wide, node_x, z)
+    for name, J in assembled_jacobians(narrow, q, node_x, z).items():
+        scale = np.abs(expected[name]).max()
+        assert np.abs(J - expected[name]).max() <= 1e-13 * scale, name
+    slopes = taylor_slopes(narrow, node_x, normals)
+    assert narrow.widened.tolist() == [partly]
+    for name, slope in slopes.items():
+        assert abs(slope - 2.0) < 0.1, (name, slopes)
+    if dim == 3:
+        node_x, slave_facets, master_facets, pairs = pairs_3d(SLAVE_TRIANGLE, [-0.5, 0.4, 1.5],
+                                                              -0.1, tilt=-0.05)
+        split = covered_stencil(node_x, slave_facets, master_facets, pairs)
+        split.master_boundary = covered.boundary_nodes(np.asarray(master_facets)[:, [0, 1, 2]],
+                                                       node_x.shape[0])
+        evaluate(split, node_x, normals)
+        assert split.widened.tolist() == [True]
+
+
 def test_fully_covered_facet_keeps_the_whole_facet_dual_basis():
     """Covered everywhere (by two masters), the coefficients are the whole facet's:
     A = [[3, -1, -1], ...] for a triangle, [[2, -1], [-1, 2]] for a 2D facet."""
@@ -280,8 +326,11 @@ def curved_2d(gap):
 def test_taylor_2d(normals, gap):
     node_x, slave_facets, master_facets, pairs = curved_2d(gap)
     stencil = covered_stencil(node_x, slave_facets, master_facets, pairs)
-    assert stencil.partners.shape[1] == 1 and stencil.width == 6 + 3
+    assert stencil.partners.shape[1] == 0 and stencil.width == 6  # narrow until evaluated
     slopes = taylor_slopes(stencil, node_x, normals)
+    # facet [0, 1] (two masters over part of it) is widened, [1, 2] (no overlap) is not
+    assert stencil.widened[1] and not stencil.widened[2]
+    assert stencil.partners.shape[1] == 1 and stencil.width == 6 + 3
     for name, slope in slopes.items():
         assert abs(slope - 2.0) < 0.1, (name, slopes)
 
