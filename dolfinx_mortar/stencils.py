@@ -43,6 +43,29 @@ def lookup(keys: np.ndarray, values: np.ndarray, queries: np.ndarray):
     return values[order[position]], found
 
 
+def _gradient_rows(item, rows: np.ndarray) -> np.ndarray:
+    """The gradients of ``rows`` of a Dual; of a :class:`RowSubsetDual` whose kept rows
+    are sorted, without building its full gradient (a slice where ``rows`` are
+    consecutive kept rows, zero for the rows it does not keep)."""
+    if not isinstance(item, RowSubsetDual):
+        return item.grad[rows]
+    if item.rows is rows:
+        return item.grad_rows
+    kept = item.rows
+    if kept.size > 1 and not np.all(kept[1:] > kept[:-1]):
+        return item.grad[rows]
+    position = np.minimum(np.searchsorted(kept, rows), max(kept.size - 1, 0))
+    found = kept[position] == rows if kept.size else np.zeros(rows.shape, dtype=bool)
+    grad = item.grad_rows
+    if found.all():
+        if rows.size and np.all(position[1:] == position[:-1] + 1):
+            return grad[position[0]:position[-1] + 1]
+        return grad[position]
+    result = np.zeros((rows.size,) + grad.shape[1:])
+    result[found] = grad[position[found]]
+    return result
+
+
 class PairStencil:
     """The pairs of one search and their stencils (base of the per-dimension classes).
 
@@ -165,10 +188,7 @@ class PairStencil:
             items += [q.D_dual, q.M_dual]
         for item in items:
             size = int(np.prod(item.value.shape[1:]))
-            if isinstance(item, RowSubsetDual) and item.rows is rows:
-                parts.append(item.grad_rows.reshape(rows.size, size, nv))
-            else:
-                parts.append(item.grad[rows].reshape(rows.size, size, nv))
+            parts.append(_gradient_rows(item, rows).reshape(rows.size, size, nv))
             starts.append(start)
             start += size
         result = np.zeros((len(terms), rows.size, nv))
