@@ -43,27 +43,42 @@ def lookup(keys: np.ndarray, values: np.ndarray, queries: np.ndarray):
     return values[order[position]], found
 
 
+def _rows_of(array: np.ndarray, kept: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """The entries of ``rows`` of an array whose entries are those of the rows ``kept``
+    (zero for rows not kept): a slice where they are consecutive kept rows."""
+    if rows is kept:
+        return array
+    sorter = None if kept.size < 2 or np.all(kept[1:] > kept[:-1]) else np.argsort(kept)
+    position = np.minimum(np.searchsorted(kept, rows, sorter=sorter), max(kept.size - 1, 0))
+    if sorter is not None and kept.size:
+        position = sorter[position]
+    found = kept[position] == rows if kept.size else np.zeros(rows.shape, dtype=bool)
+    if found.all():
+        if sorter is None and rows.size and np.all(position[1:] == position[:-1] + 1):
+            return array[position[0]:position[-1] + 1]
+        return array[position]
+    result = np.zeros((rows.size,) + array.shape[1:])
+    result[found] = array[position[found]]
+    return result
+
+
 def _gradient_rows(item, rows: np.ndarray) -> np.ndarray:
-    """The gradients of ``rows`` of a Dual; of a :class:`RowSubsetDual` whose kept rows
-    are sorted, without building its full gradient (a slice where ``rows`` are
-    consecutive kept rows, zero for the rows it does not keep)."""
+    """The gradients of ``rows`` of a Dual; of a :class:`RowSubsetDual` without building
+    its full gradient."""
     if not isinstance(item, RowSubsetDual):
         return item.grad[rows]
-    if item.rows is rows:
-        return item.grad_rows
-    kept = item.rows
-    if kept.size > 1 and not np.all(kept[1:] > kept[:-1]):
-        return item.grad[rows]
-    position = np.minimum(np.searchsorted(kept, rows), max(kept.size - 1, 0))
-    found = kept[position] == rows if kept.size else np.zeros(rows.shape, dtype=bool)
-    grad = item.grad_rows
-    if found.all():
-        if rows.size and np.all(position[1:] == position[:-1] + 1):
-            return grad[position[0]:position[-1] + 1]
-        return grad[position]
-    result = np.zeros((rows.size,) + grad.shape[1:])
-    result[found] = grad[position[found]]
-    return result
+    return _rows_of(item.grad_rows, item.rows, rows)
+
+
+def _affine_factors(q):
+    """The factorized gradients of Dn, Mn and the areas, if the kernel kept them so
+    (:class:`~dolfinx_mortar.kernels.surface3.AffineFactors`)."""
+    factors = getattr(q.Dn, "factors", None)
+    if not hasattr(factors, "chain"):
+        return None
+    if not all(getattr(item, "factors", None) is factors for item in (q.Mn, q.area)):
+        return None
+    return factors
 
 
 class PairStencil:
@@ -186,12 +201,25 @@ class PairStencil:
         items = [q.Dn, q.Mn, q.area, q.gap]
         if getattr(q, "D_dual", None) is not None:
             items += [q.D_dual, q.M_dual]
+        affine = _affine_factors(q)
         for item in items:
             size = int(np.prod(item.value.shape[1:]))
-            parts.append(_gradient_rows(item, rows).reshape(rows.size, size, nv))
+            if affine is not None and item.factors is affine:
+                parts.append(None)
+            else:
+                parts.append(_gradient_rows(item, rows).reshape(rows.size, size, nv))
             starts.append(start)
             start += size
         result = np.zeros((len(terms), rows.size, nv))
+        if affine is not None:
+            # the terms summed over the plane coordinates first, chained once at the end
+            kept = q.Dn.rows
+            local = _rows_of(affine.local, kept, rows)
+            weights = {"Dn": _rows_of(affine.slave_weights, kept, rows),
+                       "Mn": _rows_of(affine.master_weights, kept, rows)}
+            local_sum = np.zeros((rows.size, len(terms), local.shape[-1]))
+            offsets = affine.offsets
+            first = nv - 3 * self.ns
         for p, row in enumerate(terms):
             for o, weight in row:
                 if o >= self.NORMAL:
@@ -202,7 +230,19 @@ class PairStencil:
                 if o >= start:
                     raise ValueError(f"output {o} was not kept by the kernel")
                 part = int(np.searchsorted(starts, o, side="right")) - 1
-                result[p] += parts[part][:, o - starts[part], :] * np.reshape(weight, (-1, 1))
+                index = o - starts[part]
+                weight = np.reshape(weight, (-1, 1))
+                if parts[part] is None:
+                    name = ("Dn", "Mn", "area")[part]
+                    local_sum[:, p] += local[:, offsets[name] + index] * weight
+                    if name != "area":
+                        jl, c = divmod(index, 3)
+                        j, node = divmod(jl, self.ns if name == "Dn" else self.nm)
+                        result[p][:, first + c::3] += weights[name][:, j, node] * weight
+                    continue
+                result[p] += parts[part][:, index, :] * weight
+        if affine is not None:
+            result += (local_sum @ _rows_of(affine.chain, kept, rows)).transpose(1, 0, 2)
         return result
 
     def combined_gradients(self, q, rows: np.ndarray, terms) -> np.ndarray:
