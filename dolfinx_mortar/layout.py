@@ -213,7 +213,8 @@ class CooMatrix:
             self._indices = _interleave(global_cols[slot_blocks], bc)
         self._num_unique = num_blocks * br * bc
         # 1 + the block's position: a lookup of an absent block (a dropped one) gives 0
-        pattern.data = np.arange(1, num_blocks + 1, dtype=np.int64)
+        pattern.data = np.arange(1, num_blocks + 1,
+                                 dtype=np.int32 if num_blocks < 2**31 - 1 else np.int64)
         self._blocks = {
             "pattern": pattern, "rows": row_side.local, "cols": col_side.local,
             "count": num_blocks, "num_groups": num_groups, "last": None,
@@ -577,21 +578,17 @@ class BlockIncidence:
         self.numbers, local, self.count = _compact_numbering(blocks)
         index = np.int32 if self.count < 2**31 - 1 else np.int64
         self.local = np.where(local < 0, self.count, local).astype(index, copy=False)
-        self._csr = self._transposed = None
 
     @property
     def csr(self):
-        """(groups, count + 1) CSR matrix with a one where a group has a block."""
-        if self._csr is None:
-            self._csr = _incidence(self.local, self.count)
-        return self._csr
+        """(groups, count + 1) CSR matrix with a one where a group has a block (made on
+        each use, not kept: it is as large as ``local``)."""
+        return _incidence(self.local, self.count)
 
     @property
     def transposed(self):
         """The transpose of :attr:`csr`, in CSR form."""
-        if self._transposed is None:
-            self._transposed = self.csr.T.tocsr()
-        return self._transposed
+        return self.csr.T.tocsr()
 
 
 def _compact_numbering(blocks: np.ndarray):

@@ -372,8 +372,10 @@ class Surface3Stencil(PairStencil):
         star_nodes = star[pair_star_rows]  # (n, ns, max_star) rows of the unique table, -1 pad
         present_star = star_nodes >= 0
         star_table_nodes = np.where(present_star, table_rows[np.maximum(star_nodes, 0)], 0)
+        # (int32: a pair has ~30 stencil slots, kept from one search to the next)
         nodes = np.concatenate(
-            [slave, master, star_table_nodes.reshape(slave.shape[0], ns * max_star)], axis=1)
+            [slave, master, star_table_nodes.reshape(slave.shape[0], ns * max_star)], axis=1,
+            dtype=np.int32 if node_blocks.size < 2**31 else np.int64)
         present = np.concatenate(
             [np.ones((slave.shape[0], ns + nm), dtype=bool),
              present_star.reshape(slave.shape[0], ns * max_star)], axis=1)
