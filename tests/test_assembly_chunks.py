@@ -1,7 +1,9 @@
 """Assembly of the gradient blocks a chunk of pairs at a time: the same matrices as all at once.
 
 G and K are summed group by group (each pair's entries in the pair's order), so the
-chunk size cannot change a bit of them; a chunk that dropped or repeated pairs would.
+chunk size cannot change a bit of them (in serial; in parallel PETSc's own sums of
+other ranks' rows round differently from run to run); a chunk that dropped or
+repeated pairs would.
 """
 
 from __future__ import annotations
@@ -51,8 +53,15 @@ def test_chunked_gradient_blocks_equal_all_at_once(cell, basis):
     (all_first, all_second, contributing), (chunk_first, chunk_second, _) = results
     assert MPI.COMM_WORLD.allreduce(contributing, op=MPI.MAX) > 3 * 7  # several chunks
     for expected, got in zip(all_first + all_second, chunk_first + chunk_second, strict=True):
-        for a, b in zip(expected, got, strict=True):
+        for a, b in zip(expected[:2], got[:2], strict=True):
             assert np.array_equal(a, b)
+        if MPI.COMM_WORLD.size == 1:
+            assert np.array_equal(expected[2], got[2])
+        else:
+            # PETSc adds the rows other ranks send in an order of its own (two runs with
+            # the same chunk differ by ~1e-16 there): a dropped pair is ~1e-2
+            scale = np.abs(expected[2]).max(initial=0.0)
+            assert np.abs(expected[2] - got[2]).max(initial=0.0) <= 1e-14 * scale
     assert any(np.abs(a[2]).max() > 0 for a in all_first)
 
 
