@@ -317,8 +317,10 @@ class CooMatrix:
         entries in that order): the group axis last. Or it is a function
         ``values(start, stop)`` giving the values of ``groups[start:stop]``,
         called ``chunk`` groups at a time (so that the values of all groups
-        never exist at once); the sums do not depend on ``chunk``: each
-        group's entries are added in the group's order.
+        never exist at once); those sums do not depend on ``chunk`` (each
+        group's entries are added after the last group's; an array's
+        entries are added entry by entry over the groups: the same sums, other
+        rounding).
         """
         if self._serial is not None:
             return self._set_serial(values, groups, chunk)
@@ -364,11 +366,24 @@ class CooMatrix:
         count = self._blocks["count"]
         position = self._positions(groups)  # (groups, nr, nc)
         sums = np.zeros((br, bc, count + 1))
-        step = max(int(chunk or groups.size), 1) if callable(values) else max(groups.size, 1)
-        for start in range(0, groups.size, step):
+        if not callable(values):
+            # all at once, entry (i, a, j, b) of every group after the other (np.bincount)
+            values = np.asarray(values, dtype=PETSc.ScalarType)
+            expected = nr * br * nc * bc * groups.size
+            if values.size != expected:
+                raise ValueError(f"expected {expected} values, got {values.size}")
+            values = values.reshape(nr, br, nc, bc, groups.size)
+            where = position.transpose(1, 2, 0).reshape(-1)
+            for a in range(br):
+                for b in range(bc):
+                    weights = np.ascontiguousarray(values[:, a, :, b, :]).reshape(-1)
+                    sums[a, b] = np.bincount(where, weights=weights, minlength=count + 1)
+            chunk, values = None, None
+        step = max(int(chunk or groups.size), 1)
+        for start in range(0, groups.size if values is not None else 0, step):
+            # chunk by chunk, group by group: the sums do not depend on the chunk size
             stop = min(groups.size, start + step)
-            part = values(start, stop) if callable(values) else values
-            part = np.asarray(part, dtype=PETSc.ScalarType)
+            part = np.asarray(values(start, stop), dtype=PETSc.ScalarType)
             expected = nr * br * nc * bc * (stop - start)
             if part.size != expected:
                 raise ValueError(f"expected {expected} values, got {part.size}")

@@ -196,7 +196,7 @@ class MortarInterface:
         self.scalar_gradients = False
         self.assembly_chunk: int | None = 2048 if self.gdim == 3 else None
         """Pairs whose gradient blocks (G, K) are formed at once in an assembly (None:
-        all; 2D's factorized gradients combine all pairs in one go)."""
+        all, summed as one array; 2D's factorized gradients combine all pairs in one go)."""
         """3D: the kernel also keeps the gradients of D and M, and the stencils hold the
         averaged normals' stars whatever the normal option (friction's tangent frames;
         set before the first search)."""
@@ -685,7 +685,8 @@ class MortarInterface:
         """``matrix`` assembled from the combined gradients of ``terms`` (a row of the
         matrix block per term, :meth:`_combined_gradients`), ``assembly_chunk`` pairs at a
         time: in 3D their values on the stencil are ~1.2e4 numbers a pair for K."""
-        chunk = self.assembly_chunk or rows.size
+        if self.assembly_chunk is None:
+            return matrix.assemble_groups(self._combined_gradients(q, rows, terms), rows)
 
         def values(start: int, stop: int) -> np.ndarray:
             if (start, stop) == (0, rows.size):
@@ -694,7 +695,7 @@ class MortarInterface:
                     for row in terms]
             return self._combined_gradients(q, rows[start:stop], part)
 
-        return matrix.assemble_groups(values, rows, chunk=chunk)
+        return matrix.assemble_groups(values, rows, chunk=self.assembly_chunk)
 
     def mortar_matrices(self) -> tuple[PETSc.Mat, PETSc.Mat]:
         """D (multipliers x slave nodes) and M (multipliers x master nodes).

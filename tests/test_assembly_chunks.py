@@ -35,7 +35,7 @@ def test_chunked_gradient_blocks_equal_all_at_once(cell, basis):
     tagged = two_blocks(cell, 3, 4)
     u = bent_displacement(tagged)
     results = []
-    for chunk in (None, 7):
+    for chunk in (10**9, 7):  # all pairs in one chunk, then 7 at a time
         mortar = interface(tagged, u, basis=basis)
         mortar.assembly_chunk = chunk
         z = mortar.create_multiplier_vector()
@@ -67,20 +67,25 @@ def test_chunked_gradient_blocks_equal_all_at_once(cell, basis):
 
 def test_group_chunks_equal_one_call():
     """CooMatrix.assemble_groups with values given chunk by chunk (blocks repeated within
-    and across groups) is bitwise the call with all values."""
+    and across groups) is bitwise the same with one chunk, and the sums of the array."""
     rng = np.random.default_rng(3)
     num_groups = 40
     row_blocks = rng.integers(0, 6, (num_groups, 2))
     col_blocks = rng.integers(-1, 9, (num_groups, 4))
     values = rng.standard_normal((2, 3, 4, 2, 25))
     groups = np.sort(rng.choice(num_groups, 25, replace=False))
-    expected = CooMatrix.from_blocks(MPI.COMM_SELF, row_blocks, col_blocks, (3, 2), 18, 18)
-    chunked = CooMatrix.from_blocks(MPI.COMM_SELF, row_blocks, col_blocks, (3, 2), 18, 18)
-    a = _csr(expected.assemble_groups(values, groups))
+    matrices = [CooMatrix.from_blocks(MPI.COMM_SELF, row_blocks, col_blocks, (3, 2), 18, 18)
+                for _ in range(3)]
+    expected, one_chunk, chunked = matrices
+    a = _csr(one_chunk.assemble_groups(lambda start, stop: values[..., start:stop], groups,
+                                       chunk=25))
     b = _csr(chunked.assemble_groups(lambda start, stop: values[..., start:stop], groups,
                                      chunk=4))
     for x, y in zip(a, b, strict=True):
         assert np.array_equal(x, y)
+    c = _csr(expected.assemble_groups(values, groups))
+    assert np.array_equal(a[1], c[1])
+    assert np.abs(a[2] - c[2]).max() <= 1e-15 * np.abs(c[2]).max()
     dense = np.zeros((18, 18))
     for g, group in enumerate(groups):
         for i, r in enumerate(row_blocks[group]):
@@ -88,8 +93,8 @@ def test_group_chunks_equal_one_call():
                 if c >= 0:
                     dense[3 * r:3 * r + 3, 2 * c:2 * c + 2] += values[i, :, j, :, g]
     assert np.allclose(expected.mat.getValues(range(18), range(18)), dense, rtol=0, atol=1e-13)
-    expected.destroy()
-    chunked.destroy()
+    for matrix in matrices:
+        matrix.destroy()
 
 
 def test_gradient_rows_of_a_subset():
