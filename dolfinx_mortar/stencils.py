@@ -214,10 +214,10 @@ class PairStencil:
         if affine is not None:
             # the terms summed over the plane coordinates first, chained once at the end
             kept = q.Dn.rows
-            local = _rows_of(affine.local, kept, rows)
+            local = _rows_of(affine.local.transpose(1, 0, 2), kept, rows)  # (rows, 57, 12)
             weights = {"Dn": _rows_of(affine.slave_weights, kept, rows),
                        "Mn": _rows_of(affine.master_weights, kept, rows)}
-            local_sum = np.zeros((rows.size, len(terms), local.shape[-1]))
+            local_sum = np.zeros((len(terms), rows.size, local.shape[-1]))
             offsets = affine.offsets
             first = nv - 3 * self.ns
         for p, row in enumerate(terms):
@@ -234,7 +234,7 @@ class PairStencil:
                 weight = np.reshape(weight, (-1, 1))
                 if parts[part] is None:
                     name = ("Dn", "Mn", "area")[part]
-                    local_sum[:, p] += local[:, offsets[name] + index] * weight
+                    local_sum[p] += local[:, offsets[name] + index] * weight
                     if name != "area":
                         jl, c = divmod(index, 3)
                         j, node = divmod(jl, self.ns if name == "Dn" else self.nm)
@@ -242,7 +242,8 @@ class PairStencil:
                     continue
                 result[p] += parts[part][:, index, :] * weight
         if affine is not None:
-            result += (local_sum @ _rows_of(affine.chain, kept, rows)).transpose(1, 0, 2)
+            result += (local_sum.transpose(1, 0, 2) @ _rows_of(affine.chain, kept, rows)
+                       ).transpose(1, 0, 2)
         return result
 
     def combined_gradients(self, q, rows: np.ndarray, terms) -> np.ndarray:

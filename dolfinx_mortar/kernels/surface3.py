@@ -110,7 +110,8 @@ class PairQuantities3:
 class AffineFactors:
     """The gradients of Dn, the areas and Mn of triangle pairs with averaged normals, kept
     as :func:`_affine_integrals` makes them: over the 12 plane coordinates of the slave and
-    master nodes (``local``, (r, 57, 12): Dn (j, k, c), area (j), Mn (j, l, c)), the chain
+    master nodes (``local``, (57, r, 12), output-major so that a consumer reads one output
+    of many pairs at once: Dn (j, k, c), area (j), Mn (j, l, c)), the chain
     of the plane coordinates to the pair's 27 variables (``chain``, (r, 12, 27)), and what
     multiplies each nodal normal in Dn and Mn (``slave_weights`` (r, j, k, i),
     ``master_weights`` (r, j, l, i): d Dn_jk[c] / d n_i[c]). 1,134 numbers a pair instead
@@ -119,14 +120,17 @@ class AffineFactors:
 
     def __init__(self, num_rows: int, ns: int, nm: int, nvar: int):
         self.ns, self.nm, self.nvar = ns, nm, nvar
-        self.local = np.empty((num_rows, ns * ns * 3 + ns + ns * nm * 3, 2 * (ns + nm)))
+        self.local = np.empty((ns * ns * 3 + ns + ns * nm * 3, num_rows, 2 * (ns + nm)))
         self.chain = np.empty((num_rows, 2 * (ns + nm), nvar))
         self.slave_weights = np.empty((num_rows, ns, ns, ns))
         self.master_weights = np.empty((num_rows, ns, nm, ns))
 
     def put(self, position, factors: dict) -> None:
         for name, array in factors.items():
-            getattr(self, name)[position] = array
+            if name == "local":
+                self.local[:, position] = array.transpose(1, 0, 2)
+            else:
+                getattr(self, name)[position] = array
 
     @property
     def offsets(self) -> dict:
@@ -138,11 +142,12 @@ class AffineFactors:
         """The gradient of Dn, Mn or area over the pair's variables (the kernel's product and
         the normals' scatter, as :func:`_affine_integrals` applies them)."""
         ns, nm, nvar = self.ns, self.nm, self.nvar
-        r = self.local.shape[0]
+        r = self.local.shape[1]
         k = {"Dn": 3 * ns * ns, "area": ns, "Mn": 3 * ns * nm}[name]
         start = self.offsets[name]
         # the kernel's product of all rows at once (the same bits), then the rows of name
-        grad = np.ascontiguousarray((self.local @ self.chain)[:, start:start + k])
+        local = np.ascontiguousarray(self.local.transpose(1, 0, 2))
+        grad = np.ascontiguousarray((local @ self.chain)[:, start:start + k])
         if name == "area":
             return grad.reshape(r, ns, nvar)
         count = ns if name == "Dn" else nm
