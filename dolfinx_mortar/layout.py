@@ -373,7 +373,7 @@ class CooMatrix:
             if values.size != expected:
                 raise ValueError(f"expected {expected} values, got {values.size}")
             values = values.reshape(nr, br, nc, bc, groups.size)
-            where = position.transpose(1, 2, 0).reshape(-1)
+            where = position.transpose(1, 2, 0).astype(np.intp).reshape(-1)
             for a in range(br):
                 for b in range(bc):
                     weights = np.ascontiguousarray(values[:, a, :, b, :]).reshape(-1)
@@ -388,7 +388,7 @@ class CooMatrix:
             if part.size != expected:
                 raise ValueError(f"expected {expected} values, got {part.size}")
             part = part.reshape(nr, br, nc, bc, stop - start)
-            where = position[start:stop].reshape(-1)
+            where = position[start:stop].reshape(-1).astype(np.intp)  # (once, not per call)
             for a in range(br):
                 for b in range(bc):
                     np.add.at(sums[a, b], where, part[:, a, :, b, :].transpose(2, 0, 1).reshape(-1))
