@@ -588,22 +588,30 @@ class BlockIncidence:
     nothing).
     """
 
-    def __init__(self, blocks):
+    def __init__(self, blocks, keep: bool = True):
         blocks = np.asarray(blocks, dtype=np.int64)
         self.numbers, local, self.count = _compact_numbering(blocks)
         index = np.int32 if self.count < 2**31 - 1 else np.int64
         self.local = np.where(local < 0, self.count, local).astype(index, copy=False)
+        self._keep = keep
+        self._csr = self._transposed = None
 
     @property
     def csr(self):
-        """(groups, count + 1) CSR matrix with a one where a group has a block (made on
-        each use, not kept: it is as large as ``local``)."""
-        return _incidence(self.local, self.count)
+        """(groups, count + 1) CSR matrix with a one where a group has a block (kept only
+        with ``keep``: it is as large as ``local``)."""
+        csr = self._csr if self._csr is not None else _incidence(self.local, self.count)
+        if self._keep:
+            self._csr = csr
+        return csr
 
     @property
     def transposed(self):
         """The transpose of :attr:`csr`, in CSR form."""
-        return self.csr.T.tocsr()
+        transposed = self._transposed if self._transposed is not None else self.csr.T.tocsr()
+        if self._keep:
+            self._transposed = transposed
+        return transposed
 
 
 def _compact_numbering(blocks: np.ndarray):

@@ -661,12 +661,14 @@ class MortarInterface:
             stencil = self.stencil
             blocks = {
                 "multipliers": lambda: self.pair_multipliers,
-                "slave": lambda: self.pair_node_blocks[:, stencil.slave_slots],
-                "master": lambda: self.pair_node_blocks[:, stencil.master_slots],
+                "slave": lambda: self._node_blocks[stencil.slave_nodes],
+                "master": lambda: self._node_blocks[stencil.master_nodes],
                 "stencil": lambda: self._pair_col_blocks,
                 "force": lambda: self._pair_force_blocks,
             }[name]()
-            side = BlockIncidence(blocks)
+            # the stencil's incidence (~30 blocks a pair) is remade for each matrix, the
+            # others (at most 8 a pair) are kept for the matrices that share them
+            side = BlockIncidence(blocks, keep=name != "stencil")
             self._pair_block_sides[name] = (self._pattern_version, side)
         return side
 
