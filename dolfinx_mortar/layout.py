@@ -213,7 +213,8 @@ class CooMatrix:
             self._indices = _interleave(global_cols[slot_blocks], bc)
         self._num_unique = num_blocks * br * bc
         # 1 + the block's position: a lookup of an absent block (a dropped one) gives 0
-        pattern.data = np.arange(1, num_blocks + 1, dtype=np.int64)
+        pattern.data = np.arange(1, num_blocks + 1,
+                                 dtype=np.int32 if num_blocks < 2**31 - 1 else np.int64)
         self._blocks = {
             "pattern": pattern, "rows": row_side.local, "cols": col_side.local,
             "count": num_blocks, "num_groups": num_groups, "last": None,
@@ -308,25 +309,32 @@ class CooMatrix:
         summed = np.bincount(self._slot, weights=values[self._keep], minlength=self._num_unique)
         return self._set(summed)
 
-    def assemble_groups(self, values, groups) -> PETSc.Mat:
+    def assemble_groups(self, values, groups, chunk: int | None = None) -> PETSc.Mat:
         """Replace the matrix values by those of the listed groups (all others are zero).
 
         Only for a matrix built by :meth:`from_blocks`. ``values`` has the
         shape (nr, br, nc, bc, len(groups)) (or any shape with those
-        entries in that order): the group axis last.
+        entries in that order): the group axis last. Or it is a function
+        ``values(start, stop)`` giving the values of ``groups[start:stop]``,
+        called ``chunk`` groups at a time (so that the values of all groups
+        never exist at once); those sums do not depend on ``chunk`` (each
+        group's entries are added after the last group's; an array's
+        entries are added entry by entry over the groups: the same sums, other
+        rounding).
         """
         if self._serial is not None:
-            return self._set_serial(values, groups)
-        return self._set(self._summed_groups(values, groups), self._ijv)
+            return self._set_serial(values, groups, chunk)
+        return self._set(self._summed_groups(values, groups, chunk), self._ijv)
 
-    def _set_serial(self, values, groups) -> PETSc.Mat:
+    def _set_serial(self, values, groups, chunk=None) -> PETSc.Mat:
         """The summed values written straight into the CSR values of the serial matrix,
         which is made around them (zero copy) at the first assembly."""
         serial = self._serial
         first = serial["values"] is None
         if first:
             serial["values"] = np.empty(serial["indices"].size, dtype=PETSc.ScalarType)
-        self._summed_groups(values, groups, out=serial["values"], row_starts=serial["row_starts"])
+        self._summed_groups(values, groups, chunk, out=serial["values"],
+                            row_starts=serial["row_starts"])
         if first:
             row_sizes, col_sizes = serial["sizes"]
             self.mat = PETSc.Mat().createAIJWithArrays(
@@ -347,34 +355,56 @@ class CooMatrix:
         matrix.setValuesIJV(indptr, indices, self._summed_groups(values, groups),
                             addv=PETSc.InsertMode.ADD_VALUES, rowmap=rowmap)
 
-    def _summed_groups(self, values, groups, out=None, row_starts=()) -> np.ndarray:
+    def _summed_groups(self, values, groups, chunk=None, out=None, row_starts=()) -> np.ndarray:
         """The groups' values summed into the pattern, in the order of ``_ijv``, or with
-        ``row_starts`` (serial CSR, see :meth:`_serial_layout`) in CSR order into ``out``."""
+        ``row_starts`` (serial CSR, see :meth:`_serial_layout`) in CSR order into ``out``.
+        The entries are added group by group (``values`` as in :meth:`assemble_groups`)."""
         if self._blocks is None:
             raise TypeError("assemble_groups needs a matrix built by CooMatrix.from_blocks")
         groups = np.asarray(groups, dtype=np.int64).reshape(-1)
         nr, br, nc, bc = self._block_shape
-        values = np.asarray(values, dtype=PETSc.ScalarType)
-        if values.size != nr * br * nc * bc * groups.size:
-            expected = nr * br * nc * bc * groups.size
-            raise ValueError(f"expected {expected} values, got {values.size}")
-        values = values.reshape(nr, br, nc, bc, groups.size)
-        position = self._positions(groups).reshape(-1)
         count = self._blocks["count"]
+        position = self._positions(groups)  # (groups, nr, nc)
+        sums = np.zeros((br, bc, count + 1))
+        if not callable(values):
+            # all at once, entry (i, a, j, b) of every group after the other (np.bincount)
+            values = np.asarray(values, dtype=PETSc.ScalarType)
+            expected = nr * br * nc * bc * groups.size
+            if values.size != expected:
+                raise ValueError(f"expected {expected} values, got {values.size}")
+            values = values.reshape(nr, br, nc, bc, groups.size)
+            where = position.transpose(1, 2, 0).astype(np.intp).reshape(-1)
+            for a in range(br):
+                for b in range(bc):
+                    weights = np.ascontiguousarray(values[:, a, :, b, :]).reshape(-1)
+                    sums[a, b] = np.bincount(where, weights=weights, minlength=count + 1)
+            chunk, values = None, None
+        step = max(int(chunk or groups.size), 1)
+        for start in range(0, groups.size if values is not None else 0, step):
+            # chunk by chunk, group by group: the sums do not depend on the chunk size
+            stop = min(groups.size, start + step)
+            part = np.asarray(values(start, stop), dtype=PETSc.ScalarType)
+            expected = nr * br * nc * bc * (stop - start)
+            if part.size != expected:
+                raise ValueError(f"expected {expected} values, got {part.size}")
+            part = part.reshape(nr, br, nc, bc, stop - start)
+            where = position[start:stop].reshape(-1).astype(np.intp)  # (once, not per call)
+            for a in range(br):
+                for b in range(bc):
+                    np.add.at(sums[a, b], where, part[:, a, :, b, :].transpose(2, 0, 1).reshape(-1))
+            del part
         summed = np.empty(br * count * bc) if out is None else out
         by_block = summed.reshape(br * count, bc)
         for a in range(br):
             for b in range(bc):
-                weights = np.ascontiguousarray(values[:, a, :, b, :]).reshape(-1)
-                sums = np.bincount(position, weights=weights, minlength=count + 1)
                 if len(row_starts):
-                    by_block[row_starts[a], b] = sums[1:]
+                    by_block[row_starts[a], b] = sums[a, b, 1:]
                 else:
-                    by_block[a * count:(a + 1) * count, b] = sums[1:]
+                    by_block[a * count:(a + 1) * count, b] = sums[a, b, 1:]
         return summed
 
     def _positions(self, groups: np.ndarray) -> np.ndarray:
-        """(nr, nc, len(groups)) 1 + positions of the groups' blocks; 0 for dropped ones.
+        """(len(groups), nr, nc) 1 + positions of the groups' blocks; 0 for dropped ones.
 
         The answer for the last ``groups`` is kept: a Newton iteration assembles the same
         pairs again, or almost the same (only the groups that were not in the last call
@@ -391,24 +421,33 @@ class CooMatrix:
             where[last[0]] = np.arange(last[0].size)
             index = where[groups]
             known = index >= 0
-            result = np.empty(last[1].shape[:2] + (groups.size,), dtype=np.int64)
-            result[:, :, known] = last[1][:, :, index[known]]
+            result = np.empty((groups.size,) + last[1].shape[1:], dtype=last[1].dtype)
+            result[known] = last[1][index[known]]
             if not known.all():
-                result[:, :, ~known] = self._lookup(groups[~known])
+                result[~known] = self._lookup(groups[~known])
         blocks["last"] = (groups.copy(), result)
         return result
 
     def _lookup(self, groups: np.ndarray) -> np.ndarray:
-        """(nr, nc, len(groups)) 1 + positions of the groups' blocks, found in the pattern."""
+        """(len(groups), nr, nc) 1 + positions of the groups' blocks, found in the pattern
+        (int32 unless the pattern has 2^31 blocks or more)."""
         blocks = self._blocks
-        rows = blocks["rows"][groups].T.astype(np.int32)
-        cols = blocks["cols"][groups].T.astype(np.int32)
-        shape = (rows.shape[0], cols.shape[0], groups.size)
+        rows = blocks["rows"][groups].astype(np.int32)
+        cols = blocks["cols"][groups].astype(np.int32)
+        shape = (groups.size, rows.shape[1], cols.shape[1])
+        dtype = np.int32 if blocks["count"] < 2**31 - 1 else np.int64
         if groups.size == 0:
-            return np.zeros(shape, dtype=np.int64)
-        found = blocks["pattern"][np.broadcast_to(rows[:, None, :], shape).reshape(-1),
-                                  np.broadcast_to(cols[None, :, :], shape).reshape(-1)]
-        return np.asarray(found, dtype=np.int64).reshape(shape)
+            return np.zeros(shape, dtype=dtype)
+        found = blocks["pattern"][np.broadcast_to(rows[:, :, None], shape).reshape(-1),
+                                  np.broadcast_to(cols[:, None, :], shape).reshape(-1)]
+        return np.asarray(found, dtype=dtype).reshape(shape)
+
+    def release_pattern(self) -> None:
+        """Drop what only further assemblies need (the block pattern, the groups'
+        positions, the insertion indices); the PETSc matrix stays valid. For a pattern
+        that will not be assembled again (a new search makes new ones)."""
+        self._blocks = None
+        self._ijv = None
 
     def destroy(self) -> None:
         if self.mat is not None:
@@ -549,26 +588,30 @@ class BlockIncidence:
     nothing).
     """
 
-    def __init__(self, blocks):
+    def __init__(self, blocks, keep: bool = True):
         blocks = np.asarray(blocks, dtype=np.int64)
         self.numbers, local, self.count = _compact_numbering(blocks)
-        missing = local < 0
-        self.local = np.where(missing, self.count, local) if missing.any() else local
+        index = np.int32 if self.count < 2**31 - 1 else np.int64
+        self.local = np.where(local < 0, self.count, local).astype(index, copy=False)
+        self._keep = keep
         self._csr = self._transposed = None
 
     @property
     def csr(self):
-        """(groups, count + 1) CSR matrix with a one where a group has a block."""
-        if self._csr is None:
-            self._csr = _incidence(self.local, self.count)
-        return self._csr
+        """(groups, count + 1) CSR matrix with a one where a group has a block (kept only
+        with ``keep``: it is as large as ``local``)."""
+        csr = self._csr if self._csr is not None else _incidence(self.local, self.count)
+        if self._keep:
+            self._csr = csr
+        return csr
 
     @property
     def transposed(self):
         """The transpose of :attr:`csr`, in CSR form."""
-        if self._transposed is None:
-            self._transposed = self.csr.T.tocsr()
-        return self._transposed
+        transposed = self._transposed if self._transposed is not None else self.csr.T.tocsr()
+        if self._keep:
+            self._transposed = transposed
+        return transposed
 
 
 def _compact_numbering(blocks: np.ndarray):
@@ -599,5 +642,6 @@ def _incidence(blocks: np.ndarray, num_blocks: int):
         indptr = np.zeros(blocks.shape[0] + 1, dtype=np.int64)
         np.cumsum(valid.sum(axis=1), out=indptr[1:])
         indices = blocks[valid]
-    return scipy.sparse.csr_matrix((np.ones(indices.size), indices, indptr),
+    # boolean: the products of incidences only need where they are nonzero
+    return scipy.sparse.csr_matrix((np.ones(indices.size, dtype=bool), indices, indptr),
                                    shape=(blocks.shape[0], num_blocks + 1))

@@ -197,6 +197,9 @@ class MortarInterface:
         self._pair_dofs: np.ndarray | None = None
         self.stencil: stencils.PairStencil | None = None
         self.scalar_gradients = False
+        self.assembly_chunk: int | None = 2048 if self.gdim == 3 else None
+        """Pairs whose gradient blocks (G, K) are formed at once in an assembly (None:
+        all, summed as one array; 2D's factorized gradients combine all pairs in one go)."""
         """3D: the kernel also keeps the gradients of D and M, and the stencils hold the
         averaged normals' stars whatever the normal option (friction's tangent frames;
         set before the first search)."""
@@ -355,6 +358,8 @@ class MortarInterface:
             stats.time_integration += time.perf_counter() - start
             return self.quantities
         else:
+            # the old quantities (their gradients are ~13 kB a pair in 3D) go first
+            self.quantities = None
             self.quantities = self._evaluate(self._node_x)
             self._evaluated_x = self._node_x.copy()
             self._evaluated_version = self._pattern_version
@@ -479,6 +484,12 @@ class MortarInterface:
                 master_origin: np.ndarray | None = None) -> None:
         """New candidate pairs at the positions ``x``; with ``origin`` positions
         (the last search's), the boxes are swept from there (:mod:`search`)."""
+        # what belongs to the last search's pairs (their quantities, the assembly patterns'
+        # lookups) goes before the new pairs' arrays are made
+        self.quantities = None
+        for _, matrix in self._matrices.values():
+            matrix.release_pattern()
+        self._pair_block_sides.clear()
         slave, master = self.slave, self.master
         parallel = self.comm.size > 1
         swept = slave_origin is not None
@@ -551,15 +562,28 @@ class MortarInterface:
             self.pair_crosspoint = np.isin(slave_blocks, self._crosspoint_blocks)
         else:
             self.pair_crosspoint = np.zeros(slave_blocks.shape, dtype=bool)
-        self.pair_node_blocks = self._node_blocks[stencil.nodes]
         self._pair_dofs = None
-        # the block patterns of the matrices (node blocks, -1 where a slot is absent)
-        self._pair_col_blocks = np.where(stencil.present, self.pair_node_blocks, -1)
-        self._pair_force_blocks = np.ascontiguousarray(self.pair_node_blocks[
-            :, np.concatenate([stencil.slave_slots, stencil.master_slots])])
         self._num_remote = (nrm, nrs)
         self._pattern_version += 1
         self.statistics.pairs = int(pairs.shape[0])
+
+    @property
+    def pair_node_blocks(self) -> np.ndarray:
+        """(n, width) global dof block of each pair's stencil nodes (made on each use:
+        the patterns are built once a search)."""
+        return self._node_blocks[self.stencil.nodes]
+
+    @property
+    def _pair_col_blocks(self) -> np.ndarray:
+        """The block pattern of the stencil columns: node blocks, -1 where a slot is absent."""
+        return np.where(self.stencil.present, self.pair_node_blocks, -1)
+
+    @property
+    def _pair_force_blocks(self) -> np.ndarray:
+        """The blocks of the slave and master facet nodes."""
+        stencil = self.stencil
+        return self._node_blocks[stencil.nodes[:, np.concatenate([stencil.slave_slots,
+                                                                   stencil.master_slots])]]
 
     @property
     def pair_nodes(self) -> np.ndarray:
@@ -666,12 +690,14 @@ class MortarInterface:
             stencil = self.stencil
             blocks = {
                 "multipliers": lambda: self.pair_multipliers,
-                "slave": lambda: self.pair_node_blocks[:, stencil.slave_slots],
-                "master": lambda: self.pair_node_blocks[:, stencil.master_slots],
+                "slave": lambda: self._node_blocks[stencil.slave_nodes],
+                "master": lambda: self._node_blocks[stencil.master_nodes],
                 "stencil": lambda: self._pair_col_blocks,
                 "force": lambda: self._pair_force_blocks,
             }[name]()
-            side = BlockIncidence(blocks)
+            # the stencil's incidence (~30 blocks a pair) is remade for each matrix, the
+            # others (at most 8 a pair) are kept for the matrices that share them
+            side = BlockIncidence(blocks, keep=name != "stencil")
             self._pair_block_sides[name] = (self._pattern_version, side)
         return side
 
@@ -685,6 +711,22 @@ class MortarInterface:
         weight * d output / d x over the pair's stencil (:mod:`stencils` numbers the
         outputs); a weight is a number or one per row."""
         return self.stencil.combined_gradients(q, rows, terms)
+
+    def _assemble_gradients(self, matrix: CooMatrix, q, rows: np.ndarray, terms) -> PETSc.Mat:
+        """``matrix`` assembled from the combined gradients of ``terms`` (a row of the
+        matrix block per term, :meth:`_combined_gradients`), ``assembly_chunk`` pairs at a
+        time: in 3D their values on the stencil are ~1.2e4 numbers a pair for K."""
+        if self.assembly_chunk is None:
+            return matrix.assemble_groups(self._combined_gradients(q, rows, terms), rows)
+
+        def values(start: int, stop: int) -> np.ndarray:
+            if (start, stop) == (0, rows.size):
+                return self._combined_gradients(q, rows, terms)
+            part = [[(o, w if np.ndim(w) == 0 else w[start:stop]) for o, w in row]
+                    for row in terms]
+            return self._combined_gradients(q, rows[start:stop], part)
+
+        return matrix.assemble_groups(values, rows, chunk=self.assembly_chunk)
 
     def mortar_matrices(self) -> tuple[PETSc.Mat, PETSc.Mat]:
         """D (multipliers x slave nodes) and M (multipliers x master nodes).
@@ -720,10 +762,9 @@ class MortarInterface:
         rows = self._rows(q)
         gap = self.stencil.GAP
         terms = [[(gap + j, 1.0)] for j in range(self.stencil.ns)]
-        values = self._combined_gradients(q, rows, terms)  # (j, width * gdim, n)
         matrix = self._block_matrix("G", "multipliers", "stencil", (1, self.gdim),
                                     self._multiplier_sizes, self._dof_sizes)
-        return matrix.assemble_groups(values, rows)
+        return self._assemble_gradients(matrix, q, rows, terms)
 
     def _force_columns(self) -> np.ndarray:
         """(n, (ns + nm) * gdim) dofs of the slave and master facet nodes."""
@@ -762,10 +803,9 @@ class MortarInterface:
                  for k in range(stencil.ns) for c in range(gdim)]
         terms += [[(stencil.mn(j, k, c), -z_pair[:, j]) for j in js]
                   for k in range(stencil.nm) for c in range(gdim)]
-        values = self._combined_gradients(q, rows, terms)  # ((ns + nm) gdim, width gdim, n)
         matrix = self._block_matrix("K", "force", "stencil", (gdim, gdim),
                                     self._dof_sizes, self._dof_sizes)
-        return matrix.assemble_groups(values, rows)
+        return self._assemble_gradients(matrix, q, rows, terms)
 
     def contact_force(self, z: PETSc.Vec, vector: PETSc.Vec) -> PETSc.Vec:
         """Add -B^T z to ``vector`` (displacement layout), without forming B."""

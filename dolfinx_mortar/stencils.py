@@ -43,6 +43,44 @@ def lookup(keys: np.ndarray, values: np.ndarray, queries: np.ndarray):
     return values[order[position]], found
 
 
+def _rows_of(array: np.ndarray, kept: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """The entries of ``rows`` of an array whose entries are those of the rows ``kept``
+    (zero for rows not kept): a slice where they are consecutive kept rows."""
+    if rows is kept:
+        return array
+    sorter = None if kept.size < 2 or np.all(kept[1:] > kept[:-1]) else np.argsort(kept)
+    position = np.minimum(np.searchsorted(kept, rows, sorter=sorter), max(kept.size - 1, 0))
+    if sorter is not None and kept.size:
+        position = sorter[position]
+    found = kept[position] == rows if kept.size else np.zeros(rows.shape, dtype=bool)
+    if found.all():
+        if sorter is None and rows.size and np.all(position[1:] == position[:-1] + 1):
+            return array[position[0]:position[-1] + 1]
+        return array[position]
+    result = np.zeros((rows.size,) + array.shape[1:])
+    result[found] = array[position[found]]
+    return result
+
+
+def _gradient_rows(item, rows: np.ndarray) -> np.ndarray:
+    """The gradients of ``rows`` of a Dual; of a :class:`RowSubsetDual` without building
+    its full gradient."""
+    if not isinstance(item, RowSubsetDual):
+        return item.grad[rows]
+    return _rows_of(item.grad_rows, item.rows, rows)
+
+
+def _affine_factors(q):
+    """The factorized gradients of Dn, Mn and the areas, if the kernel kept them so
+    (:class:`~dolfinx_mortar.kernels.surface3.AffineFactors`)."""
+    factors = getattr(q.Dn, "factors", None)
+    if not hasattr(factors, "chain"):
+        return None
+    if not all(getattr(item, "factors", None) is factors for item in (q.Mn, q.area)):
+        return None
+    return factors
+
+
 class PairStencil:
     """The pairs of one search and their stencils (base of the per-dimension classes).
 
@@ -163,15 +201,25 @@ class PairStencil:
         items = [q.Dn, q.Mn, q.area, q.gap]
         if getattr(q, "D_dual", None) is not None:
             items += [q.D_dual, q.M_dual]
+        affine = _affine_factors(q)
         for item in items:
             size = int(np.prod(item.value.shape[1:]))
-            if isinstance(item, RowSubsetDual) and item.rows is rows:
-                parts.append(item.grad_rows.reshape(rows.size, size, nv))
+            if affine is not None and item.factors is affine:
+                parts.append(None)
             else:
-                parts.append(item.grad[rows].reshape(rows.size, size, nv))
+                parts.append(_gradient_rows(item, rows).reshape(rows.size, size, nv))
             starts.append(start)
             start += size
         result = np.zeros((len(terms), rows.size, nv))
+        if affine is not None:
+            # the terms summed over the plane coordinates first, chained once at the end
+            kept = q.Dn.rows
+            local = _rows_of(affine.local.transpose(1, 0, 2), kept, rows)  # (rows, 57, 12)
+            weights = {"Dn": _rows_of(affine.slave_weights, kept, rows),
+                       "Mn": _rows_of(affine.master_weights, kept, rows)}
+            local_sum = np.zeros((len(terms), rows.size, local.shape[-1]))
+            offsets = affine.offsets
+            first = nv - 3 * self.ns
         for p, row in enumerate(terms):
             for o, weight in row:
                 if o >= self.NORMAL:
@@ -182,7 +230,20 @@ class PairStencil:
                 if o >= start:
                     raise ValueError(f"output {o} was not kept by the kernel")
                 part = int(np.searchsorted(starts, o, side="right")) - 1
-                result[p] += parts[part][:, o - starts[part], :] * np.reshape(weight, (-1, 1))
+                index = o - starts[part]
+                weight = np.reshape(weight, (-1, 1))
+                if parts[part] is None:
+                    name = ("Dn", "Mn", "area")[part]
+                    local_sum[p] += local[:, offsets[name] + index] * weight
+                    if name != "area":
+                        jl, c = divmod(index, 3)
+                        j, node = divmod(jl, self.ns if name == "Dn" else self.nm)
+                        result[p][:, first + c::3] += weights[name][:, j, node] * weight
+                    continue
+                result[p] += parts[part][:, index, :] * weight
+        if affine is not None:
+            result += (local_sum.transpose(1, 0, 2) @ _rows_of(affine.chain, kept, rows)
+                       ).transpose(1, 0, 2)
         return result
 
     def combined_gradients(self, q, rows: np.ndarray, terms) -> np.ndarray:
@@ -312,8 +373,10 @@ class Surface3Stencil(PairStencil):
         star_nodes = star[pair_star_rows]  # (n, ns, max_star) rows of the unique table, -1 pad
         present_star = star_nodes >= 0
         star_table_nodes = np.where(present_star, table_rows[np.maximum(star_nodes, 0)], 0)
+        # (int32: a pair has ~30 stencil slots, kept from one search to the next)
         nodes = np.concatenate(
-            [slave, master, star_table_nodes.reshape(slave.shape[0], ns * max_star)], axis=1)
+            [slave, master, star_table_nodes.reshape(slave.shape[0], ns * max_star)], axis=1,
+            dtype=np.int32 if node_blocks.size < 2**31 else np.int64)
         present = np.concatenate(
             [np.ones((slave.shape[0], ns + nm), dtype=bool),
              present_star.reshape(slave.shape[0], ns * max_star)], axis=1)

@@ -107,6 +107,58 @@ class PairQuantities3:
     normals_vary: bool = True
 
 
+class AffineFactors:
+    """The gradients of Dn, the areas and Mn of triangle pairs with averaged normals, kept
+    as :func:`_affine_integrals` makes them: over the 12 plane coordinates of the slave and
+    master nodes (``local``, (57, r, 12), output-major so that a consumer reads one output
+    of many pairs at once: Dn (j, k, c), area (j), Mn (j, l, c)), the chain
+    of the plane coordinates to the pair's 27 variables (``chain``, (r, 12, 27)), and what
+    multiplies each nodal normal in Dn and Mn (``slave_weights`` (r, j, k, i),
+    ``master_weights`` (r, j, l, i): d Dn_jk[c] / d n_i[c]). 1,134 numbers a pair instead
+    of the 1,539 of the three gradients; rows are those of ``rows`` (the pairs kept).
+    """
+
+    def __init__(self, num_rows: int, ns: int, nm: int, nvar: int):
+        self.ns, self.nm, self.nvar = ns, nm, nvar
+        self.local = np.empty((ns * ns * 3 + ns + ns * nm * 3, num_rows, 2 * (ns + nm)))
+        self.chain = np.empty((num_rows, 2 * (ns + nm), nvar))
+        self.slave_weights = np.empty((num_rows, ns, ns, ns))
+        self.master_weights = np.empty((num_rows, ns, nm, ns))
+
+    def put(self, position, factors: dict) -> None:
+        for name, array in factors.items():
+            if name == "local":
+                self.local[:, position] = array.transpose(1, 0, 2)
+            else:
+                getattr(self, name)[position] = array
+
+    @property
+    def offsets(self) -> dict:
+        """The first row of Dn, area and Mn in ``local``."""
+        ns = self.ns
+        return {"Dn": 0, "area": 3 * ns * ns, "Mn": 3 * ns * ns + ns}
+
+    def expanded(self, name: str) -> np.ndarray:
+        """The gradient of Dn, Mn or area over the pair's variables (the kernel's product and
+        the normals' scatter, as :func:`_affine_integrals` applies them)."""
+        ns, nm, nvar = self.ns, self.nm, self.nvar
+        r = self.local.shape[1]
+        k = {"Dn": 3 * ns * ns, "area": ns, "Mn": 3 * ns * nm}[name]
+        start = self.offsets[name]
+        # the kernel's product of all rows at once (the same bits), then the rows of name
+        local = np.ascontiguousarray(self.local.transpose(1, 0, 2))
+        grad = np.ascontiguousarray((local @ self.chain)[:, start:start + k])
+        if name == "area":
+            return grad.reshape(r, ns, nvar)
+        count = ns if name == "Dn" else nm
+        grad = grad.reshape(r, ns, count, 3, nvar)
+        weights = self.slave_weights if name == "Dn" else self.master_weights
+        first = nvar - 3 * ns
+        for c in range(3):
+            grad[..., c, first + c::3] += weights
+        return grad
+
+
 # -- dual helpers ------------------------------------------------------------------------
 
 
@@ -360,6 +412,7 @@ def pair_quantities(
     crosspoint: np.ndarray | None = None,
     slave_facet: np.ndarray | None = None,
     scalar_gradients: bool = False,
+    factorized: bool = True,
 ) -> PairQuantities3:
     """Mortar contributions of every pair, with derivatives (see the module docstring).
 
@@ -381,6 +434,9 @@ def pair_quantities(
         slave_facet: (n,) the slave facet of each pair: element-based integration
             gives each of its Gauss points to one master facet (default: every
             pair a facet of its own). Unused by segment-based integration.
+        factorized: triangle pairs with averaged normals and the standard basis keep the
+            gradients of Dn, Mn and the areas factorized (:class:`AffineFactors`, the
+            ``factors`` of those outputs; their ``grad`` is expanded on first use).
     """
     if normals not in NORMAL_OPTIONS:
         raise ValueError(f"unknown normal option {normals!r}; expected one of {NORMAL_OPTIONS}")
@@ -411,26 +467,35 @@ def pair_quantities(
     names = ("Dn", "Mn", "gap", "area") + (("D", "M") if scalar_gradients else ())
     valid = np.zeros(n, dtype=bool)
     overlap = np.zeros(n)
+    factors = None
     if integration == "segment":
         rows, fraction, batches = _screen_segments(slave_x, master_x, slave_normals, normals)
         valid[rows], overlap[rows] = True, fraction
+        if (factorized and ns == 3 and nm == 3 and normals == "averaged"
+                and not scalar_gradients and basis == "standard"):
+            factors = AffineFactors(rows.size, ns, nm, nvar)
+            names = ("gap",)
         grads = {name: np.empty((rows.size,) + values[name].shape[1:] + (nvar,))
                  for name in names}
         for batch, labels, count, master_node, master_edge_start in batches:
             quantities = _polygon_integrals(
                 slave_x[batch], master_x[batch], slave_normals[batch], crosspoint[batch],
                 normals, basis, rule, labels, count, master_node, master_edge_start,
-                scalar_gradients=scalar_gradients)
+                scalar_gradients=scalar_gradients, factorized=factors is not None)
             position = np.searchsorted(rows, batch)
             for name in values:
                 values[name][batch] = quantities[name].value
             for name in names:
                 grads[name][position] = quantities[name].grad
+            if factors is not None:
+                factors.put(position, quantities["factors"])
     else:
         rows, grads = _element_parts(slave_x, master_x, slave_normals, crosspoint, normals,
                                      basis, rule, slave_facet, values, valid, overlap, names)
 
     def subset(name: str) -> RowSubsetDual:
+        if factors is not None and name in ("Dn", "Mn", "area"):
+            return RowSubsetDual(values[name], rows, lambda: factors.expanded(name), factors)
         return RowSubsetDual(values[name], rows, grads[name])
 
     return PairQuantities3(
@@ -588,7 +653,7 @@ def _screen_segments(slave_x, master_x, slave_normals, normals):
 
 def _polygon_integrals(slave_x, master_x, slave_normals, crosspoint, normals, basis, rule,
                        labels, count, master_node, master_edge_start, pointwise=False,
-                       scalar_gradients=True):
+                       scalar_gradients=True, factorized=False):
     """D, M, Dn, Mn, gap and area of pairs whose clip polygons (labels (m, V, 3)) have V
     vertices each, as Duals over the pair variables (a triangle on a triangle from the
     corners of the fan cells, :func:`_affine_integrals`, unless ``pointwise``; there the
@@ -603,7 +668,8 @@ def _polygon_integrals(slave_x, master_x, slave_normals, crosspoint, normals, ba
     if ns == 3 and nm == 3 and not pointwise:
         return _affine_integrals(S, Mp, topology, node_normals, xs, xm, basis, crosspoint,
                                  bary, rule_weights, scalar_gradients,
-                                 normals_are_variables=normals == "averaged")
+                                 normals_are_variables=normals == "averaged",
+                                 factorized=factorized)
     vertex, centre, v_next, cell_area = _clip_cells(S, Mp, *topology)
     Vn = labels.shape[1]
     c = _expand(centre, 1)
@@ -681,7 +747,7 @@ def _multiplier_basis(N, xs: Dual, basis: str, crosspoint: np.ndarray, shape) ->
 def _affine_integrals(S: Dual, Mp: Dual, topology: tuple, node_normals: Dual, xs: Dual,
                       xm: Dual, basis: str, crosspoint: np.ndarray, bary: np.ndarray,
                       rule_weights: np.ndarray, scalar_gradients: bool = True,
-                      normals_are_variables: bool = False) -> dict:
+                      normals_are_variables: bool = False, factorized: bool = False) -> dict:
     """The integrals of :func:`_mortar_integrals` for a triangle on a triangle.
 
     Both inverse maps are affine, so every point quantity (Phi_j, N_k, N_l, the normal
@@ -755,7 +821,8 @@ def _affine_integrals(S: Dual, Mp: Dual, topology: tuple, node_normals: Dual, xs
         if scalar_gradients:
             read += [slave.grad[:, :, :ns, 3], master.grad[:, :, :nm, 3]]
         sizes = [part[0].size // local for part in read]
-        product = np.concatenate([part.reshape(m, -1, local) for part in read], axis=1) @ chain
+        local_gradients = np.concatenate([part.reshape(m, -1, local) for part in read], axis=1)
+        product = local_gradients @ chain
         parts = np.split(product, np.cumsum(sizes)[:-1], axis=1)
         Dn_grad = parts[0].reshape(m, ns, ns, 3, nvar)
         Mn_grad = parts[2].reshape(m, ns, nm, 3, nvar)
@@ -790,8 +857,14 @@ def _affine_integrals(S: Dual, Mp: Dual, topology: tuple, node_normals: Dual, xs
                                     xs.value.reshape(m, -1)))
             gap_grad[:, :, :3 * ns] -= Dn.value.reshape(m, ns, 3 * ns)
             gap_grad[:, :, 3 * ns:3 * (ns + nm)] += Mn.value.reshape(m, ns, 3 * nm)
-            return {"D": D, "M": M, "Dn": Dn, "Mn": Mn, "gap": Dual(gap_value, gap_grad),
-                    "area": area}
+            result = {"D": D, "M": M, "Dn": Dn, "Mn": Mn, "gap": Dual(gap_value, gap_grad),
+                      "area": area}
+            if factorized and normals_are_variables and not scalar_gradients:
+                result["factors"] = {
+                    "local": local_gradients, "chain": chain,
+                    "slave_weights": slave_weights[:, :, :ns],
+                    "master_weights": master_weights[:, :, :nm]}
+            return result
     gap = (dual.sum_(dual.sum_(Mn * _expand(xm, 1), axis=-1), axis=-1)
            - dual.sum_(dual.sum_(Dn * _expand(xs, 1), axis=-1), axis=-1))
     return {"D": D, "M": M, "Dn": Dn, "Mn": Mn, "gap": gap, "area": area}

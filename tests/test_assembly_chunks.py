@@ -1,0 +1,131 @@
+"""Assembly of the gradient blocks a chunk of pairs at a time: the same matrices as all at once.
+
+G and K are summed group by group (each pair's entries in the pair's order), so the
+chunk size cannot change a bit of them (in serial; in parallel PETSc's own sums of
+other ranks' rows round differently from run to run); a chunk that dropped or
+repeated pairs would.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+from petsc4py import PETSc
+from test_mortar3d import bent_displacement, interface, two_blocks
+
+from dolfinx_mortar.dual import RowSubsetDual
+from dolfinx_mortar.layout import CooMatrix
+from dolfinx_mortar.stencils import _gradient_rows
+
+
+def _csr(matrix):
+    indptr, indices, values = matrix.getValuesCSR()
+    return indptr.copy(), indices.copy(), values.copy()
+
+
+def _gradient_matrices(mortar, z):
+    return [_csr(mortar.gap_jacobian()), _csr(mortar.force_jacobian(z))]
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("cell", ["tetrahedron", "hexahedron"])
+@pytest.mark.parametrize("basis", ["standard", "dual"])
+def test_chunked_gradient_blocks_equal_all_at_once(cell, basis):
+    tagged = two_blocks(cell, 3, 4)
+    u = bent_displacement(tagged)
+    results = []
+    for chunk in (10**9, 7):  # all pairs in one chunk, then 7 at a time
+        mortar = interface(tagged, u, basis=basis)
+        mortar.assembly_chunk = chunk
+        z = mortar.create_multiplier_vector()
+        with z.localForm() as local:
+            local.array[:] = 1.0 + np.cos(np.arange(local.array.size))
+        first = _gradient_matrices(mortar, z)
+        u.x.array[:] += 1e-3 * np.sin(np.arange(u.x.array.size))  # the same pairs, new values
+        mortar.update(u)
+        second = _gradient_matrices(mortar, z)
+        u.x.array[:] -= 1e-3 * np.sin(np.arange(u.x.array.size))
+        contributing = mortar._rows(mortar.quantities).size
+        results.append((first, second, contributing))
+        z.destroy()
+        mortar.destroy()
+    (all_first, all_second, contributing), (chunk_first, chunk_second, _) = results
+    assert MPI.COMM_WORLD.allreduce(contributing, op=MPI.MAX) > 3 * 7  # several chunks
+    for expected, got in zip(all_first + all_second, chunk_first + chunk_second, strict=True):
+        for a, b in zip(expected[:2], got[:2], strict=True):
+            assert np.array_equal(a, b)
+        if MPI.COMM_WORLD.size == 1:
+            assert np.array_equal(expected[2], got[2])
+        else:
+            # PETSc adds the rows other ranks send in an order of its own (two runs with
+            # the same chunk differ by ~1e-16 there): a dropped pair is ~1e-2
+            scale = np.abs(expected[2]).max(initial=0.0)
+            assert np.abs(expected[2] - got[2]).max(initial=0.0) <= 1e-14 * scale
+    assert any(np.abs(a[2]).max() > 0 for a in all_first)
+
+
+def test_group_chunks_equal_one_call():
+    """CooMatrix.assemble_groups with values given chunk by chunk (blocks repeated within
+    and across groups) is bitwise the same with one chunk, and the sums of the array."""
+    rng = np.random.default_rng(3)
+    num_groups = 40
+    row_blocks = rng.integers(0, 6, (num_groups, 2))
+    col_blocks = rng.integers(-1, 9, (num_groups, 4))
+    values = rng.standard_normal((2, 3, 4, 2, 25))
+    groups = np.sort(rng.choice(num_groups, 25, replace=False))
+    matrices = [CooMatrix.from_blocks(MPI.COMM_SELF, row_blocks, col_blocks, (3, 2), 18, 18)
+                for _ in range(3)]
+    expected, one_chunk, chunked = matrices
+    a = _csr(one_chunk.assemble_groups(lambda start, stop: values[..., start:stop], groups,
+                                       chunk=25))
+    b = _csr(chunked.assemble_groups(lambda start, stop: values[..., start:stop], groups,
+                                     chunk=4))
+    for x, y in zip(a, b, strict=True):
+        assert np.array_equal(x, y)
+    c = _csr(expected.assemble_groups(values, groups))
+    assert np.array_equal(a[1], c[1])
+    assert np.abs(a[2] - c[2]).max() <= 1e-15 * np.abs(c[2]).max()
+    dense = np.zeros((18, 18))
+    for g, group in enumerate(groups):
+        for i, r in enumerate(row_blocks[group]):
+            for j, c in enumerate(col_blocks[group]):
+                if c >= 0:
+                    dense[3 * r:3 * r + 3, 2 * c:2 * c + 2] += values[i, :, j, :, g]
+    assert np.allclose(expected.mat.getValues(range(18), range(18)), dense, rtol=0, atol=1e-13)
+    for matrix in matrices:
+        matrix.destroy()
+
+
+def test_gradient_rows_of_a_subset():
+    """The gradients of some rows of a RowSubsetDual are those of its full gradient (zero
+    for rows it does not keep), without building the full gradient."""
+    rng = np.random.default_rng(4)
+    kept = np.array([1, 4, 5, 6, 9, 12])
+    item = RowSubsetDual(rng.standard_normal((15, 3)), kept, rng.standard_normal((6, 3, 5)))
+    full = np.zeros((15, 3, 5))
+    full[kept] = item.grad_rows
+    for rows in (kept[1:4], kept[[0, 2, 5]], np.array([0, 4, 7, 12]), np.zeros(0, dtype=int)):
+        assert np.array_equal(_gradient_rows(item, rows), full[rows])
+    assert item._full is None
+
+
+def test_matrices_stay_valid_after_a_new_search():
+    """A new search drops the old patterns' lookups; the matrices handed out before stay
+    readable and unchanged until they are assembled again."""
+    tagged = two_blocks("tetrahedron", 3, 4)
+    u = bent_displacement(tagged)
+    mortar = interface(tagged, u)
+    z = mortar.create_multiplier_vector()
+    z.set(1.0)
+    D, _ = mortar.mortar_matrices()
+    K = mortar.force_jacobian(z)
+    before = [_csr(D), _csr(K)]
+    mortar.reuse.invalidate()
+    mortar.update(u)
+    for expected, matrix in zip(before, (D, K), strict=True):
+        for a, b in zip(expected, _csr(matrix), strict=True):
+            assert np.array_equal(a, b)
+    assert isinstance(mortar.force_jacobian(z), PETSc.Mat)
+    z.destroy()
+    mortar.destroy()
