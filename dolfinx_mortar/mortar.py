@@ -381,9 +381,7 @@ class MortarInterface:
         if not self.comm.allreduce(changed, op=MPI.LOR):
             return
         self._stencil_widenings = stencil.widenings
-        self.pair_node_blocks = self._node_blocks[stencil.nodes]
         self._pair_dofs = None
-        self._pair_col_blocks = np.where(stencil.present, self.pair_node_blocks, -1)
         self._pattern_version += 1
         # the quantities do not depend on the partner slots: no new evaluation
         self._evaluated_version = self._pattern_version

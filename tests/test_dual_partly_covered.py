@@ -293,6 +293,30 @@ def test_fully_covered_facets_need_no_partner_coupling(dim, normals):
         assert split.widened.tolist() == [True]
 
 
+@pytest.mark.parametrize("normals", ["averaged", "slave"])
+def test_facet_uncovered_later_is_widened(normals):
+    """Two master strips meeting at x = 0.4 under a slave triangle, given as one surface
+    (no boundary known there): fully covered, narrow. One strip moved by 0.05 leaves the
+    band 0.4 < x < 0.45 uncovered: the next evaluation widens the facet (one widening)
+    and its derivatives then pass Taylor."""
+    node_x, slave_facets, master_facets, pairs = pairs_3d(SLAVE_TRIANGLE, [-0.5, 0.4, 1.5],
+                                                          -0.1, tilt=-0.05)
+    stencil = covered_stencil(node_x, slave_facets, master_facets, pairs, normals=normals)
+    evaluate(stencil, node_x, normals)
+    assert stencil.widened.tolist() == [False]
+    narrow_width = stencil.width
+    assert stencil.widenings == 0
+    moved = node_x.copy()
+    moved[7:, 0] += 0.05  # the second strip's nodes
+    evaluate(stencil, moved, normals)
+    assert stencil.widened.tolist() == [True] and stencil.widenings == 1
+    assert stencil.width > narrow_width
+    evaluate(stencil, moved, normals)
+    assert stencil.widenings == 1
+    for name, slope in taylor_slopes(stencil, moved, normals).items():
+        assert abs(slope - 2.0) < 0.1, name
+
+
 def test_fully_covered_facet_keeps_the_whole_facet_dual_basis():
     """Covered everywhere (by two masters), the coefficients are the whole facet's:
     A = [[3, -1, -1], ...] for a triangle, [[2, -1], [-1, 2]] for a 2D facet."""
