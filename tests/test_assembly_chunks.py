@@ -35,7 +35,7 @@ def test_chunked_gradient_blocks_equal_all_at_once(cell, basis):
     tagged = two_blocks(cell, 3, 4)
     u = bent_displacement(tagged)
     results = []
-    for chunk in (10**9, 7):  # all pairs in one chunk, then 7 at a time
+    for chunk in (10**9, 3):  # all pairs in one chunk, then 3 at a time
         mortar = interface(tagged, u, basis=basis)
         mortar.assembly_chunk = chunk
         z = mortar.create_multiplier_vector()
@@ -51,7 +51,8 @@ def test_chunked_gradient_blocks_equal_all_at_once(cell, basis):
         z.destroy()
         mortar.destroy()
     (all_first, all_second, contributing), (chunk_first, chunk_second, _) = results
-    assert MPI.COMM_WORLD.allreduce(contributing, op=MPI.MAX) > 3 * 7  # several chunks
+    # several chunks on the busiest rank (3 ranks: 20 pairs at most on one)
+    assert MPI.COMM_WORLD.allreduce(contributing, op=MPI.MAX) > 3 * 3
     for expected, got in zip(all_first + all_second, chunk_first + chunk_second, strict=True):
         for a, b in zip(expected[:2], got[:2], strict=True):
             assert np.array_equal(a, b)
@@ -62,7 +63,8 @@ def test_chunked_gradient_blocks_equal_all_at_once(cell, basis):
             # the same chunk differ by ~1e-16 there): a dropped pair is ~1e-2
             scale = np.abs(expected[2]).max(initial=0.0)
             assert np.abs(expected[2] - got[2]).max(initial=0.0) <= 1e-14 * scale
-    assert any(np.abs(a[2]).max() > 0 for a in all_first)
+    largest = max(np.abs(a[2]).max(initial=0.0) for a in all_first)
+    assert MPI.COMM_WORLD.allreduce(largest, op=MPI.MAX) > 0
 
 
 def test_group_chunks_equal_one_call():
