@@ -143,6 +143,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         "--normal-phase", choices=("frictionless", "frictional"), default="frictionless",
         help="friction while P is applied (the theory has no tangential traction after it)")
     cli.add_common_arguments(parser, normals="master", mu=0.2)
+    cli.add_predictor_argument(parser)
     args = parser.parse_args(argv)
     if args.tresca is not None:
         parser.error("this demo is about Coulomb friction: use --mu, not --tresca")
@@ -189,10 +190,11 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     law = problem.friction.laws[0]
     if args.normal_phase == "frictionless":
         problem.friction.laws[0] = None
-    records = solve_load_steps(problem, press, args.steps, output=output, on_step=record)
+    records = solve_load_steps(problem, press, args.steps, output=output, on_step=record,
+                               predictor=args.predictor)
     problem.friction.laws[0] = law
     records += solve_load_steps(problem, pull, args.tangential_steps, output=output,
-                                on_step=record)
+                                on_step=record, predictor=args.predictor)
     if output is not None:
         output.close()
     wall_time = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)

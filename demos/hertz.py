@@ -167,6 +167,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     cli.add_common_arguments(
         parser, normals=None, normals_help="None: master for --material linear, else averaged"
     )
+    cli.add_predictor_argument(parser)
     args = parser.parse_args(argv)
     if args.normals is None:
         args.normals = "master" if args.material == "linear" else "averaged"
@@ -234,7 +235,8 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         traction.value[:] = (0.0, -t * load / width)
 
     output = ContactOutput(problem, args.output / "paraview") if args.output else None
-    records = solve_load_steps(problem, apply_load, args.steps, output=output)
+    records = solve_load_steps(problem, apply_load, args.steps, output=output,
+                               predictor=args.predictor)
     if output is not None:
         output.close()
     wall_time = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)

@@ -132,6 +132,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     parser.add_argument("--depth", type=float, default=1.0, help="downward stroke of the die")
     parser.add_argument("--slide", type=float, default=10.0, help="horizontal stroke of the die")
     cli.add_common_arguments(parser)
+    cli.add_predictor_argument(parser)
     args = parser.parse_args(argv)
     configure_logging(comm)
     start = time.perf_counter()
@@ -224,7 +225,8 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     output = ContactOutput(problem, args.output / "paraview") if args.output else None
     steps = max(1, round(args.steps * args.end_time / 2.0))
     records = solve_load_steps(
-        problem, apply_load, steps, output=output, on_step=record, end=args.end_time
+        problem, apply_load, steps, output=output, on_step=record, end=args.end_time,
+        predictor=args.predictor,
     )
     if output is not None:
         output.close()

@@ -157,6 +157,18 @@ def add_common_arguments(
     )
 
 
+def add_predictor_argument(parser: argparse.ArgumentParser, default: str = "extrapolate") -> None:
+    """``--predictor``: the initial guess of each load step
+    (:func:`dolfinx_mortar.loading.solve_load_steps`)."""
+    parser.add_argument(
+        "--predictor",
+        choices=("none", "extrapolate"),
+        default=default,
+        help="initial guess of a load step: the last converged state (none) or the last two "
+        "extrapolated linearly in the load parameter",
+    )
+
+
 def problem_options(args: argparse.Namespace) -> dict[str, Any]:
     """The keyword arguments of ContactProblem that :func:`add_common_arguments` set."""
     return {

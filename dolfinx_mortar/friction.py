@@ -427,9 +427,10 @@ class Friction:
         self.fixed = [f if self.gdim == 3 and flag else None
                       for f, flag in zip(fixed, any_partial, strict=True)]
 
-    def start(self, u) -> None:
-        """Measure slips from u (the state a solve starts from)."""
-        self._start = u.x.array.copy()
+    def start(self, u: np.ndarray) -> None:
+        """Measure slips from the displacement values u (the state a solve starts from, or
+        the last converged state when the solve starts from a predicted one)."""
+        self._start = np.array(u, copy=True)
 
     def tangents(self, k: int, rows: np.ndarray) -> PairTangents:
         """Pair k's tangential coefficients of the pairs ``rows`` at the last evaluation

@@ -31,6 +31,9 @@ from .problem import ContactProblem, SolveReport
 
 logger = logging.getLogger("dolfinx_mortar")
 
+PREDICTORS = ("none", "extrapolate")
+"""Initial guesses of a load step (see :func:`solve_load_steps`)."""
+
 
 class LoadSteppingError(RuntimeError):
     """Newton failed even after the last allowed cut-back, or the increment became too small.
@@ -117,6 +120,7 @@ def solve_load_steps(
     start: float = 0.0,
     end: float = 1.0,
     check_penetration: bool = True,
+    predictor: str = "none",
 ) -> list[StepRecord]:
     """Solve for t = start + (end - start) k / num_steps, k = 1 .. num_steps. Collective.
 
@@ -134,6 +138,11 @@ def solve_load_steps(
         on_step: called after every accepted step (e.g. to record forces).
         check_penetration: after every accepted step, warn when nodes ended it
             deep inside the other body (:meth:`ContactProblem.check_penetration`).
+        predictor: ``none`` (each solve starts from the last converged state) or
+            ``extrapolate``: from the third accepted step on, each solve starts from
+            the last two converged states extrapolated linearly in t
+            (:meth:`ContactProblem.predict`), so that the active set starts near
+            the new one when the contact zone moves or grows steadily.
 
     Raises:
         LoadSteppingError: Newton failed after ``max_cutbacks`` halvings in a row,
@@ -144,6 +153,8 @@ def solve_load_steps(
     """
     if num_steps < 1:
         raise ValueError(f"num_steps must be >= 1, got {num_steps}")
+    if predictor not in PREDICTORS:
+        raise ValueError(f"predictor must be one of {PREDICTORS}, got {predictor!r}")
     records: list[StepRecord] = []
     nominal = (end - start) / num_steps
     if min_increment is None:
@@ -154,12 +165,15 @@ def solve_load_steps(
     step = 0
     penetration_check = getattr(problem, "check_penetration", None) if check_penetration else None
     inverting: tuple[float, object] | None = None  # (t, Inversion) of the last inverting attempt
+    previous: tuple[float, dict] | None = None  # (t, state) of the accepted state before t
     while t < end - 1e-12 * abs(end - start):
         # never step over a point of the nominal grid, so cut-back steps grow back onto it
         next_grid = start + math.ceil((t - start) / nominal * (1.0 + 1e-12) + 1e-9) * nominal
         target = min(end, t + increment, next_grid)
         saved = problem.save_state()
         apply_load(target)
+        if predictor == "extrapolate" and previous is not None:
+            problem.predict(previous[1], (target - t) / (t - previous[0]))
         begin = time.perf_counter()
         report = problem.solve()
         elapsed = problem.comm.allreduce(time.perf_counter() - begin, op=MPI.MAX)
@@ -196,6 +210,8 @@ def solve_load_steps(
             )
             continue
         step += 1
+        if step > 1:  # saved is a converged state (the first step starts from a guess)
+            previous = (t, saved)
         t = target
         record = StepRecord(
             step=step,

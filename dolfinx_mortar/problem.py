@@ -277,6 +277,7 @@ class ContactProblem:
         ]
         self.gaps: list[np.ndarray] = [np.zeros(i.num_owned_multipliers) for i in self.interfaces]
         self.areas: list[np.ndarray] = [np.zeros(i.num_owned_multipliers) for i in self.interfaces]
+        self._slip_origin: np.ndarray | None = None
 
         self._b_u = compat.create_vector(self.F_form)
         self._K = compat.create_matrix(self.J_form)
@@ -623,7 +624,9 @@ class ContactProblem:
         start = time.perf_counter()
         before = dict(self.timings)
         if self.friction is not None:
-            self.friction.start(self.u)
+            origin = self._slip_origin if self._slip_origin is not None else self.u.x.array
+            self.friction.start(origin)
+        self._slip_origin = None
         self._read_state_into_x()
         report = self.enforcement.solve(self)
         total = time.perf_counter() - start
@@ -668,12 +671,30 @@ class ContactProblem:
 
     def restore_state(self, state: dict) -> None:
         """Put back a :meth:`save_state` (not collective; call it on every rank)."""
+        self._slip_origin = None
         self.u.x.array[:] = state["u"]
         for z, values in zip(self.multipliers + self.tangential, state["z"] + state["y"],
                              strict=True):
             z.getArray()[:] = values
         self.enforcement.restore_state(state["enforcement"])
         self._read_state_into_x()
+
+    def predict(self, previous: dict, ratio: float) -> None:
+        """Start the next solve from the current state extrapolated linearly, x + ratio (x -
+        x_previous), for u and the multipliers (not collective; call it on every rank).
+
+        ``previous`` is a :meth:`save_state` of the step before. The solve still measures
+        slips from the current state (friction's increments are from the last converged
+        state, not from the guess); Uzawa multipliers are not extrapolated.
+        """
+        current = self.save_state()
+        self.u.x.array[:] += ratio * (current["u"] - previous["u"])
+        for z, now, before in zip(self.multipliers + self.tangential,
+                                  current["z"] + current["y"], previous["z"] + previous["y"],
+                                  strict=True):
+            z.getArray()[:] += ratio * (now - before)
+        self._read_state_into_x()
+        self._slip_origin = current["u"]
 
     # -- results -----------------------------------------------------------
 

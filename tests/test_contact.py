@@ -416,3 +416,62 @@ def test_separated_bodies_have_no_active_node_and_a_regular_system():
     assert report.active == 0
     assert problem.statistics()[f"{pair.slave}-{pair.master}"]["pairs"] == 0
     problem.destroy()
+
+
+def _patch_test_with_load(argv: list[str]):
+    """The patch test demo's problem before its solve, and its traction Constant."""
+    module = demo("patch_test")
+
+    class Capture(module.ContactProblem):
+        def __init__(self, F, *args, **kwargs):
+            super().__init__(F, *args, **kwargs)
+            (self.traction,) = [c for c in F.constants() if c.value.shape == (2,)]
+
+        def solve(self):
+            raise _ProblemBuilt(self)
+
+    module.ContactProblem = Capture
+    with pytest.raises(_ProblemBuilt) as built:
+        module.main(argv)
+    problem = built.value.problem
+    problem.solve = ContactProblem.solve.__get__(problem)
+    return problem, problem.traction
+
+
+@pytest.mark.parallel
+def test_extrapolating_predictor_is_exact_for_a_solution_linear_in_the_load():
+    """The patch test (linear material, reference configuration, every slave node active)
+    has u and z affine in the load: from the third step on (the first two converged states
+    are the first to extrapolate from) the guess is the solution, so its residual is the
+    previous steps' solver tolerance, and Newton stops at its one forced step; without
+    the predictor each step starts one load increment off. Both end at the same state."""
+    problem, traction = _patch_test_with_load(["--ratio", "2:3", "--refinement", "1"])
+    full = traction.value.copy()
+    start = problem.save_state()
+
+    def apply_load(t):
+        traction.value[:] = t * full
+
+    initial, final = {}, {}
+    for predictor in ("none", "extrapolate"):
+        problem.restore_state(start)
+        records = solve_load_steps(problem, apply_load, 4, predictor=predictor,
+                                   check_penetration=False)
+        initial[predictor] = [r.report.residuals[0] for r in records]
+        final[predictor] = problem.save_state()
+        assert problem.num_active() > 0 and all(r.report.converged for r in records)
+    none, extrapolated = initial["none"], initial["extrapolate"]
+    # the same load increment in every step after the first: the same initial residual
+    assert none[2:] == pytest.approx([none[1]] * 2, rel=1e-6)
+    assert extrapolated[:2] == pytest.approx(none[:2], rel=1e-12)
+    assert max(extrapolated[2:]) <= 1e-8 * none[1], (none, extrapolated)
+    assert [r.iterations for r in records][2:] == [1, 1]
+    comm = problem.comm
+    for key in ("u", "z"):
+        a, b = (np.concatenate([np.ravel(final[p][key])]) for p in ("none", "extrapolate"))
+        scale = comm.allreduce(np.abs(a).max(initial=0.0), op=MPI.MAX)
+        difference = comm.allreduce(np.abs(a - b).max(initial=0.0), op=MPI.MAX)
+        assert scale > 0.0 and difference <= 1e-9 * scale, (key, difference, scale)
+    with pytest.raises(ValueError, match="predictor must be one of"):
+        solve_load_steps(problem, apply_load, 1, predictor="quadratic")
+    problem.destroy()

@@ -246,6 +246,51 @@ def test_a_monotone_pull_does_not_depend_on_the_number_of_steps():
 
 
 @pytest.mark.parallel
+@pytest.mark.parametrize("shear_ratio", [0.6, 2.0])
+def test_a_predicted_start_measures_slips_from_the_converged_state(shear_ratio):
+    """The friction patch test in stick (R = 0.6) and in slip (R = 2), solved; then the same
+    load again from a guess (that state extrapolated as from u = 0, twice its displacement
+    and multipliers, as ``ContactProblem.predict`` makes them): the solve must come back
+    to the solved state, because slips are measured from the last converged state and
+    not from the guess."""
+    limit = 0.5 * PATCH.PRESSURE
+    problem = sheared_blocks((3, 7), "upper", ("coulomb", 0.5),
+                             shear_ratio * limit / PATCH.SHEAR_MODULUS,
+                             min(shear_ratio, 1.0) * limit)
+    start = problem.save_state()
+    solved(problem)
+    converged = problem.save_state()
+    problem.predict(start, 1.0)
+    guess = problem.save_state()
+    comm = problem.comm
+    for key in ("u", "z", "y"):
+        a, b = (np.ravel(state[key]) for state in (converged, guess))
+        scale = comm.allreduce(np.abs(a).max(initial=0.0), op=MPI.MAX)
+        moved = comm.allreduce(np.abs(a - b).max(initial=0.0), op=MPI.MAX)
+        assert moved > 0.5 * scale > 0.0, key
+    solved(problem)
+    for key in ("u", "z", "y"):
+        a, b = (np.ravel(state[key]) for state in (converged, problem.save_state()))
+        scale = comm.allreduce(np.abs(a).max(initial=0.0), op=MPI.MAX)
+        difference = comm.allreduce(np.abs(a - b).max(initial=0.0), op=MPI.MAX)
+        assert difference <= 1e-9 * scale, (key, difference, scale)
+
+
+def test_the_predictor_does_not_change_a_frictional_answer():
+    """Cattaneo-Mindlin at refinement 0 pulled in 8 steps, each started from the last two
+    converged states extrapolated (the demos' default) and from the last one: the same
+    tractions (to 1e-8 of mu p0), because slips are measured from the last converged state,
+    not from the guess; and fewer Newton iterations with the guess."""
+    module = load_demo("cattaneo_mindlin")
+    runs = [module.main(["--refinement", "0", "--tangential-steps", "8", "--predictor", p],
+                        comm=MPI.COMM_SELF) for p in ("none", "extrapolate")]
+    q = [np.array(r["profile"]["traction"]) for r in runs]
+    scale = 0.2 * runs[0]["p0_exact"]
+    assert np.max(np.abs(q[0] - q[1])) < 1e-8 * scale
+    assert sum(runs[1]["newton_iterations"]) < sum(runs[0]["newton_iterations"])
+
+
+@pytest.mark.parallel
 @pytest.mark.timeout(600)
 def test_frictional_ironing_serial_equals_parallel():
     """Shallow ironing with mu = 0.3 into the sliding phase (250 steps over [0, 2], twice
