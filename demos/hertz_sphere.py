@@ -24,12 +24,20 @@ Mesh (dolfinx_mortar.meshes3d.hertz_sphere): tetrahedra of size a / (4 2^k)
 distance, with a the Hertz radius of the given load and moduli: the same
 dimensionless problem in other units gives the same p_max / p0.
 
-Measured (defaults, L = R; 2 load steps; Newton iterations per step):
+Load steps: the sphere starts pressed in so that the bodies overlap within a/2, and
+the load grows so that the Hertz radius grows linearly from a/2 to a, in steps that move
+the contact edge by at most 3 slave elements (``--steps`` overrides the count): the
+semismooth Newton iterations of a step grow with that distance (docs/benchmarks.md,
+"Newton iterations per load step in 3D Hertz"). From the third step on each step starts
+from the last two extrapolated (``--predictor``).
 
-    refinement  dofs   p_max/p0-1  fitted p0  a_contact-a  L2 error  Newton  wall
-    0            2703  +3.2 %      +0.2 %     -0.26 h      8.5 %     4, 4    3 s
-    1           13407  +3.8 %      +0.9 %     -0.02 h      5.5 %     6, 5    48 s
-    2           84726  +4.1 %      +0.3 %     -0.12 h      3.2 %     9, 7    27 min (2 ranks)
+Measured (defaults, L = R; Newton iterations per step; wall times serial, the iterative
+solver at refinement 2, one other job on the second core):
+
+    refinement  dofs   p_max/p0-1  fitted p0  a_contact-a  L2 error  Newton    wall
+    0            2703  +3.2 %      +0.2 %     -0.26 h      8.5 %     5         0.7 s
+    1           13407  +3.8 %      +0.9 %     -0.02 h      5.5 %     5, 5      12 s
+    2           84726  +4.1 %      +0.3 %     -0.12 h      3.2 %     6, 6, 4   103 s
 
 The total force equals the load to 4e-15. p_max, the largest nodal multiplier,
 stays 3-4 % above p0: the nodal values scatter about Hertz's curve (within
@@ -39,10 +47,8 @@ come down, while their mean does: ``p0_fit`` (the ellipse p^2 = p0^2 (1 - r^2/a^
 fitted to the nodes with r < 0.8 a) is within 1 % of p0. L = 2R moves p_max
 and p0_fit by less than 0.2 % at refinement 1, so the block's size is not the
 cause. The L2 error converges at the rate 0.73 (fitted on levels 0-2). The
-direct linear solver takes 98 % of the time at refinement 2 (wall times on 2
-cores shared with other jobs). ``--linear-solver iterative`` gives the same
-answer (to 1e-14 at refinement 1, 29 and 26 Krylov iterations per step) but was
-not faster there (60 s of linear solves against 38 s).
+default ``--linear-solver auto`` takes the iterative solver from 20,000 dofs on
+(benchmarks/README.md, "Direct or iterative by default"); both give the same answer.
 
 ``--cell hexahedron`` (dolfinx_mortar.meshes3d.hertz_sphere_hexahedral): structured
 graded hexahedral grids, the upper body a column [0, R/2]^2 whose bottom face is the
@@ -79,6 +85,22 @@ from dolfinx_mortar.materials import Material, internal_work
 from dolfinx_mortar.problem import ContactPair, ContactProblem
 
 TIMINGS = ("bulk assembly", "contact search", "mortar integration", "linear solve", "total")
+INITIAL_RADIUS = 0.5
+"""Radius of the initial overlap (the first iterate's active set), a fraction of a."""
+EDGE_ELEMENTS_PER_STEP = 3.0
+"""How far the contact edge moves in one automatic load step, in slave elements."""
+
+
+def automatic_steps(elements_per_radius: int, refinement: int) -> int:
+    """Load steps (uniform in the Hertz radius) that move the contact edge by at most
+    :data:`EDGE_ELEMENTS_PER_STEP` slave elements each.
+
+    The semismooth Newton method's iterations in a step grow with that distance: its
+    first iterate overshoots the new contact zone and the next ones shed the overshoot
+    about half of it at a time (docs/benchmarks.md, "Newton iterations per load step in 3D").
+    """
+    elements = elements_per_radius * 2**refinement
+    return max(1, math.ceil((1.0 - INITIAL_RADIUS) * elements / EDGE_ELEMENTS_PER_STEP))
 
 
 def hertz_solution(load, radius, E1, nu1, E2, nu2, case) -> dict:
@@ -231,10 +253,16 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         default=meshes3d.ELEMENTS_PER_RADIUS,
         help="n0: element size a / (n0 2^refinement) in the contact zone",
     )
-    parser.add_argument("--steps", type=int, default=2, help="load steps")
+    parser.add_argument(
+        "--steps", type=int, default=None,
+        help="load steps, uniform in the Hertz radius from the initial indentation's to a "
+        f"(None: enough that the contact edge moves by at most {EDGE_ELEMENTS_PER_STEP:g} "
+        "slave elements per step)",
+    )
     cli.add_common_arguments(
         parser, normals=None, normals_help="None: master for --material linear, else averaged"
     )
+    cli.add_predictor_argument(parser)
     args = parser.parse_args(argv)
     if args.normals is None:
         args.normals = "master" if args.material == "linear" else "averaged"
@@ -283,10 +311,10 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         F, u, bcs, [pair], configuration=configuration, **problem_options(args)
     )
 
-    # start the floating sphere pressed into the lower body by a fraction of the Hertz
-    # approach, so that Newton's first iterate already has active nodes
+    # start the floating sphere pressed into the lower body so that the bodies overlap
+    # within INITIAL_RADIUS a, so that Newton's first iterate already has active nodes
     sphere_cells = tagged.cell_tags.find(markers["sphere"])
-    indentation = (0.5 * exact["a"]) ** 2 / (2.0 * exact["R_star"])
+    indentation = (INITIAL_RADIUS * exact["a"]) ** 2 / (2.0 * exact["R_star"])
     u.interpolate(
         lambda x: np.vstack([0.0 * x[0], 0.0 * x[0], -indentation + 0.0 * x[0]]), sphere_cells
     )
@@ -296,10 +324,14 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     load_area = surface_area(tagged, "load")
 
     def apply_load(t: float) -> None:
-        traction.value[:] = (0.0, 0.0, -t * 0.25 * args.load / load_area)
+        # the Hertz radius grows linearly in t, from INITIAL_RADIUS a to a (F ~ a^3)
+        fraction = (INITIAL_RADIUS + (1.0 - INITIAL_RADIUS) * t) ** 3
+        traction.value[:] = (0.0, 0.0, -fraction * 0.25 * args.load / load_area)
 
+    steps = args.steps or automatic_steps(args.elements_per_radius, args.refinement)
     output = ContactOutput(problem, args.output / "paraview") if args.output else None
-    records = solve_load_steps(problem, apply_load, args.steps, output=output)
+    records = solve_load_steps(problem, apply_load, steps, output=output,
+                               predictor=args.predictor)
     if output is not None:
         output.close()
     wall_time = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
@@ -364,6 +396,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
             "pressure": pressure[zone][order].tolist(),
         },
         "newton_iterations": [r.iterations for r in records],
+        "load_steps": steps,
         "krylov_iterations": [r.report.linear_iterations for r in records],
         "residuals_per_step": [r.report.residuals for r in records],
         "active_nodes": records[-1].active,

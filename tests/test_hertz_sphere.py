@@ -62,7 +62,7 @@ def test_pressure_is_near_hertz(serial):
     """Refinement 0 (h = a/4, 2703 dofs), measured: p_max/p0 - 1 = +3.2 % (the largest of
     scattered nodal values), the fitted peak p0_fit/p0 - 1 = +0.17 %, a_contact = 0.0945
     vs a = 0.1008 (-0.26 slave elements), L2 pressure error 8.5 %; one linear problem per
-    active set, so few Newton iterations (measured [4, 4])."""
+    active set, so few Newton iterations (measured [4, 4] in 2 steps)."""
     assert 0.0 < serial["p_max"] / serial["p0_exact"] - 1.0 < 0.06
     assert abs(serial["p0_fit_error_rel"]) < 0.02
     assert abs(serial["a_error_in_elements"]) < 1.0
@@ -102,6 +102,36 @@ def test_serial_equals_parallel():
     for key in ("p_max", "total_force", "a_contact", "l2_pressure_error_rel"):
         assert parallel[key] == pytest.approx(serial[key], rel=1e-8), key
     assert parallel["total_force"] == pytest.approx(parallel["load"], rel=1e-8)
+
+
+def _demo_module():
+    spec = importlib.util.spec_from_file_location("demo_hertz_sphere", DEMOS / "hertz_sphere.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("n0, refinement, steps", [(4, 0, 1), (4, 1, 2), (4, 2, 3), (2, 3, 3),
+                                                    (5, 2, 4), (5, 3, 7)])
+def test_automatic_steps_move_the_contact_edge_at_most_three_elements(n0, refinement, steps):
+    """From a/2 to a is n0 2^k / 2 slave elements: the fewest steps of at most 3 each."""
+    module = _demo_module()
+    assert module.automatic_steps(n0, refinement) == steps
+    distance = (1.0 - module.INITIAL_RADIUS) * n0 * 2**refinement
+    assert distance / steps <= module.EDGE_ELEMENTS_PER_STEP
+    assert steps == 1 or distance / (steps - 1) > module.EDGE_ELEMENTS_PER_STEP
+
+
+def test_the_answer_does_not_depend_on_the_load_steps(serial):
+    """Frictionless linear elasticity has no load path: 1 and 4 steps (the default at
+    refinement 0 is 1) end at the 2-step answer to 1e-8; the iterations per step fall with
+    the distance the contact edge moves in a step (measured [5], [3, 4] and [3, 2, 1, 2])."""
+    runs = {n: hertz_sphere(["--refinement", "0", "--steps", str(n)]) for n in (1, 4)}
+    for n, summary in runs.items():
+        for key in ("p_max", "a_contact", "l2_pressure_error_rel"):
+            assert summary[key] == pytest.approx(serial[key], rel=1e-8), (n, key)
+        assert summary["load_steps"] == n
+    assert max(runs[4]["newton_iterations"]) < runs[1]["newton_iterations"][0]
 
 
 @pytest.mark.parametrize(

@@ -138,7 +138,7 @@ def hertz3d_record(summary: dict) -> dict:
 
 def hertz3d(refinements: list[int], repeats: int, variants: list[dict] = HERTZ3D_VARIANTS,
             elements_per_radius: int = 2, direct_max_refinement: int | None = None) -> dict:
-    """Every variant x refinement of demos/hertz_sphere.py (quarter model, linear, 2 steps);
+    """Every variant x refinement of demos/hertz_sphere.py (quarter model, linear, its load steps);
     the direct solver only up to ``direct_max_refinement`` (its fill-in grows fastest)."""
     base = ["--elements-per-radius", str(elements_per_radius)]
     run_demo("hertz_sphere", base + ["--refinement", "0"])  # warm-up: JIT, gmsh
