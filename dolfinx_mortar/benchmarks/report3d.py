@@ -76,8 +76,8 @@ def hertz3d_markdown(data: dict) -> str:
                      + (f" ({fmt(finest)} over the finest three)" if finest is not None else "")
                      + f", {fmt(rate['l2_vs_dofs'])} against dofs")
     lines += ["", f"Quarter model, --elements-per-radius {data['elements_per_radius']}, linear "
-              "material, the demo's load steps (the contact edge moves by at most 3 slave "
-              "elements a step); h is the measured mean slave edge length within a; "
+              "material, the load steps of each run (its Newton iterations per step); h is "
+              "the measured mean slave edge length within a; "
               "Newton and Krylov iterations per load step (Krylov: the iterations of the "
               "linear solves, one per Newton iteration for LU, outer FGMRES iterations on "
               "[u, z] for the iterative solver); inner GMRES: iterations per application of "
@@ -100,7 +100,7 @@ def scaling3d_markdown(data: dict) -> str:
                          f"{r['error'][:200]} |" + " |" * (len(header) - 4))
             continue
         load = (f"{r['load_1min_start']:.1f} / {r['load_1min_end']:.1f}"
-                if "load_1min_start" in r else "-")
+                if r.get("load_1min_start") is not None else "-")
         solver = r["linear_solver"] + (" (stored)" if r.get("stored") else "")
         lines.append("| " + " | ".join([
             solver, str(r["num_ranks"]), mesh, str(r["num_dofs"]),
@@ -111,8 +111,8 @@ def scaling3d_markdown(data: dict) -> str:
             ", ".join(f"{m:.0f}" for m in r["peak_rss_mib_per_rank"]),
             fmt(r["errors"]["l2_pressure_error_rel"]), load]) + " |")
     lines += ["", "One process per run (a fresh high-water mark of its memory). Hertz sphere "
-              "on a block, quarter model, linear, the demo's load steps; n0:ref = "
-              "--elements-per-radius:"
+              "on a block, quarter model, linear, the load steps of each run (Newton: "
+              "iterations per step); n0:ref = --elements-per-radius:"
               "--refinement. direct: MUMPS LU of the monolithic [u, z] system; iterative: "
               "FGMRES on [u, z] (the 'Krylov' count) preconditioned by the condensed "
               "displacement system, GMRES rtol 1e-3 + BoomerAMG ('inner GMRES' per "
