@@ -28,16 +28,15 @@ Load steps: the sphere starts pressed in so that the bodies overlap within a/2, 
 the load grows so that the Hertz radius grows linearly from a/2 to a, in steps that move
 the contact edge by at most 3 slave elements (``--steps`` overrides the count): the
 semismooth Newton iterations of a step grow with that distance (docs/benchmarks.md,
-"Newton iterations per load step in 3D Hertz"). From the third step on each step starts
-from the last two extrapolated (``--predictor``).
+"Newton iterations per load step in 3D Hertz").
 
 Measured (defaults, L = R; Newton iterations per step; wall times serial, the iterative
-solver at refinement 2, one other job on the second core):
+solver at refinement 2, other jobs on the second core):
 
     refinement  dofs   p_max/p0-1  fitted p0  a_contact-a  L2 error  Newton    wall
     0            2703  +3.2 %      +0.2 %     -0.26 h      8.5 %     5         0.7 s
     1           13407  +3.8 %      +0.9 %     -0.02 h      5.5 %     5, 5      12 s
-    2           84726  +4.1 %      +0.3 %     -0.12 h      3.2 %     6, 6, 4   103 s
+    2           84726  +4.1 %      +0.3 %     -0.12 h      3.2 %     6, 6, 6   171 s
 
 The total force equals the load to 4e-15. p_max, the largest nodal multiplier,
 stays 3-4 % above p0: the nodal values scatter about Hertz's curve (within

@@ -157,7 +157,7 @@ def add_common_arguments(
     )
 
 
-def add_predictor_argument(parser: argparse.ArgumentParser, default: str = "extrapolate") -> None:
+def add_predictor_argument(parser: argparse.ArgumentParser, default: str = "none") -> None:
     """``--predictor``: the initial guess of each load step
     (:func:`dolfinx_mortar.loading.solve_load_steps`)."""
     parser.add_argument(

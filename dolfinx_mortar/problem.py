@@ -278,6 +278,7 @@ class ContactProblem:
         self.gaps: list[np.ndarray] = [np.zeros(i.num_owned_multipliers) for i in self.interfaces]
         self.areas: list[np.ndarray] = [np.zeros(i.num_owned_multipliers) for i in self.interfaces]
         self._slip_origin: np.ndarray | None = None
+        self._reference_norm: float | None = None
 
         self._b_u = compat.create_vector(self.F_form)
         self._K = compat.create_matrix(self.J_form)
@@ -628,7 +629,14 @@ class ContactProblem:
             self.friction.start(origin)
         self._slip_origin = None
         self._read_state_into_x()
-        report = self.enforcement.solve(self)
+        rtol, atol, stol, max_it = self.snes.getTolerances()
+        if self._reference_norm is not None:
+            self.snes.setTolerances(atol=max(atol, rtol * self._reference_norm))
+        self._reference_norm = None
+        try:
+            report = self.enforcement.solve(self)
+        finally:
+            self.snes.setTolerances(atol=atol)
         total = time.perf_counter() - start
         spent = {key: self.timings[key] - before[key] for key in self.timings}
         spent["linear solve"] = max(0.0, total - sum(spent.values()))
@@ -672,6 +680,7 @@ class ContactProblem:
     def restore_state(self, state: dict) -> None:
         """Put back a :meth:`save_state` (not collective; call it on every rank)."""
         self._slip_origin = None
+        self._reference_norm = None
         self.u.x.array[:] = state["u"]
         for z, values in zip(self.multipliers + self.tangential, state["z"] + state["y"],
                              strict=True):
@@ -681,13 +690,18 @@ class ContactProblem:
 
     def predict(self, previous: dict, ratio: float) -> None:
         """Start the next solve from the current state extrapolated linearly, x + ratio (x -
-        x_previous), for u and the multipliers (not collective; call it on every rank).
+        x_previous), for u and the multipliers. Collective.
 
         ``previous`` is a :meth:`save_state` of the step before. The solve still measures
         slips from the current state (friction's increments are from the last converged
-        state, not from the guess); Uzawa multipliers are not extrapolated.
+        state, not from the guess), and its relative tolerance still refers to the residual
+        at the current state (with the new load): a better guess must not tighten the
+        stopping test. Uzawa multipliers are not extrapolated.
         """
         current = self.save_state()
+        self._read_state_into_x()
+        self._residual(self.snes, self.x, self.b)
+        self._reference_norm = self.b.norm()
         self.u.x.array[:] += ratio * (current["u"] - previous["u"])
         for z, now, before in zip(self.multipliers + self.tangential,
                                   current["z"] + current["y"], previous["z"] + previous["y"],
