@@ -699,8 +699,10 @@ class ContactProblem:
         stopping test. Uzawa multipliers are not extrapolated.
         """
         current = self.save_state()
+        if self.friction is not None:
+            self.friction.start(current["u"])
         self._read_state_into_x()
-        self._residual(self.snes, self.x, self.b)
+        self._residual(self.snes, self.x, self.b)  # where an unpredicted solve would start
         self._reference_norm = self.b.norm()
         self.u.x.array[:] += ratio * (current["u"] - previous["u"])
         for z, now, before in zip(self.multipliers + self.tangential,
