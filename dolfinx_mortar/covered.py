@@ -240,8 +240,6 @@ class CoveredStencil:
         self.coupled = coupled
         """False: the pairs never get the partner coupling (quantities frozen in the
         reference configuration have no derivatives of A_e)"""
-        self.master_boundary = master_boundary
-        """mask over the node table: nodes on the master surface's boundary (None: none)"""
         facet = base.slave_facets
         n = facet.size
         order = np.argsort(facet, kind="stable")
@@ -260,7 +258,23 @@ class CoveredStencil:
         """per slave facet (sorted ids): whether its pairs carry the partner coupling"""
         self.slave_facets = facet
         self.widenings = 0
+        self.master_boundary = master_boundary
         self._build_slots()
+
+    @property
+    def master_boundary(self) -> np.ndarray | None:
+        """Mask over the node table: nodes on the master surface's boundary (None: none)."""
+        return self._master_boundary
+
+    @master_boundary.setter
+    def master_boundary(self, mask: np.ndarray | None) -> None:
+        # per slave facet (sorted ids): a candidate master facet has a boundary node
+        self._master_boundary = mask
+        self._touches_boundary = np.zeros(self._starts.size, dtype=bool)
+        if mask is not None and self._group.size:
+            touches = mask[self.base.master_nodes].any(axis=1)
+            self._touches_boundary = np.bincount(self._group, weights=touches,
+                                                 minlength=self._starts.size) > 0
 
     def _build_slots(self) -> None:
         """``partners``, ``node_slots``, ``nodes`` and ``present`` for the widened facets."""
@@ -317,10 +331,7 @@ class CoveredStencil:
         # the pairs' overlaps may also overlap each other (masters projected along their
         # own normals): then too M_e moves with the master nodes
         partial = ~(np.abs(covered - measure) <= FULL_COVERAGE * measure)
-        if self.master_boundary is not None and self._group.size:
-            touches = self.master_boundary[self.base.master_nodes].any(axis=1)
-            by_facet = np.bincount(self._group, weights=touches, minlength=self.widened.size)
-            partial |= by_facet[group] > 0
+        partial |= self._touches_boundary[group]
         return group[partial & ~self.widened[group]]
 
     def widen(self, groups: np.ndarray) -> None:
