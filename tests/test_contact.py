@@ -452,6 +452,14 @@ def test_extrapolating_predictor_is_exact_for_a_solution_linear_in_the_load():
     def apply_load(t):
         traction.value[:] = t * full
 
+    references = []
+    predict = problem.predict
+
+    def recording_predict(*args):
+        predict(*args)
+        references.append(problem._reference_norm)
+
+    problem.predict = recording_predict
     initial, final = {}, {}
     for predictor in ("none", "extrapolate"):
         problem.restore_state(start)
@@ -466,6 +474,8 @@ def test_extrapolating_predictor_is_exact_for_a_solution_linear_in_the_load():
     assert extrapolated[:2] == pytest.approx(none[:2], rel=1e-12)
     assert max(extrapolated[2:]) <= 1e-8 * none[1], (none, extrapolated)
     assert [r.iterations for r in records][2:] == [1, 1]
+    # the predicted steps stop relative to where an unpredicted step starts
+    assert references == pytest.approx(none[2:], rel=1e-10)
     comm = problem.comm
     for key in ("u", "z"):
         a, b = (np.concatenate([np.ravel(final[p][key])]) for p in ("none", "extrapolate"))
