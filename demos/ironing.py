@@ -200,6 +200,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
             {
                 "t": step.load,
                 "newton_iterations": step.iterations,
+                "initial_residual": step.report.residuals[0] if step.report.residuals else None,
                 "active": step.active,
                 # force the block exerts on the die (slave) and the die on the block (master)
                 "slave_force_x": float(slave[0]),
@@ -246,6 +247,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     summary = {
         **problem_options(args),
         "slave": args.slave,
+        "predictor": args.predictor,
         "E_die": args.E_die,
         "E_block": args.E_block,
         "dim": gdim,
