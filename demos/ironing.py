@@ -131,9 +131,15 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     )
     parser.add_argument("--depth", type=float, default=1.0, help="downward stroke of the die")
     parser.add_argument("--slide", type=float, default=10.0, help="horizontal stroke of the die")
-    cli.add_common_arguments(parser)
+    cli.add_common_arguments(
+        parser, normals=None,
+        normals_help="None: averaged in 2D, slave in 3D (the slave facets' own normals: fewer "
+        "Newton iterations where the bow wave reaches the end of the die's contact face, "
+        "docs/benchmarks.md)")
     cli.add_predictor_argument(parser)
     args = parser.parse_args(argv)
+    if args.normals is None:
+        args.normals = "slave" if args.dim == 3 else "averaged"
     configure_logging(comm)
     start = time.perf_counter()
     gdim = args.dim

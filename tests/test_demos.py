@@ -84,7 +84,7 @@ HELP_DEFAULTS = {
     "hertz": ["(default: B)", "(default: 8.0)", "(default: 2)"],
     "patch_test": ["(default: 3:2)", "(default: top)", "(default: lagrange)"],
     "ironing": ["(default: 500)", "(default: quadrilateral)", "(default: 2.0)",
-                "(default: frictionless)"],
+                "(default: frictionless)", "None: averaged in 2D, slave in 3D"],
     "mesh_tying": [
         "(None: 5 in 2D, 4 in 3D)",
         "(None: 3:4 in 2D, 2:3 in 3D)",
