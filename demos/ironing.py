@@ -26,7 +26,11 @@ FILE`` writes the summary.
 ``--dim 3``: the 3D setup of the reference (Kratos' shallow_ironing_3D): die
 and block extruded one unit through the thickness z into hexahedra
 (``--layers``), u_z = 0 on the block's back face z = 0 only, the die top
-driven in x and y with u_z = 0; forces are per unit thickness as in 2D.
+driven in x and y with u_z = 0; forces are per unit thickness as in 2D. The
+contact constraints use the slave facets' own normals there unless ``--normals``
+says otherwise: with them the step where the bow wave ahead of the die reaches
+the end of the die's contact face settles in fewer Newton iterations than with
+averaged normals (docs/benchmarks.md, "Slave normals, the 3D default").
 ``--compare FILE`` (another run's JSON, e.g. a 2D one beside a 3D run, or the
 frictionless one beside a frictional run) adds its curves to the figure.
 
