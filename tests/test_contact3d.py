@@ -313,8 +313,8 @@ def test_penetration_report_finds_nodes_behind_a_3d_surface():
 def test_ironing_3d_small_run_balances_and_gives_the_serial_answer():
     """The extruded die pressed 0.1 into the extruded block (two hexahedra through the
     thickness): every step converges, die and block forces balance, the die-top reaction
-    equals the contact force, and N ranks give the serial forces to 1e-8 (and the serial
-    Newton iterations to one)."""
+    equals the contact force, N ranks give the serial forces to 1e-8 (and the serial
+    Newton iterations to one), and the serial steps end quadratically."""
     args = ["--dim", "3", "--layers", "2", "--steps", "40", "--end-time", "0.3"]
     serial = demo("ironing").main(list(args), comm=MPI.COMM_SELF)
     parallel = demo("ironing").main(list(args), comm=MPI.COMM_WORLD)
@@ -333,6 +333,17 @@ def test_ironing_3d_small_run_balances_and_gives_the_serial_answer():
     assert len(parallel["newton_iterations"]) == len(serial["newton_iterations"])
     for a, b in zip(serial["newton_iterations"], parallel["newton_iterations"], strict=True):
         assert abs(a - b) <= 1, (serial["newton_iterations"], parallel["newton_iterations"])
+    # quadratic at the end: the last drop above the rounding floor (1e-11 r_0) has
+    # r_k+1/r_0 <= 10 (r_k/r_0)^2 (the active set may change in any earlier iteration)
+    checked = 0
+    for step in serial["history"]:
+        q = np.array(step["residuals"]) / step["residuals"][0]
+        drops = [(a, b) for a, b in zip(q[:-1], q[1:], strict=True) if a < 0.1 and b > 1e-11]
+        if drops:
+            a, b = drops[-1]
+            assert b <= 10.0 * a**2, step["residuals"]
+            checked += 1
+    assert checked == 2, [h["residuals"] for h in serial["history"]]  # the steps in contact
 
 
 @pytest.mark.parallel
