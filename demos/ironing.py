@@ -210,7 +210,6 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
             {
                 "t": step.load,
                 "newton_iterations": step.iterations,
-                "initial_residual": step.report.residuals[0] if step.report.residuals else None,
                 "residuals": [float(r) for r in step.report.residuals],
                 "active": step.active,
                 # force the block exerts on the die (slave) and the die on the block (master)
