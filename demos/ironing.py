@@ -334,7 +334,8 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         if args.output:
             args.output.mkdir(parents=True, exist_ok=True)
             with open(args.output / "ironing_forces.csv", "w", newline="") as stream:
-                writer = csv.DictWriter(stream, fieldnames=list(history[0]))
+                scalars = [key for key, value in history[0].items() if not isinstance(value, list)]
+                writer = csv.DictWriter(stream, fieldnames=scalars, extrasaction="ignore")
                 writer.writeheader()
                 writer.writerows(history)
             compare, label = None, ""

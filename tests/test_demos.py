@@ -13,6 +13,7 @@ import json
 import math
 import pathlib
 
+import numpy as np
 import pytest
 from mpi4py import MPI
 
@@ -232,7 +233,11 @@ def test_demo_outputs(tmp_path):
     load("ironing").main(
         ["--steps", "40", "--end-time", "0.3", "--output", str(iron)], comm=MPI.COMM_SELF
     )
-    assert (iron / "ironing_forces.csv").read_text().count("\n") >= 3
+    rows = [line.split(",") for line in (iron / "ironing_forces.csv").read_text().splitlines()]
+    assert rows[0][:3] == ["t", "newton_iterations", "active"] and len(rows) >= 4
+    assert all(len(row) == len(rows[0]) for row in rows)
+    float_cells = np.array(rows[1:], dtype=float)  # one number a cell (no per-step lists)
+    assert float_cells[-1, 0] == pytest.approx(0.3)
     assert (iron / "ironing_forces.png").stat().st_size > 1000
     assert (iron / "paraview" / "displacement.bp").exists()
     profile = (output / "hertz_pressure.csv").read_text().splitlines()
