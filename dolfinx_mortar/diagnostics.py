@@ -12,8 +12,12 @@ module holds the checks behind the messages of :class:`ContactProblem` and
   counted, with the worst one located;
 * :func:`facing_report`: where slave and master are closest, do their
   outward normals point at each other (run when a problem is built);
-* :func:`penetration_report`: surface nodes that ended a converged step deep
-  behind the other surface (run after each accepted load step).
+* :func:`penetration_report`: surface nodes deep behind the other surface (run
+  when a problem is built, for bodies that start overlapping, and after each
+  accepted load step);
+* :func:`free_translations`: bodies whose rigid-body translation nothing in the
+  bulk form holds;
+* :func:`warn`: a :class:`ContactWarning` that the user sees, once, on rank 0.
 
 All functions that take a communicator are collective.
 """
@@ -21,6 +25,9 @@ All functions that take a communicator are collective.
 from __future__ import annotations
 
 import dataclasses
+import logging
+import sys
+import warnings
 
 import numpy as np
 from mpi4py import MPI
@@ -60,6 +67,59 @@ _OUR_REASON_NAMES = {
     FIXED_POINT_NOT_SETTLED: "FIXED_POINT_NOT_SETTLED",
     UZAWA_NOT_SETTLED: "UZAWA_NOT_SETTLED",
 }
+
+
+class ContactWarning(UserWarning):
+    """A contact set-up or result that is probably not what the user meant."""
+
+
+def warn(comm: MPI.Intracomm, message: str, stacklevel: int = 2) -> None:
+    """Collective: issue ``message`` as a :class:`ContactWarning`, shown once, by rank 0.
+
+    Every rank passes the warning through the warnings filters, so that a filter
+    set to ``"error"`` raises on every rank (none is left waiting in the next
+    collective call) and ``"ignore"`` silences it everywhere; only rank 0 shows
+    it. The texts are built from collective results, so the counts in them are
+    global and the same on every rank.
+
+    Shown means written to stderr even where :mod:`logging` captures warnings:
+    FFCx calls ``logging.captureWarnings(True)`` when it is imported, which routes
+    every warning to the ``py.warnings`` logger, and an unconfigured logger prints
+    nothing. So when warnings are captured and no handler of that logger would
+    print a warning, the text goes to stderr directly; otherwise it takes the
+    usual path (:func:`warnings.showwarning`: the user's logging, pytest's
+    recorder, a custom hook).
+    """
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.warn(message, ContactWarning, stacklevel=stacklevel + 1)
+    if comm.rank != 0:
+        return
+    for w in caught:
+        if warnings.showwarning is _logging_showwarning and not _logger_prints_warnings(
+            logging.getLogger("py.warnings")
+        ):
+            sys.stderr.write(warnings.formatwarning(w.message, w.category, w.filename, w.lineno))
+            sys.stderr.flush()
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno, w.file, w.line)
+
+
+_logging_showwarning = getattr(logging, "_showwarning", None)
+
+
+def _logger_prints_warnings(logger: logging.Logger) -> bool:
+    """Would a record of level WARNING sent to ``logger`` reach a handler that shows it?"""
+    if not logger.isEnabledFor(logging.WARNING):
+        return False
+    current: logging.Logger | None = logger
+    while current is not None:
+        for handler in current.handlers:
+            if not isinstance(handler, logging.NullHandler) and handler.level <= logging.WARNING:
+                return True
+        if not current.propagate:
+            break
+        current = current.parent
+    return False
 
 
 def _enum_name(enum, value: int, prefixes: tuple[str, ...] = ("CONVERGED", "DIVERGED")) -> str:
@@ -390,3 +450,76 @@ def _distance_to_facets(points: np.ndarray, corners: np.ndarray, normal: np.ndar
     inside = np.all(side >= 0.0, axis=2)
     plane = np.abs(np.einsum("nkc,nkc->nk", points[:, None, :] - corners.mean(axis=2), normal))
     return np.where(inside, plane, to_edges), inside
+
+
+@dataclasses.dataclass
+class FreeBody:
+    """A body whose translation along some axes nothing in the bulk problem holds."""
+
+    label: int
+    """Its number from :func:`~dolfinx_mortar.surface.body_labels`."""
+    axes: tuple[int, ...]
+    """The coordinate axes (0 = x, 1 = y, 2 = z) of the free translations."""
+    lower: tuple[float, ...]
+    upper: tuple[float, ...]
+    """The corners of its bounding box (reference coordinates)."""
+
+
+def free_translations(V, K, labels: np.ndarray, bcs, tolerance: float = 1e-8) -> list[FreeBody]:
+    """Collective: bodies that a translation along a coordinate axis moves freely.
+
+    A body (a connected set of cells, ``labels`` per local cell as
+    :func:`~dolfinx_mortar.surface.body_labels` gives them) is free along axis c
+    when no Dirichlet condition fixes a component c of any of its nodes and the
+    bulk Jacobian ``K`` (assembled without the conditions) maps the unit
+    translation t_c of its nodes to (nearly) nothing: ``|K t_c| <= tolerance
+    max|diag K| |t_c|`` on the body. A spring or Robin term in the form holds
+    the body and is not reported. Only contact could hold such a body; if it is
+    not active, the Newton matrix is singular.
+    """
+    comm = V.mesh.comm
+    bs = V.dofmap.index_map_bs
+    index_map = V.dofmap.index_map
+    num_blocks = index_map.size_local + index_map.num_ghosts
+    dofmap = np.asarray(V.dofmap.list, dtype=np.int64)[: labels.size]
+    block_label = np.full(num_blocks, -1, dtype=np.int64)
+    block_label[dofmap.reshape(-1)] = np.repeat(labels, dofmap.shape[1])
+    owned_label = block_label[: index_map.size_local]
+    fixed = np.zeros((0, 2), dtype=np.int64)
+    for bc in bcs:
+        local = np.asarray(bc.dof_indices()[0], dtype=np.int64)
+        fixed = np.vstack([fixed, np.column_stack([block_label[local // bs], local % bs])])
+    fixed = np.unique(np.vstack(comm.allgather(fixed)), axis=0)
+    bodies = np.unique(np.concatenate(comm.allgather(np.unique(labels))))
+    x = V.tabulate_dof_coordinates()[: index_map.size_local, : V.mesh.geometry.dim]
+    gdim = V.mesh.geometry.dim
+    diagonal_vector = K.getDiagonal()
+    diagonal = np.abs(diagonal_vector.getArray(readonly=True)).reshape(-1, bs)
+    diagonal_vector.destroy()
+    translation, image = K.createVecs()
+    found = []
+    for body in bodies:
+        mine = owned_label == body
+        held = set(fixed[fixed[:, 0] == body, 1].tolist())
+        scale = comm.allreduce(float(diagonal[mine].max(initial=0.0)), op=MPI.MAX)
+        count = comm.allreduce(int(mine.sum()), op=MPI.SUM)
+        axes = []
+        for axis in range(gdim):
+            if axis in held:
+                continue
+            values = np.zeros((index_map.size_local, bs))
+            values[mine, axis] = 1.0
+            translation.getArray()[:] = values.reshape(-1)
+            K.mult(translation, image)
+            if image.norm() <= tolerance * scale * np.sqrt(count):
+                axes.append(axis)
+        if axes:
+            points = x[mine]
+            lower, upper = points.min(axis=0, initial=np.inf), points.max(axis=0, initial=-np.inf)
+            comm.Allreduce(MPI.IN_PLACE, lower, op=MPI.MIN)
+            comm.Allreduce(MPI.IN_PLACE, upper, op=MPI.MAX)
+            found.append(FreeBody(int(body), tuple(axes), tuple(map(float, lower)),
+                                  tuple(map(float, upper))))
+    translation.destroy()
+    image.destroy()
+    return found

@@ -40,7 +40,6 @@ import dataclasses
 import logging
 import time
 import typing
-import warnings
 import weakref
 
 import dolfinx
@@ -52,13 +51,21 @@ from petsc4py import PETSc
 
 from . import compat, diagnostics, enforcement, kernels, solvers
 from . import friction as friction_rules
+from .diagnostics import ContactWarning
 from .enforcement import ACTIVE_SET_STRATEGIES, METHODS
 from .layout import BlockLayout, dirichlet_dofs
 from .mortar import MortarInterface
 from .solvers import SolveReport
+from .surface import body_labels as surface_body_labels
 from .system import ContactSystem, Tangential
 
 logger = logging.getLogger("dolfinx_mortar")
+
+__all__ = ["ContactPair", "ContactProblem", "ContactWarning", "SolveReport"]
+
+INITIAL_OVERLAP = 0.05
+"""A surface node deeper than this many facet lengths behind the other surface at
+the start is reported as an initial overlap."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -87,8 +94,16 @@ class ContactProblem:
     every rank of the mesh's communicator (on one rank alone they wait forever).
     :meth:`contact_pressure`, :meth:`save_state` and :meth:`restore_state` are local.
 
-    Warns (:class:`ContactWarning`) when a slave surface looks away from its
-    master where the two are closest: a tag on the wrong face of its body.
+    Building it checks the set-up before any load step. It raises
+    :class:`ValueError` when a pair's slave and master lie on one connected mesh
+    (the same body, or bodies that share nodes). It warns
+    (:class:`ContactWarning`, shown once by rank 0,
+    :func:`~dolfinx_mortar.diagnostics.warn`) when a slave surface looks away
+    from its master where the two are closest (a tag on the wrong face of its
+    body), when the bodies start overlapping by more than
+    :data:`INITIAL_OVERLAP` facet lengths, and when a body is free to move as a
+    rigid body (no Dirichlet condition or term of the form holds a translation
+    of it, and it does not touch the other body at the start).
 
     Args:
         F: bulk residual form F(u; v) (internal minus external virtual work).
@@ -248,10 +263,13 @@ class ContactProblem:
         if self.has_friction and u.function_space.mesh.geometry.dim == 3:
             for interface in self.interfaces:
                 interface.scalar_gradients = True  # friction's tangent frames
-        self._check_slave_body()
+        self._warned: set = set()
+        body_labels = surface_body_labels(self.V.mesh)
+        self._check_slave_body(body_labels)
         self._inversion_check = diagnostics.InversionCheck(self.V)
         self._last_inversion = diagnostics.Inversion()
         self._check_facing()
+        self._check_initial_overlap()
         bs = self.V.dofmap.index_map_bs
         self._fixed_dofs = dirichlet_dofs(self.bcs, self.V)
         fixed_blocks = np.unique(self._fixed_dofs // bs)
@@ -287,6 +305,7 @@ class ContactProblem:
         self._read_state_into_x()
 
         self._row_scale, self._slave_length, master_scale = self._stiffness_scale()
+        free_bodies = diagnostics.free_translations(self.V, self._K, body_labels, self.bcs)
         scales = enforcement.Scales(self._row_scale, self._slave_length,
                                     self.V.mesh.geometry.dim)
         self._dirichlet_scale = scales.dirichlet
@@ -325,24 +344,47 @@ class ContactProblem:
             "linear solve": 0.0,
         }
         self._setup_snes(petsc_options or {}, petsc_options_prefix)
+        self._check_free_bodies(body_labels, free_bodies)
 
     # -- setup -------------------------------------------------------------
 
-    def _check_slave_body(self) -> None:
-        """Slave and master surfaces of a pair must lie on different bodies."""
-        from .surface import body_labels
+    def _warn(self, cause: tuple, message: str) -> None:
+        """Collective: a :class:`ContactWarning` the first time this problem meets ``cause``
+        (:func:`~dolfinx_mortar.diagnostics.warn`: shown once, by rank 0); later ones go to
+        the ``dolfinx_mortar`` logger at INFO level (rank 0), as the progress lines do."""
+        if cause in self._warned:
+            if self.comm.rank == 0:
+                logger.info("again: %s", message)
+            return
+        self._warned.add(cause)
+        diagnostics.warn(self.comm, message, stacklevel=4)
 
-        labels = body_labels(self.V.mesh)
-        for pair, interface in zip(self.pairs, self.interfaces, strict=True):
-            slave = np.unique(np.concatenate(self.comm.allgather(labels[interface.slave.cells])))
-            master = np.unique(np.concatenate(self.comm.allgather(labels[interface.master.cells])))
-            if np.intersect1d(slave, master).size:
-                raise ValueError(
-                    f"contact pair {pair.name or (pair.slave, pair.master)}: the slave surface "
-                    f"(tag {pair.slave}) and the master surface (tag {pair.master}) lie on the "
-                    "same body; is the slave surface on the wrong body? (self-contact is not "
-                    "supported)"
-                )
+    def _check_slave_body(self, labels: np.ndarray) -> None:
+        """Slave and master surfaces of a pair must lie on different bodies: meshes that share
+        no node (a conforming mesh joins its parts: they move as one)."""
+        for k, interface in enumerate(self.interfaces):
+            slave, master = interface.slave, interface.master
+            slave_bodies = np.unique(np.concatenate(self.comm.allgather(labels[slave.cells])))
+            master_bodies = np.unique(np.concatenate(self.comm.allgather(labels[master.cells])))
+            if not np.intersect1d(slave_bodies, master_bodies).size:
+                continue
+            slave_nodes = np.concatenate(self.comm.allgather(slave.node_global_blocks))
+            shared = np.isin(master.node_global_blocks, slave_nodes)
+            count = np.unique(np.concatenate(
+                self.comm.allgather(master.node_global_blocks[shared]))).size
+            points = [p for p in self.comm.allgather(
+                tuple(master.reference_coordinates[np.flatnonzero(shared)[0]])
+                if shared.any() else None) if p is not None]
+            where = (f"; the two surfaces share {count} node(s), one at ("
+                     + ", ".join(f"{c:.4g}" for c in points[0]) + ")") if count else ""
+            raise ValueError(
+                f"{self._pair_name(k)}: the slave and the master surface lie on one connected "
+                f"mesh (cells joined through shared nodes{where}), so they cannot separate or "
+                "slide. Either both tags are on the same body (is the slave or the master tag "
+                "on the wrong body? self-contact is not supported), or two bodies share nodes, "
+                "as a gmsh model built with fragment or coherence makes them: build each body "
+                "as its own mesh and join them with dolfinx_mortar.bodies.merge_meshes."
+            )
 
     def _pair_name(self, k: int) -> str:
         pair = self.pairs[k]
@@ -357,8 +399,8 @@ class ContactProblem:
                 self.comm, slave.current_coordinates(self.u), slave.facets,
                 master.current_coordinates(self.u), master.facets)
             if facing.looks_away:
-                _warn(
-                    self.comm,
+                self._warn(
+                    ("facing", k),
                     f"{self._pair_name(k)}: the slave surface looks away from its master. Where "
                     f"the two surfaces are closest ({facing.distance:.3g} apart), "
                     f"{facing.facets_looking_away} of {facing.facets_compared} slave facets have "
@@ -368,6 +410,78 @@ class ContactProblem:
                     "other. Likely cause: the slave or the master tag is on the wrong face of "
                     "its body (outward normals point out of each body).",
                 )
+
+    def _check_initial_overlap(self) -> None:
+        """Warn when the bodies start overlapping by more than :data:`INITIAL_OVERLAP`."""
+        for k, interface in enumerate(self.interfaces):
+            if ("facing", k) in self._warned:
+                continue  # the wrong face puts every node "behind": one message says it
+            slave, master = interface.slave, interface.master
+            report = diagnostics.penetration_report(
+                self.comm, INITIAL_OVERLAP, slave.node_global_blocks,
+                slave.current_coordinates(self.u), slave.facets, master.node_global_blocks,
+                master.current_coordinates(self.u), master.facets)
+            if report.count:
+                other = "master" if report.side == "slave" else "slave"
+                where = ", ".join(f"{c:.4g}" for c in report.where)
+                self._warn(
+                    ("overlap", k),
+                    f"{self._pair_name(k)}: the bodies overlap at the start: {report.count} "
+                    f"surface node(s) lie behind the other surface by more than "
+                    f"{INITIAL_OVERLAP:g} facet lengths, the deepest a {report.side} node "
+                    f"{report.depth:.3g} facet lengths behind the {other} surface, at "
+                    f"({where}). The first load step pushes the bodies apart with whatever "
+                    "force that takes, on top of the load. Unless the overlap is meant (an "
+                    "interference fit), move a body so that the surfaces touch or are apart "
+                    "(its mesh coordinates, or the initial displacement u), and check the "
+                    "geometry's units and the facet tags.",
+                )
+
+    def _check_free_bodies(self, labels: np.ndarray, free: list[diagnostics.FreeBody]) -> None:
+        """Warn about bodies that only contact could hold (``free``, from
+        :func:`diagnostics.free_translations`) where none touches the other body at the start
+        (a nodal gap within 1e-6 slave facet lengths of zero): the first Newton matrix is
+        singular."""
+        if not free:
+            return
+        holding = {}  # body label -> (pairs on it, smallest covered nodal gap)
+        for k, interface in enumerate(self.interfaces):
+            bodies = np.unique(np.concatenate(self.comm.allgather(np.concatenate([
+                labels[interface.slave.cells], labels[interface.master.cells]]))))
+            if not any(body.label in bodies for body in free):
+                continue
+            interface.update(self.u)
+            self._assemble_gaps(k)
+            covered, gap = self._nodal_gaps(k)
+            smallest = self.comm.allreduce(float(gap[covered].min(initial=np.inf)), op=MPI.MIN)
+            for label in bodies:
+                names, gaps = holding.get(int(label), ([], []))
+                holding[int(label)] = (names + [self._pair_name(k)], gaps + [smallest])
+        for body in free:
+            names, gaps = holding.get(body.label, ([], []))
+            if any(g <= 1e-6 * self._slave_length for g in gaps):
+                continue
+            axes = ", ".join("xyz"[a] for a in body.axes)
+            direction = "that direction" if len(body.axes) == 1 else "those directions"
+            box = " .. ".join("(" + ", ".join(f"{c:.4g}" for c in corner) + ")"
+                              for corner in (body.lower, body.upper))
+            if not names:
+                contact = "it is on no contact pair"
+            elif np.isfinite(min(gaps)):
+                contact = (f"no contact is active at the start: the smallest nodal gap of its "
+                           f"pair(s) ({'; '.join(names)}) is {min(gaps):.3g}")
+            else:
+                contact = (f"no contact is active at the start: no slave node of its pair(s) "
+                           f"({'; '.join(names)}) has a master facet within the search margin")
+            self._warn(
+                ("free body", body.label),
+                f"the body with nodes in {box} is free to move as a rigid body along {axes}: "
+                f"no Dirichlet condition holds it in {direction} and {contact}. The first "
+                "Newton system is then singular, and the solve fails (often reported as "
+                "inverted elements or a failed linear solve) or leaves the body where it is. "
+                "Hold it with a Dirichlet condition (e.g. a prescribed displacement on one "
+                "face), or start it touching the other body.",
+            )
 
     def most_compressed_cell(self) -> tuple[float, tuple[float, ...] | None]:
         """(J, reference point): the smallest det F = det(current) / det(reference) of any
@@ -404,8 +518,8 @@ class ContactProblem:
                           f"by more than the search margin ({interface.reuse.margin:.3g})"]
                 if self.method != "lagrange":
                     causes.append(f"a penalty parameter too soft (penalty={self.penalty:.3g})")
-                _warn(
-                    self.comm,
+                self._warn(
+                    ("penetration", k),
                     f"{self._pair_name(k)}: {report.count} {report.side} node(s) ended the step "
                     f"behind the {other} surface by more than {threshold:g} facet lengths "
                     f"(deepest {report.depth:.3g} facet lengths, at ({where})), beyond what "
@@ -508,24 +622,29 @@ class ContactProblem:
             before = interface.statistics.time_search
             interface.update(self.u)
             searching += interface.statistics.time_search - before
-            q = interface.quantities
-            gap_vector = self._row_coefficients[k]["gap"]
-            area_vector = self._row_coefficients[k]["area"]
-            for vector, values in ((gap_vector, q.gap.value), (area_vector, q.area.value)):
-                vector.zeroEntries()
-                vector.setValues(
-                    interface.pair_multipliers.reshape(-1).astype(PETSc.IntType),
-                    values.reshape(-1),
-                    addv=PETSc.InsertMode.ADD_VALUES,
-                )
-                vector.assemble()
-            self.gaps[k] = gap_vector.getArray(readonly=True).copy()
-            self.areas[k] = area_vector.getArray(readonly=True).copy()
+            self._assemble_gaps(k)
             self.active[k] = self._decide_active(k)
             if self.friction is not None:
                 self.friction.update_slip(k, self.u, self._row_coefficients[k]["slip_00"])
         self.timings["contact search"] += searching
         self.timings["mortar integration"] += time.perf_counter() - start - searching
+
+    def _assemble_gaps(self, k: int) -> None:
+        """Pair k's weighted gaps g~_j and areas A_j at its owned slave nodes, from the last
+        :meth:`MortarInterface.update`."""
+        interface = self.interfaces[k]
+        q = interface.quantities
+        for name, values, into in (("gap", q.gap.value, self.gaps),
+                                   ("area", q.area.value, self.areas)):
+            vector = self._row_coefficients[k][name]
+            vector.zeroEntries()
+            vector.setValues(
+                interface.pair_multipliers.reshape(-1).astype(PETSc.IntType),
+                values.reshape(-1),
+                addv=PETSc.InsertMode.ADD_VALUES,
+            )
+            vector.assemble()
+            into[k] = vector.getArray(readonly=True).copy()
 
     def _tangential_rows(self, k: int) -> friction_rules.TangentialRows:
         """Pair k's owned tangential rows (:mod:`dolfinx_mortar.friction`)."""
@@ -846,16 +965,6 @@ class ContactProblem:
             interface.destroy()
         if self.friction is not None:
             self.friction.destroy()
-
-
-class ContactWarning(UserWarning):
-    """A contact set-up or result that is probably not what the user meant."""
-
-
-def _warn(comm: MPI.Intracomm, message: str) -> None:
-    """A :class:`ContactWarning` on every rank (the same text), so that a warnings filter
-    set to "error" raises on every rank instead of leaving the others waiting."""
-    warnings.warn(message, ContactWarning, stacklevel=3)
 
 
 def _check_choice(name: str, value, allowed) -> None:

@@ -13,6 +13,7 @@ import dolfinx
 import numpy as np
 import pytest
 import ufl
+from contact_warnings import warns_on_rank_zero
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -52,15 +53,21 @@ def punch(comm, slave_face: str, material: str = "neo-hookean"):
 
 
 @pytest.mark.parallel
-def test_slave_surface_tagged_on_the_wrong_face_warns_at_setup_and_after_steps(comm):
+def test_slave_surface_tagged_on_the_wrong_face_warns_at_setup_and_after_steps(comm, caplog):
+    """One warning per cause, shown once by rank 0: the wrong face at set-up, the nodes
+    behind the slave after the first step; the second step's penetration goes to the log."""
     F, u, bcs, pair, apply_load = punch(comm, "top")
-    with pytest.warns(ContactWarning, match=r"contact pair 'punch'.*looks away from its master"
-                      r".*3 of 3 slave facets.*wrong face"):
+    with warns_on_rank_zero(r"contact pair 'punch'.*looks away from its master"
+                            r".*3 of 3 slave facets.*wrong face") as caught:
         problem = ContactProblem(F, u, bcs, [pair])
-    with pytest.warns(ContactWarning, match=r"'punch'.*3 master node\(s\) ended the step behind "
-                      r"the slave surface.*wrong face") as caught:
-        solve_load_steps(problem, apply_load(1.0), 2)
-    assert len([w for w in caught if issubclass(w.category, ContactWarning)]) == 2
+    assert len(caught) == (1 if comm.rank == 0 else 0)
+    with caplog.at_level("INFO", logger="dolfinx_mortar"):
+        with warns_on_rank_zero(r"'punch'.*3 master node\(s\) ended the step behind "
+                                r"the slave surface.*wrong face") as caught:
+            solve_load_steps(problem, apply_load(1.0), 2)
+    assert len(caught) == (1 if comm.rank == 0 else 0)
+    again = [r for r in caplog.records if r.getMessage().startswith("again: ")]
+    assert len(again) == (1 if comm.rank == 0 else 0)
     slave_force, _ = problem.contact_forces()
     assert problem.num_active() == 0 and np.all(slave_force == 0.0)  # what went unnoticed
     problem.destroy()
@@ -237,8 +244,9 @@ def test_user_punch_from_two_rectangles_pressed_and_slid(comm, slave_face):
         assert slave_force[1] > 1.0 and problem.num_active() > 0
         assert np.linalg.norm(slave_force + master_force) <= 1e-9 * np.linalg.norm(slave_force)
     else:
-        assert "looks away from its master" in messages[0] and "wrong face" in messages[0]
-        assert len(messages) == 1 + 4  # set-up, then every accepted step
-        assert all("ended the step behind the slave surface" in m for m in messages[1:])
+        assert len(messages) == (2 if comm.rank == 0 else 0)  # set-up, the first step
+        if comm.rank == 0:
+            assert "looks away from its master" in messages[0] and "wrong face" in messages[0]
+            assert "ended the step behind the slave surface" in messages[1]
         assert problem.num_active() == 0
     problem.destroy()
