@@ -283,6 +283,8 @@ def _diagnosis(problem, report: SolveReport, inverting, since: float) -> str:
             " The linear solver failed: a singular system usually means a body whose rigid-body "
             "motion no boundary condition or active contact holds."
         )
+    for warning in getattr(problem, "setup_warnings", []):
+        text += f" Warned when the problem was built: {warning}"
     return text
 
 

@@ -264,6 +264,10 @@ class ContactProblem:
             for interface in self.interfaces:
                 interface.scalar_gradients = True  # friction's tangent frames
         self._warned: set = set()
+        self._building = True
+        self.setup_warnings: list[str] = []
+        """The texts of the ContactWarnings issued while the problem was built (on every
+        rank): a failed load step's message repeats them."""
         body_labels = surface_body_labels(self.V.mesh)
         self._check_slave_body(body_labels)
         self._inversion_check = diagnostics.InversionCheck(self.V)
@@ -345,6 +349,7 @@ class ContactProblem:
         }
         self._setup_snes(petsc_options or {}, petsc_options_prefix)
         self._check_free_bodies(body_labels, free_bodies)
+        self._building = False
 
     # -- setup -------------------------------------------------------------
 
@@ -357,6 +362,8 @@ class ContactProblem:
                 logger.info("again: %s", message)
             return
         self._warned.add(cause)
+        if self._building:
+            self.setup_warnings.append(message)
         diagnostics.warn(self.comm, message, stacklevel=4)
 
     def _check_slave_body(self, labels: np.ndarray) -> None:

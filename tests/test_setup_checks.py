@@ -18,6 +18,7 @@ from mpi4py import MPI
 
 from dolfinx_mortar import compat
 from dolfinx_mortar.bodies import merge_meshes
+from dolfinx_mortar.loading import LoadSteppingError, solve_load_steps
 from dolfinx_mortar.materials import Material, internal_work
 from dolfinx_mortar.problem import ContactPair, ContactProblem, ContactWarning
 from dolfinx_mortar.surface import SurfaceError
@@ -110,6 +111,28 @@ def test_a_body_held_by_touching_contact_a_spring_or_one_component_is_not_report
     with warns_on_rank_zero(r"free to move as a rigid body along x, y: no Dirichlet condition "
                             r"holds it in those directions"):
         build(*cube_on_block(1.1, held=("block_bottom",), held_vertically=("cube_top",)))
+
+
+@pytest.mark.parallel
+def test_a_failed_load_step_repeats_the_set_up_warning():
+    """The free cube pushed down by a traction on its top: the step fails, and the error
+    says that the cube was free to move, which is why."""
+    F, u, bcs, pair = cube_on_block(1.1, gdim=2, held=("block_bottom",))
+    V = u.function_space
+    push = dolfinx.fem.Constant(V.mesh, 0.0)
+    ds = ufl.Measure("ds", V.mesh, subdomain_data=pair.facet_tags)
+    F += push * ufl.TestFunction(V)[1] * ds(pair.slave + 1)  # cube_top
+    with warns_on_rank_zero(r"free to move as a rigid body"):
+        problem = ContactProblem(F, u, bcs, [pair])
+    assert len(problem.setup_warnings) == 1
+
+    def apply_load(t):
+        push.value = 10.0 * t
+
+    with pytest.raises(LoadSteppingError, match=r"Warned when the problem was built: the body "
+                       r"with nodes in .* is free to move as a rigid body"):
+        solve_load_steps(problem, apply_load, 1, max_cutbacks=1)
+    problem.destroy()
 
 
 def two_boxes_from_one_gmsh_model(comm):
