@@ -14,9 +14,9 @@ frees them after each set-up (less memory, every product built anew).
 database under the problem's prefix overrides both.
 
 Defaults are put into the options database only for ``setFromOptions`` and
-removed again, except the factorization ones (``mat_*``): PETSc reads those at
-every symbolic factorization, so they stay until the problem is destroyed (or
-garbage collected). A database entry that a problem put there is not taken
+removed again (also when the set-up fails), except the factorization ones
+(``mat_*``): PETSc reads those at every symbolic factorization, so they stay until
+the problem is destroyed (or garbage collected). A database entry that a problem put there is not taken
 for the user's own by the next problem with the same prefix.
 """
 
@@ -202,21 +202,34 @@ def configure_snes(
     defaults.update(petsc_options)
     options = PETSc.Options()
     added = []
+    replaced = {}  # another problem's values of the names we set
     for key, value in defaults.items():
         name = f"{prefix}{key}"
         if not options.hasName(name) or name in _OPTIONS_SET_BY_PROBLEMS:
+            if options.hasName(name):
+                replaced[name] = options.getString(name)
             options[name] = value
             added.append(name)
     user_atol = "snes_atol" in petsc_options or (
         options.hasName(f"{prefix}snes_atol")
         and f"{prefix}snes_atol" not in _OPTIONS_SET_BY_PROBLEMS
     )
-    before_options()
-    snes.setFromOptions()
-    snes.getKSP().setFromOptions()
-    if not user_atol:
-        snes.setTolerances(atol=default_atol)
-    after_options(snes.getKSP())
+    try:
+        before_options()
+        snes.setFromOptions()
+        snes.getKSP().setFromOptions()
+        if not user_atol:
+            snes.setTolerances(atol=default_atol)
+        after_options(snes.getKSP())
+    except BaseException:
+        # a failed set-up (e.g. an unknown solver type) leaves the database as it was:
+        # otherwise the next problem with this prefix would read these as the user's
+        for name in added:
+            if name in replaced:
+                options[name] = replaced[name]
+            else:
+                options.delValue(name)
+        raise
     kept = [name for name in added
             if name[len(prefix):].removeprefix("condensed_").startswith("mat_")]
     for name in added:
