@@ -130,11 +130,14 @@ class MeshTying:
         opts = PETSc.Options()
         for key, value in options.items():
             opts[f"{petsc_options_prefix}{key}"] = value
-        self.solver.setFromOptions()
-        # the factor (and its mat_mumps_* options) exists once the KSP is set up
-        self.solver.setUp()
-        for key in options:
-            del opts[f"{petsc_options_prefix}{key}"]
+        try:
+            self.solver.setFromOptions()
+            # the factor (and its mat_mumps_* options) exists once the KSP is set up
+            self.solver.setUp()
+        finally:
+            # also when the set-up fails: no option left for the next solver to read
+            for key in options:
+                del opts[f"{petsc_options_prefix}{key}"]
 
     def solve(self) -> dolfinx.fem.Function:
         """Assemble the right-hand side, solve, and write the displacement into ``u``."""

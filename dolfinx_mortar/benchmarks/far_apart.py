@@ -49,10 +49,12 @@ class PlainNewton:
             options[f"{prefix}{key}"] = value
         snes.setFunction(self._residual, self.b)
         snes.setJacobian(self._jacobian, self.A)
-        snes.setFromOptions()
-        snes.getKSP().setFromOptions()
-        for key in self.OPTIONS:
-            options.delValue(f"{prefix}{key}")
+        try:
+            snes.setFromOptions()
+            snes.getKSP().setFromOptions()
+        finally:
+            for key in self.OPTIONS:
+                options.delValue(f"{prefix}{key}")
         self.snes = snes
 
     def _residual(self, snes, x, b) -> None:
