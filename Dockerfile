@@ -10,7 +10,8 @@ ENV DEBIAN_FRONTEND=noninteractive \
     OMPI_MCA_btl=self,vader \
     OMPI_MCA_btl_vader_single_copy_mechanism=none \
     PRTE_MCA_rmaps_default_mapping_policy=:oversubscribe \
-    OMP_NUM_THREADS=1
+    OMP_NUM_THREADS=1 \
+    SCOTCH_PTHREAD_NUMBER=1
 
 COPY tools/debian-packages.txt tools/pip-packages.txt /tmp/dolfinx_mortar/
 RUN apt-get update \

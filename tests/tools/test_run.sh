@@ -60,6 +60,7 @@ summary = {
     "sys_path": sys.path,
     "no_user_site": sys.flags.no_user_site,
     "cache": os.environ.get("XDG_CACHE_HOME"),
+    "scotch_threads": os.environ.get("SCOTCH_PTHREAD_NUMBER"),
 }
 with open(args.json, "w") as f:
     json.dump(summary, f)
@@ -102,6 +103,13 @@ check "it reads a relative path in the caller's folder" json_is "$out/x.json" \
 check "it writes a relative path in the caller's folder" grep -qx "written inside" "$work/output.txt"
 check "it sees MY_VAR exported by the caller" json_is "$out/x.json" "d['my_var'] == 'hello'"
 check "it keeps the caller's HOME" json_is "$out/x.json" "d['home'] == '$HOME'"
+# one PT-Scotch thread: the same mesh is partitioned the same way in every run
+if [ -z "${SCOTCH_PTHREAD_NUMBER+x}" ]; then
+    check "PT-Scotch runs one thread (SCOTCH_PTHREAD_NUMBER=1)" json_is "$out/x.json" \
+        "d['scotch_threads'] == '1'"
+fi
+threads=$(cd "$work" && SCOTCH_PTHREAD_NUMBER=2 "$run" sh -c 'echo "$SCOTCH_PTHREAD_NUMBER"')
+check "the caller's SCOTCH_PTHREAD_NUMBER wins (2, got $threads)" test "$threads" = 2
 if [ -n "$suite" ]; then
     check "PYTHONHOME is dropped" json_is "$out/x.json" "d['pythonhome'] is None"
     check "the host's ~/.local packages are not imported" json_is "$out/x.json" "d['no_user_site']"
