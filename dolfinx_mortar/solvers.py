@@ -151,8 +151,11 @@ class SolveReport:
 
 
 
-_OPTIONS_SET_BY_PROBLEMS: set[str] = set()
-"""Options-database names holding a problem's defaults (not the user's)."""
+_OPTIONS_SET_BY_PROBLEMS: dict[str, int] = {}
+"""Options-database names holding a problem's defaults (not the user's), each with the
+number of live problems that keep it: the name leaves the database with the last one (a
+problem destroyed or collected while another with the same prefix still factorizes
+must not take the other's options)."""
 
 
 def default_options(condensation: bool, linear_solver: str = "direct") -> dict:
@@ -235,17 +238,22 @@ def configure_snes(
     for name in added:
         if name not in kept:
             options.delValue(name)
-    _OPTIONS_SET_BY_PROBLEMS.update(kept)
+    for name in kept:
+        _OPTIONS_SET_BY_PROBLEMS[name] = _OPTIONS_SET_BY_PROBLEMS.get(name, 0) + 1
     return kept
 
 
 def release_options(names: list[str]) -> None:
-    """Remove the factorization options a problem left in the database."""
+    """Remove the factorization options a problem left in the database (once per
+    problem), those that no other live problem keeps."""
     options = PETSc.Options()
     for name in names:
-        if name in _OPTIONS_SET_BY_PROBLEMS:
+        count = _OPTIONS_SET_BY_PROBLEMS.get(name, 0)
+        if count > 1:
+            _OPTIONS_SET_BY_PROBLEMS[name] = count - 1
+        elif count == 1:
             options.delValue(name)
-            _OPTIONS_SET_BY_PROBLEMS.discard(name)
+            del _OPTIONS_SET_BY_PROBLEMS[name]
 
 
 def rigid_body_modes(V) -> list[np.ndarray]:

@@ -60,3 +60,21 @@ def test_successful_setup_keeps_only_factor_options_until_released():
     solvers.release_options(kept)
     assert not [name for name in PETSc.Options().getAll() if name.startswith(PREFIX)]
     snes.destroy()
+
+
+def test_releasing_one_problem_keeps_the_factor_options_of_another():
+    """Two problems with one prefix hold the same factorization options: the first one
+    destroyed or garbage collected (at any moment, while the other still solves) must
+    not take them from the other, whose next symbolic factorization reads them."""
+    first, second = PETSc.SNES().create(PETSc.COMM_SELF), PETSc.SNES().create(PETSc.COMM_SELF)
+    kept_first = configure(first)
+    kept_second = configure(second)
+    assert sorted(kept_first) == sorted(kept_second)
+    solvers.release_options(kept_first)
+    left = sorted(name for name in PETSc.Options().getAll() if name.startswith(PREFIX))
+    assert left == sorted(kept_second)
+    assert PETSc.Options().getInt(f"{PREFIX}mat_mumps_icntl_24") == 1
+    solvers.release_options(kept_second)
+    assert not [name for name in PETSc.Options().getAll() if name.startswith(PREFIX)]
+    first.destroy()
+    second.destroy()
