@@ -5,6 +5,8 @@ Public entry points:
 * :class:`MortarInterface` — D, M, weighted gaps and their exact derivatives
   for one slave/master pair of facet-tagged surfaces, in PETSc layouts.
 * :class:`MeshTying` — tie non-matching subdomains with D and M.
+* :func:`reaction_force` — the total force a Dirichlet condition exerts on a tagged
+  boundary, from the bulk residual (:mod:`dolfinx_mortar.reactions`).
 * :mod:`dolfinx_mortar.meshes` — gmsh builders of the benchmark geometries.
 """
 
@@ -21,6 +23,7 @@ __all__ = [
     "MortarStatistics",
     "SurfaceError",
     "__version__",
+    "reaction_force",
 ]
 
 # dolfinx-dependent names load on first use, so that the pure-numpy kernels
@@ -31,6 +34,7 @@ _LAZY = {
     "MeshTying": "tying",
     "MortarInterface": "mortar",
     "MortarStatistics": "mortar",
+    "reaction_force": "reactions",
 }
 
 
