@@ -111,7 +111,9 @@ class FrictionLaw:
 class TangentialRows:
     """Owned tangential rows of one pair, m = d - 1 components per node: residual C_j
     (n, m) and its derivative dC_j = slip du~_j + gap dg~_j + area dA_j + normal dz_j
-    + own dy_j (slip, own: (n, m, m); gap, area, normal: (n, m)); ``sticking`` (n,)."""
+    + own dy_j (slip, own: (n, m, m); gap, area, normal: (n, m)); ``sticking`` (n,);
+    ``pressure`` (n,): the normal multipliers z_j the rows were computed from (set by
+    :meth:`Friction.rows`, so that the nodal state reports the pressure of its own rows)."""
 
     residual: np.ndarray
     slip: np.ndarray
@@ -120,6 +122,7 @@ class TangentialRows:
     normal: np.ndarray
     own: np.ndarray
     sticking: np.ndarray
+    pressure: np.ndarray | None = None
 
 
 def tangential_rows(law: FrictionLaw | None, weight: float, c_t: float, c_n: float | None,
@@ -483,8 +486,10 @@ class Friction:
         y = np.stack([v.getArray(readonly=True) for v in self.multipliers[k]], axis=1)
         if self.gdim == 3 and self.laws[k] is not None:
             self._check_frames(k, active)
-        return tangential_rows(self.laws[k], self.weight, self.c_t, self.c_n, y, z, active,
+        rows = tangential_rows(self.laws[k], self.weight, self.c_t, self.c_n, y, z, active,
                                self.slips[k], gap, area, self.held[k])
+        rows.pressure = np.array(z, dtype=float, copy=True)
+        return rows
 
     def _check_frames(self, k: int, active: np.ndarray) -> None:
         """Raise (on every rank) if an active node's normal is parallel to the frame axis."""
@@ -525,7 +530,8 @@ class Friction:
 
     def state(self, k: int, rows: TangentialRows, active: np.ndarray,
               area: np.ndarray) -> dict:
-        """Pair k's nodal state (see ContactProblem.friction_state); in 2D ``traction`` and
+        """Pair k's nodal state (see ContactProblem.friction_state), one row per owned slave
+        node in the order of ContactProblem.contact_pressure; in 2D ``traction`` and
         ``slip`` are (n,), in 3D (n, 2) in the nodes' tangent frames, and ``frames``
         (n, 2, 3) holds those (collective in 3D)."""
         y = np.stack([v.getArray(readonly=True) for v in self.multipliers[k]], axis=1)
@@ -534,6 +540,8 @@ class Friction:
         squeeze = (lambda a: a[:, 0]) if self.components == 1 else (lambda a: a)
         state = {
             "coordinates": self.interfaces[k].owned_multiplier_coordinates.copy(),
+            "pressure": (np.zeros(active.size) if rows.pressure is None
+                         else rows.pressure.copy()),
             "traction": squeeze(y.copy()),
             "slip": squeeze(slip),
             "sticking": rows.sticking.copy(),
