@@ -89,7 +89,9 @@ class _Body:
 def merge_meshes(bodies: Mapping[str, object], comm: MPI.Comm | None = None) -> TaggedMesh:
     """Put several bodies, each meshed on its own, into one mesh with one cell tag per body.
 
-    Collective on ``comm``: call it on every rank with the same bodies.
+    Collective on ``comm``: call it on every rank with the same bodies. All bodies must have
+    the same cell type (e.g. all tetrahedra or all hexahedra: dolfinx meshes hold one cell
+    type) and geometric dimension, with linear (P1/Q1) geometry.
 
     Args:
         bodies: body name -> body, in the order of the tag values. A body is

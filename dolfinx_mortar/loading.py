@@ -54,7 +54,26 @@ class LoadSteppingError(RuntimeError):
 
 @dataclasses.dataclass
 class StepRecord:
-    """One accepted load step."""
+    """One accepted load step, as :func:`solve_load_steps` returns it and logs it.
+
+    The same on every rank (each field is a global quantity).
+
+    Attributes:
+        step: the step's number among the accepted steps, from 1 (a cut-back step that
+            converged counts as a step; failed attempts do not).
+        load: the load parameter t the step ended at (``apply_load(load)`` holds now).
+        iterations: Newton iterations of the step's converged solve (with
+            ``active_set="fixed-point"`` or augmented Lagrange: summed over the outer
+            iterations).
+        active: active slave nodes at the end of the step, all pairs, summed over ranks.
+        residual: the last residual norm of the converged solve (NaN if none was recorded).
+        wall_time: seconds the step's converged solve took (the slowest rank's), without
+            the time of failed attempts before it.
+        cutbacks: how many failed attempts were halved just before this step converged
+            (0 if it converged at once).
+        report: the solve's full :class:`~dolfinx_mortar.solvers.SolveReport` (SNES reason,
+            residual history, linear iterations, timings per phase).
+    """
 
     step: int
     load: float
@@ -76,6 +95,18 @@ class ContactOutput:
     """
 
     def __init__(self, problem: ContactProblem, directory: str | pathlib.Path):
+        """Open the VTX writers of ``problem``'s fields (pair 0's pressure) in ``directory``.
+
+        Nothing is written until :meth:`write` (which :func:`solve_load_steps` calls after
+        every accepted step when given this output). Collective.
+
+        Args:
+            problem: the contact problem, 2D or 3D: its displacement ``problem.u`` is
+                written as it is, the pressure and friction fields as P1 scalar Functions
+                on the whole mesh (0 away from the slave nodes).
+            directory: created (by rank 0) if missing; existing ``.bp`` files in it with
+                the same names are overwritten.
+        """
         self.problem = problem
         self.directory = pathlib.Path(directory)
         comm = problem.comm
