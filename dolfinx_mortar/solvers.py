@@ -16,8 +16,9 @@ database under the problem's prefix overrides both.
 Defaults are put into the options database only for ``setFromOptions`` and
 removed again (also when the set-up fails), except the factorization ones
 (``mat_*``): PETSc reads those at every symbolic factorization, so they stay until
-the problem is destroyed (or garbage collected). A database entry that a problem put there is not taken
-for the user's own by the next problem with the same prefix.
+the problem is destroyed (or garbage collected) and no other live problem with the
+same prefix keeps them. A database entry that a problem put there is not taken for
+the user's own by the next problem with the same prefix.
 """
 
 from __future__ import annotations
