@@ -8,8 +8,11 @@ under ``mpirun -n 2`` and ``-n 3``. With more than one rank, a block that sets
 rank (each in its own directory), and its contact results must equal the parallel ones.
 
 Known answers checked on the executed namespace: the contact forces on the two sides
-balance; the traction example's contact force equals its load; the punch's contact
-force equals the reaction at its prescribed top. A block that raises fails the test
+balance; the traction example's contact force equals its load; the driven body's contact
+force (the punch's in 2D, the cube's in 3D) balances the reaction at its prescribed top,
+summed here independently of ``reaction_force`` and compared with it; in the 3D example's
+slip phase every active node slips with a friction traction of mu times its pressure, and
+``friction_state`` has ``contact_pressure``'s rows. A block that raises fails the test
 with its line number in README.md.
 """
 
@@ -55,6 +58,7 @@ def test_readme_has_the_examples():
     sources = [source for _, source in BLOCKS]
     assert any("meshes.hertz(" in s and "traction" in s for s in sources)
     assert any("merge_meshes(" in s and "top_displacement" in s for s in sources)
+    assert any("create_box(" in s and "reaction_force(" in s and "coulomb" in s for s in sources)
     fences = re.findall(r"^```(\w*)\s*$", README.read_text(), flags=re.MULTILINE)
     openings = fences[0::2]
     assert all(lang in ("python", "sh", "text") for lang in openings), (
@@ -127,21 +131,60 @@ def check_known_answers(line: int, namespace: dict) -> None:
         )
     if "top_displacement" in namespace:
         check_punch_reaction(where, namespace)
+    if namespace.get("problem") is not None and namespace["problem"].has_friction:
+        check_slip(where, namespace)
 
 
 def check_punch_reaction(where: str, namespace: dict) -> None:
-    """The punch's equilibrium: the bulk residual summed over its prescribed top (the drive's
-    reaction) plus the contact force on the punch is zero."""
+    """The driven body's equilibrium: the bulk residual summed over its prescribed top (the
+    drive's reaction) plus the contact force on the body is zero; ``reaction_force`` gives
+    the same sum."""
+    from dolfinx_mortar.reactions import reaction_force
+
     problem, V = namespace["problem"], namespace["V"]
     slave, _ = problem.contact_forces()
+    gdim = V.mesh.geometry.dim
     residual = dolfinx.fem.assemble_vector(dolfinx.fem.form(namespace["F"]))
     residual.scatter_reverse(dolfinx.la.InsertMode.add)
     top = namespace["top"]
     top = top[top < V.dofmap.index_map.size_local]
-    reaction = problem.comm.allreduce(residual.array.reshape(-1, 2)[top].sum(axis=0), op=MPI.SUM)
-    assert np.linalg.norm(reaction + slave) <= 1e-8 * np.linalg.norm(slave), (
-        f"{where}: reaction {reaction} at the punch's top against contact force {slave}"
+    reaction = problem.comm.allreduce(
+        residual.array.reshape(-1, gdim)[top].sum(axis=0), op=MPI.SUM
     )
+    assert reaction.shape == slave.shape == (gdim,)
+    assert np.linalg.norm(reaction + slave) <= 1e-8 * np.linalg.norm(slave), (
+        f"{where}: reaction {reaction} at the driven top against contact force {slave}"
+    )
+    markers, facet_tags = namespace["markers"], namespace["facet_tags"]
+    name = next(n for n in ("punch_top", "cube_top") if n in markers)
+    helper = reaction_force(problem, facet_tags, markers[name])
+    assert np.linalg.norm(helper - reaction) <= 1e-12 * np.linalg.norm(reaction), (
+        f"{where}: reaction_force {helper} against the residual's sum {reaction}"
+    )
+    if "reaction" in namespace:  # the block's own reaction_force call
+        assert np.allclose(namespace["reaction"], helper, rtol=1e-12, atol=0.0)
+
+
+def check_slip(where: str, namespace: dict) -> None:
+    """After sliding, every active node slips with |y_j| = mu z_j, and friction_state's rows
+    are contact_pressure's (coordinates and pressures equal, row by row)."""
+    problem, mu = namespace["problem"], namespace["mu"]
+    state = problem.friction_state()
+    coordinates, pressure = problem.contact_pressure()
+    assert np.array_equal(state["coordinates"], coordinates), f"{where}: rows differ"
+    assert np.array_equal(state["pressure"], pressure), f"{where}: pressures differ"
+    active = pressure > 0.0
+    assert problem.comm.allreduce(int(np.count_nonzero(state["sticking"])), op=MPI.SUM) == 0
+    assert np.all(state["slipping"] == active), f"{where}: an active node does not slip"
+    traction = np.abs(state["traction"]) if state["traction"].ndim == 1 else np.linalg.norm(
+        state["traction"], axis=1)
+    assert np.allclose(traction[active], mu * pressure[active], rtol=1e-8, atol=0.0), (
+        f"{where}: slipping nodes' friction traction is not mu times their pressure"
+    )
+    # the total force's ratio is mu up to the tilt of the deformed surface's normals
+    slave, _ = problem.contact_forces()
+    ratio = np.linalg.norm(slave[:-1]) / abs(slave[-1])
+    assert abs(ratio - mu) <= 0.01 * mu, f"{where}: tangential / normal force {ratio}"
 
 
 def destroy(namespace: dict) -> None:
