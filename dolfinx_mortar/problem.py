@@ -846,8 +846,9 @@ class ContactProblem:
 
     def contact_pressure(self, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """(reference coordinates, nodal pressure z_j) of pair k's slave nodes owned by this
-        rank. Not collective: each rank sees only its own nodes (:meth:`gathered_pressure`
-        gives all of them)."""
+        rank: coordinates (n, gdim), pressures (n,). Not collective: each rank sees only its
+        own nodes (:meth:`gathered_pressure` gives all of them). The
+        rows are those of :meth:`friction_state`, in the same order."""
         interface = self.interfaces[k]
         return (
             interface.owned_multiplier_coordinates.copy(),
@@ -855,7 +856,8 @@ class ContactProblem:
         )
 
     def gathered_pressure(self, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
-        """The same on every rank, for all slave nodes, sorted by x coordinate. Collective."""
+        """The same on every rank, for all slave nodes: coordinates (n, gdim) and pressures
+        (n,), sorted by x, then by y coordinate. Collective."""
         coordinates, pressure = self.contact_pressure(k)
         coordinates = np.vstack(self.comm.allgather(coordinates))
         pressure = np.concatenate(self.comm.allgather(pressure))
@@ -863,9 +865,12 @@ class ContactProblem:
         return coordinates[order], pressure[order]
 
     def contact_forces(self, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
-        """Total contact force (2-vector) on the slave and on the master side of pair k.
+        """Total contact force on the slave and on the master side of pair k.
 
-        Collective: call it on every rank (each gets the sums over all ranks).
+        Each is a vector of gdim components ((x, y) in 2D, (x, y, z) in 3D): the force the
+        other body exerts on that side, the normal pressure's and, with friction, the
+        friction traction's; the two balance. Collective: call it on every rank (each gets
+        the sums over all ranks).
         """
         interface = self.interfaces[k]
         q = interface.quantities
@@ -886,7 +891,9 @@ class ContactProblem:
         """Pair k's frictional state at this rank's owned slave nodes (not collective in 2D,
         collective in 3D).
 
-        Keys: ``coordinates`` (reference), ``traction`` y_j (the tangential multiplier:
+        One row per node, the rows of :meth:`contact_pressure` in the same order. Keys:
+        ``coordinates`` (reference, (n, gdim)), ``pressure`` z_j (the normal multiplier, as
+        :meth:`contact_pressure` returns it), ``traction`` y_j (the tangential multiplier:
         the friction traction on the slave is -y_j tau_j), ``slip`` u~_j / A_j (the slip
         of the slave against the master since the last solve started, a length),
         ``sticking`` and ``slipping`` (active nodes in each state) and ``dissipation``
@@ -899,7 +906,8 @@ class ContactProblem:
         return self.friction.state(k, self._tangential_rows(k), self.active[k], self.areas[k])
 
     def pressure_function(self, k: int = 0, function: dolfinx.fem.Function | None = None):
-        """A P1 scalar Function with the contact pressure at the slave nodes (0 elsewhere).
+        """A P1 scalar Function with the contact pressure at the slave nodes (0 elsewhere),
+        in 2D and 3D; ``function`` given: that one, overwritten.
 
         Collective (creating a Function and updating its ghosts).
         """
