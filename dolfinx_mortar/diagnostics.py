@@ -153,9 +153,13 @@ def describe_ksp_failure(ksp) -> str:
     if failed:
         failure = _enum_name(PETSc.PC.FailedReason, failed, ("FACTOR", "SETUP", "SUBPC"))
         text += f", preconditioner failure {failure}"
-        if "FACTOR" in failure:
+        if "ZEROPIVOT" in failure:
             text += " (the factorization met a zero or tiny pivot: a singular system, e.g. a "
             text += "body with a free rigid-body motion)"
+        elif "OUTMEMORY" in failure:
+            text += (" (the factorization ran out of the working space it had estimated, e.g. "
+                     "MUMPS' INFOG(1) = -9 after many delayed pivots: raise the estimate's "
+                     "margin, the option <prefix>mat_mumps_icntl_14, a percentage, default 20)")
     return text
 
 

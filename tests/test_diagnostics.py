@@ -163,6 +163,45 @@ def test_a_singular_factorization_is_described():
         assert words in text
     ksp.destroy()
     matrix.destroy()
+    b.destroy()
+    x.destroy()
+
+
+def test_a_factorization_out_of_working_space_is_described_as_such():
+    """A saddle-point matrix (its zero block delays pivots) factorized by MUMPS with no
+    margin on the estimated working space (ICNTL(14) = 0, strict pivoting): INFOG(1) = -9,
+    named as such, not as a singular system."""
+    n, m = 400, 200
+    rng = np.random.default_rng(1)
+    B = np.zeros((m, n))
+    for i in range(m):
+        B[i, rng.choice(n, 4, replace=False)] = rng.uniform(-1.0, 1.0, 4)
+    K = np.block([[np.diag(rng.uniform(1.0, 2.0, n)), B.T], [B, np.zeros((m, m))]])
+    rows, cols = np.nonzero(K)
+    matrix = PETSc.Mat().createAIJ(K.shape, nnz=np.bincount(rows).astype(PETSc.IntType),
+                                   comm=MPI.COMM_SELF)
+    for r, c in zip(rows, cols, strict=True):
+        matrix.setValue(r, c, K[r, c])
+    matrix.assemble()
+    ksp = PETSc.KSP().create(MPI.COMM_SELF)
+    ksp.setOperators(matrix)
+    ksp.setType("preonly")
+    pc = ksp.getPC()
+    pc.setType("lu")
+    pc.setFactorSolverType("mumps")
+    pc.setFactorSetUpSolverType()
+    pc.getFactorMatrix().setMumpsIcntl(14, 0)
+    pc.getFactorMatrix().setMumpsCntl(1, 1.0)
+    ksp.setErrorIfNotConverged(False)
+    b, x = matrix.createVecs()
+    b.set(1.0)
+    ksp.solve(b, x)
+    assert pc.getFactorMatrix().getMumpsInfog(1) == -9
+    text = diagnostics.describe_ksp_failure(ksp)
+    assert "FACTOR_OUTMEMORY" in text and "mat_mumps_icntl_14" in text
+    assert "pivot: a singular system" not in text
+    for obj in (ksp, matrix, b, x):
+        obj.destroy()
 
 
 @pytest.mark.parallel
