@@ -11,9 +11,12 @@
 from __future__ import annotations
 
 import functools
+import warnings
 
 import numpy as np
 import pytest
+
+from dolfinx_mortar.diagnostics import ContactWarning
 
 from . import common
 from .common import record, record_outcome, relative_difference
@@ -134,8 +137,13 @@ def hertz_lagrange(refinement=0, steps=2):
 
 def run_hertz_penalty(factor: float, refinement=0, steps=2, **options):
     lagrange, scale = hertz_lagrange(refinement, steps)
-    setup = common.hertz(refinement=refinement, method="penalty", penalty=factor * scale, **options)
-    outcome = setup.steps(steps) if steps else setup.solve()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ContactWarning)
+        setup = common.hertz(refinement=refinement, method="penalty", penalty=factor * scale,
+                             **options)
+        outcome = setup.steps(steps) if steps else setup.solve()
+    outcome.extra["warnings"] = [str(w.message) for w in caught
+                                 if issubclass(w.category, ContactWarning)]
     setup.destroy()
     error = relative_difference(outcome.pressure, lagrange.pressure)
     return outcome, error
@@ -146,8 +154,15 @@ def run_hertz_penalty(factor: float, refinement=0, steps=2, **options):
     PENALTY_FACTORS,
 )
 def test_penalty_hertz_every_solve_converges(factor):
-    """Hertz in the demo's two load steps: every Newton solve converges (no cut-back)."""
+    """Hertz in the demo's two load steps: every Newton solve converges (no cut-back); a
+    penalty of 1e-2 E/h or softer lets the block's nodes end more than half a facet inside
+    the cylinder, and the user is told so, with the soft penalty among the causes."""
     outcome, error = run_hertz_penalty(factor)
+    if factor <= 1e-2:
+        assert outcome.extra["warnings"], "no penetration warning for a soft penalty"
+        assert all("penalty parameter too soft" in m for m in outcome.extra["warnings"])
+    else:
+        assert outcome.extra["warnings"] == []
     record_outcome(
         1,
         outcome,
