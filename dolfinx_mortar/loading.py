@@ -88,8 +88,11 @@ class StepRecord:
 class ContactOutput:
     """Displacement and contact pressure per step, as VTX (ADIOS2 BP) for ParaView.
 
-    Writes ``directory/displacement.bp`` and ``directory/contact_pressure.bp``
-    (open either in ParaView with the ADIOS2 VTX reader), with friction also
+    Writes ``directory/displacement.bp`` and ``directory/contact_pressure.bp`` (the
+    fields ``contact_pressure``, the recovered pressure users read, and
+    ``contact_multiplier``, the nodal multipliers z_j; see
+    :meth:`ContactProblem.contact_pressure`), open either in ParaView with the ADIOS2
+    VTX reader; with friction also
     ``tangential_traction.bp`` and ``friction_status.bp`` (1 slip, 2 stick). Creating, writing and
     closing are collective.
     """
@@ -114,9 +117,11 @@ class ContactOutput:
             self.directory.mkdir(parents=True, exist_ok=True)
         comm.Barrier()
         self.pressure = problem.pressure_function()
+        self.multiplier = problem.pressure_function(raw=True)
         self._writers = [
             dolfinx.io.VTXWriter(comm, self.directory / "displacement.bp", [problem.u]),
-            dolfinx.io.VTXWriter(comm, self.directory / "contact_pressure.bp", [self.pressure]),
+            dolfinx.io.VTXWriter(comm, self.directory / "contact_pressure.bp",
+                                 [self.pressure, self.multiplier]),
         ]
         self.friction = None
         if problem.has_friction:
@@ -128,6 +133,7 @@ class ContactOutput:
     def write(self, t: float) -> None:
         """Write the current displacement and pressure at time t. Collective."""
         self.problem.pressure_function(0, self.pressure)
+        self.problem.pressure_function(0, self.multiplier, raw=True)
         if self.friction is not None:
             self.problem.friction_functions(0, self.friction)
         for writer in self._writers:

@@ -49,7 +49,7 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from . import compat, diagnostics, enforcement, kernels, solvers
+from . import compat, diagnostics, enforcement, kernels, recovery, solvers
 from . import friction as friction_rules
 from .diagnostics import ContactWarning
 from .enforcement import ACTIVE_SET_STRATEGIES, METHODS
@@ -844,21 +844,27 @@ class ContactProblem:
         """Active slave nodes of all pairs, summed over the ranks. Collective."""
         return int(self.comm.allreduce(sum(int(a.sum()) for a in self.active), op=MPI.SUM))
 
-    def contact_pressure(self, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
-        """(reference coordinates, nodal pressure z_j) of pair k's slave nodes owned by this
-        rank: coordinates (n, gdim), pressures (n,). Not collective: each rank sees only its
-        own nodes (:meth:`gathered_pressure` gives all of them). The
-        rows are those of :meth:`friction_state`, in the same order."""
-        interface = self.interfaces[k]
-        return (
-            interface.owned_multiplier_coordinates.copy(),
-            self.multipliers[k].getArray(readonly=True).copy(),
-        )
+    def contact_pressure(self, k: int = 0, raw: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """(reference coordinates, contact pressure) of pair k's slave nodes owned by this
+        rank: coordinates (n, gdim), pressures (n,); :meth:`gathered_pressure` gives all of
+        them on every rank. The rows are those of :meth:`friction_state`, in the same order.
 
-    def gathered_pressure(self, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
-        """The same on every rank, for all slave nodes: coordinates (n, gdim) and pressures
-        (n,), sorted by x, then by y coordinate. Collective."""
-        coordinates, pressure = self.contact_pressure(k)
+        The pressure is the nodal multipliers recovered on their patches
+        (:mod:`dolfinx_mortar.recovery`): the linear fit of the multiplier field over each
+        active node's patch, which keeps linear pressures exact and averages the node to
+        node scatter of unstructured meshes; ``raw=True``: the multipliers z_j themselves
+        (each node's contact force over its area, what the forces are made of). Collective.
+        """
+        interface = self.interfaces[k]
+        z = self.multipliers[k]
+        pressure = (z.getArray(readonly=True).copy() if raw
+                    else recovery.recovered_pressure(interface, z, self.active[k]))
+        return interface.owned_multiplier_coordinates.copy(), pressure
+
+    def gathered_pressure(self, k: int = 0, raw: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`contact_pressure` of all slave nodes, on every rank: coordinates (n, gdim)
+        and pressures (n,), sorted by x, then by y coordinate. Collective."""
+        coordinates, pressure = self.contact_pressure(k, raw)
         coordinates = np.vstack(self.comm.allgather(coordinates))
         pressure = np.concatenate(self.comm.allgather(pressure))
         order = np.lexsort((coordinates[:, 1], coordinates[:, 0]))
@@ -905,17 +911,18 @@ class ContactProblem:
             raise RuntimeError("friction_state: this problem has no friction")
         return self.friction.state(k, self._tangential_rows(k), self.active[k], self.areas[k])
 
-    def pressure_function(self, k: int = 0, function: dolfinx.fem.Function | None = None):
-        """A P1 scalar Function with the contact pressure at the slave nodes (0 elsewhere),
-        in 2D and 3D; ``function`` given: that one, overwritten.
+    def pressure_function(self, k: int = 0, function: dolfinx.fem.Function | None = None,
+                          raw: bool = False):
+        """A P1 scalar Function with :meth:`contact_pressure` at the slave nodes (0
+        elsewhere), in 2D and 3D; ``function`` given: that one, overwritten.
 
         Collective (creating a Function and updating its ghosts).
         """
         if function is None:
             space = dolfinx.fem.functionspace(self.V.mesh, ("Lagrange", 1))
-            function = dolfinx.fem.Function(space, name="contact_pressure")
-        return self._slave_node_function(k, self.multipliers[k].getArray(readonly=True),
-                                         function)
+            function = dolfinx.fem.Function(space, name="contact_multiplier" if raw
+                                            else "contact_pressure")
+        return self._slave_node_function(k, self.contact_pressure(k, raw)[1], function)
 
     def friction_functions(self, k: int = 0, functions: tuple | None = None) -> tuple:
         """(tangential traction y_j, status) as P1 scalar Functions for ParaView (0 away

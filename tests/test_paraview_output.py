@@ -86,6 +86,7 @@ class Capture:
                 state["points"] = V.tabulate_dof_coordinates()
                 state["u"] = self.u.x.array.reshape(-1, 2).copy()
                 state["pressure"] = self.pressure_function().x.array.copy()
+                state["multiplier"] = self.pressure_function(raw=True).x.array.copy()
                 state["pressure_points"] = (
                     self.pressure_function().function_space.tabulate_dof_coordinates()
                 )
@@ -113,24 +114,25 @@ def check_contact_output(directory, state, times):
     displacement = read_vtx(directory / "displacement.bp")
     pressure = read_vtx(directory / "contact_pressure.bp")
     assert displacement["fields"] == ["displacement"]
-    assert pressure["fields"] == ["contact_pressure"]
+    assert pressure["fields"] == ["contact_pressure", "contact_multiplier"]
     for data in (displacement, pressure):
         assert data["times"] == pytest.approx(times, rel=1e-14, abs=0.0)
         assert len(data["geometry"]) == len(times)
     # last step: the file's values at its points are the computed ones at theirs
     u = displacement["displacement"][-1]
     assert u.shape[1] == 3 and np.all(u[:, 2] == 0.0)
-    written = sorted_rows(displacement["geometry"][-1], u[:, :2])
+    last = sorted_rows(displacement["geometry"][-1], u[:, :2])
     computed = sorted_rows(state["points"], state["u"])
-    np.testing.assert_array_equal(written, computed)
-    written = sorted_rows(pressure["geometry"][-1], pressure["contact_pressure"][-1])
-    computed = sorted_rows(state["pressure_points"], state["pressure"])
-    np.testing.assert_array_equal(written, computed)
-    assert computed[:, 2].max() > 0.0  # the pressure is not all zero
+    np.testing.assert_array_equal(last, computed)
+    for name, key in (("contact_pressure", "pressure"), ("contact_multiplier", "multiplier")):
+        written = sorted_rows(pressure["geometry"][-1], pressure[name][-1])
+        computed = sorted_rows(state["pressure_points"], state[key])
+        np.testing.assert_array_equal(written, computed)
+        assert computed[:, 2].max() > 0.0  # the pressure is not all zero
     # each step written, not the last one repeated
     if len(times) > 1:
         first = sorted_rows(displacement["geometry"][0], displacement["displacement"][0][:, :2])
-        assert np.abs(first[:, 2:] - written[:, 2:]).max() > 0.0
+        assert np.abs(first[:, 2:] - last[:, 2:]).max() > 0.0
 
 
 def test_hertz_paraview_output_holds_every_load_step(tmp_path):

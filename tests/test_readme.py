@@ -167,10 +167,10 @@ def check_punch_reaction(where: str, namespace: dict) -> None:
 
 def check_slip(where: str, namespace: dict) -> None:
     """After sliding, every active node slips with |y_j| = mu z_j, and friction_state's rows
-    are contact_pressure's (coordinates and pressures equal, row by row)."""
+    are contact_pressure's (coordinates and the multipliers, raw=True, equal row by row)."""
     problem, mu = namespace["problem"], namespace["mu"]
     state = problem.friction_state()
-    coordinates, pressure = problem.contact_pressure()
+    coordinates, pressure = problem.contact_pressure(raw=True)
     assert np.array_equal(state["coordinates"], coordinates), f"{where}: rows differ"
     assert np.array_equal(state["pressure"], pressure), f"{where}: pressures differ"
     active = pressure > 0.0
