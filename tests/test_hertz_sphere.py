@@ -59,11 +59,13 @@ def test_total_force_equals_the_load(serial):
 
 
 def test_pressure_is_near_hertz(serial):
-    """Refinement 0 (h = a/4, 2703 dofs), measured: p_max/p0 - 1 = +3.2 % (the largest of
-    scattered nodal values), the fitted peak p0_fit/p0 - 1 = +0.17 %, a_contact = 0.0945
-    vs a = 0.1008 (-0.26 slave elements), L2 pressure error 8.5 %; one linear problem per
-    active set, so few Newton iterations (measured [3, 4] in 2 steps)."""
-    assert 0.0 < serial["p_max"] / serial["p0_exact"] - 1.0 < 0.06
+    """Refinement 0 (h = a/4, 2703 dofs), measured: the recovered pressure's peak p_max/p0
+    - 1 = -1.1 %, the largest nodal multiplier +3.2 % (gmsh's tetrahedra scatter them),
+    the fitted peak p0_fit/p0 - 1 = -0.2 %, a_contact = 0.0945 vs a = 0.1008 (-0.26 slave
+    elements), L2 pressure error 9.5 %; one linear problem per active set, so few Newton
+    iterations (measured [3, 4] in 2 steps)."""
+    assert abs(serial["p_max_error_rel"]) < 0.02
+    assert 0.0 < serial["p_max_multiplier_error_rel"] < 0.06
     assert abs(serial["p0_fit_error_rel"]) < 0.02
     assert abs(serial["a_error_in_elements"]) < 1.0
     assert 0.03 < serial["l2_pressure_error_rel"] < 0.12
@@ -73,10 +75,12 @@ def test_pressure_is_near_hertz(serial):
 @pytest.mark.parametrize("case, slave", [("sphere", "sphere"), ("block", "block")])
 def test_two_spheres_and_the_block_as_slave(case, slave):
     """Two equal spheres (R/2 in Hertz's formulas), or the block's top as the slave: the
-    load transmitted to rounding; measured p_max/p0 - 1 = +3.5 % and +3.3 %."""
+    load transmitted to rounding; measured p_max/p0 - 1 = -1.0 % and -0.4 % recovered,
+    +3.5 % and +3.3 % the largest multiplier."""
     summary = hertz_sphere([*ARGS, "--case", case, "--slave", slave])
     assert summary["total_force"] == pytest.approx(summary["load"], rel=1e-8)
-    assert 0.0 < summary["p_max"] / summary["p0_exact"] - 1.0 < 0.06
+    assert abs(summary["p_max_error_rel"]) < 0.02
+    assert 0.0 < summary["p_max_multiplier_error_rel"] < 0.06
     assert abs(summary["a_error_in_elements"]) < 1.0
 
 
@@ -188,12 +192,16 @@ def test_hexahedral_mesh_bodies_are_separate_and_tagged(case):
 
 @pytest.mark.parametrize("case, refinement", [("block", 0), ("block", 1), ("sphere", 0)])
 def test_hexahedral_pressure_peak_is_within_two_percent(case, refinement):
-    """On the structured hexahedral grids the nodal pressures do not scatter as on gmsh's
-    tetrahedra: p_max within 2 % of p0 (measured +1.16 % and -0.09 % for the block at
-    refinement 0 and 1, +1.39 % for two spheres), the contact radius within one slave
-    element, the load transmitted to rounding."""
+    """On the structured hexahedral grids the nodal multipliers do not scatter as on gmsh's
+    tetrahedra: their maximum within 2 % of p0 (measured +1.16 % and -0.10 % for the block
+    at h = a/2 and a/4, +1.38 % for two spheres at h = a/2); the recovered pressure's peak
+    differs from it by the linear fit's curvature error, O(p0 h^2 / a^2) (a node on the
+    symmetry planes has a one-sided patch; measured +2.40 %, -0.08 %, +2.63 %); the
+    contact radius within one slave element, the load transmitted to rounding."""
     summary = hertz_sphere([*HEX_ARGS, "--case", case, "--refinement", str(refinement)])
-    assert abs(summary["p_max_error_rel"]) < 0.02
+    assert abs(summary["p_max_multiplier_error_rel"]) < 0.02
+    h_over_a = summary["h_slave_measured"] / summary["a_exact"]
+    assert abs(summary["p_max_error_rel"]) < 0.15 * h_over_a**2
     assert abs(summary["a_error_in_elements"]) < 1.0
     assert summary["total_force"] == pytest.approx(summary["load"], rel=1e-8)
     assert summary["force_balance"] <= 1e-10
