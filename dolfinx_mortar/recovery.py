@@ -16,8 +16,9 @@ best in L2 over the node's patch (its slave facets whose nodes are all active),
 
     min over p in P1:  int_patch (p - lambda_h)^2 dA,
 
-evaluated at the node. A pressure that is linear on the patch is reproduced exactly (so
-patch tests stay exact), the fit only averages what scatters. Nodes with no such facet
+evaluated at the node, and never below 0 (a contact pressure; a one-sided patch at a
+symmetry plane extrapolates). A pressure that is linear on the patch is reproduced
+exactly (so patch tests stay exact), the fit only averages what scatters. Nodes with no such facet
 (a lone active node, the contact edge's outermost nodes) and inactive nodes keep z_j.
 The forces (``contact_forces``) always come from the multipliers themselves.
 
@@ -135,7 +136,7 @@ def recovered_pressure(interface: MortarInterface, multipliers: PETSc.Vec,
     value = np.zeros(gram_t.shape[0])
     value[well_posed] = np.linalg.solve(gram_t[well_posed], moments_t[well_posed, :, None])[:, 0, 0]
     rows = np.flatnonzero(fitted)
-    result[rows[well_posed]] = value[well_posed]
+    result[rows[well_posed]] = np.maximum(value[well_posed], 0.0)
     return result
 
 

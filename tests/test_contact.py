@@ -37,6 +37,7 @@ def test_patch_test_segment_lagrange_is_exact(ratio, slave, refinement):
     )
     assert summary["converged"]
     assert summary["max_pressure_deviation_rel"] <= 1e-10
+    assert summary["max_multiplier_deviation_rel"] <= 1e-10
     assert summary["max_stress_deviation_rel"] <= 1e-10
     forces = np.array(summary["slave_force"]) + np.array(summary["master_force"])
     assert np.linalg.norm(forces) <= 1e-10 * summary["total_force_expected"]
@@ -57,6 +58,23 @@ def test_patch_test_segment_lagrange_is_exact(ratio, slave, refinement):
 def test_patch_test_options_are_exact(options):
     summary = demo("patch_test").main(["--ratio", "3:7", *options])
     assert summary["max_pressure_deviation_rel"] <= 1e-10
+    assert summary["max_multiplier_deviation_rel"] <= 1e-10
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("moduli", [("1e5", "1e3"), ("1e3", "1e5")])
+@pytest.mark.parametrize("slave", ["top", "bottom"])
+@pytest.mark.parametrize("cell", ["triangle", "quadrilateral"])
+def test_patch_test_is_exact_with_moduli_100_to_1(moduli, slave, cell):
+    """Punch and foundation 100 times stiffer than the other, either slave side, triangles
+    and quadrilaterals: the state stays uniform (the bodies' lateral strains differ, the
+    interface slides) and exact, the multipliers and the recovered pressure alike."""
+    summary = demo("patch_test").main(["--ratio", "3:7", "--slave", slave, "--cell-type", cell,
+                                       "--E-punch", moduli[0], "--E-foundation", moduli[1]])
+    assert summary["converged"]
+    assert summary["max_pressure_deviation_rel"] <= 1e-10
+    assert summary["max_multiplier_deviation_rel"] <= 1e-10
+    assert summary["max_stress_deviation_rel"] <= 1e-10
 
 
 @pytest.mark.parametrize("gauss_points", [2, 4, 8])

@@ -28,6 +28,7 @@ def patch_test(*args, comm=MPI.COMM_SELF) -> dict:
 def assert_exact(summary: dict, tolerance: float = 1e-10) -> None:
     assert summary["converged"]
     assert summary["max_pressure_deviation_rel"] <= tolerance, summary
+    assert summary["max_multiplier_deviation_rel"] <= tolerance, summary
     assert summary["max_stress_deviation_rel"] <= tolerance, summary
     slave, master = np.array(summary["slave_force"]), np.array(summary["master_force"])
     # the master pushes the slave away from it: up on the punch, down on the foundation
@@ -46,6 +47,17 @@ def test_patch_test_segment_lagrange_is_exact(cell, ratio, slave):
     summary = patch_test("--cell", cell, "--ratio", ratio, "--slave", slave)
     assert_exact(summary)
     assert summary["newton_iterations"] == 1
+
+
+@pytest.mark.parametrize("cell", CELLS)
+@pytest.mark.parametrize("moduli", [("1e5", "1e3"), ("1e3", "1e5")])
+@pytest.mark.parametrize("slave", ["top", "bottom"])
+def test_patch_test_is_exact_with_moduli_100_to_1(cell, moduli, slave):
+    """Punch and foundation 100 times stiffer than the other, either slave side: the state
+    stays uniform (the bodies' lateral strains differ, the interface slides) and exact."""
+    summary = patch_test("--cell", cell, "--ratio", "3:2", "--slave", slave,
+                         "--E-punch", moduli[0], "--E-foundation", moduli[1])
+    assert_exact(summary)
 
 
 @pytest.mark.parallel
