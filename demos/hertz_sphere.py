@@ -75,6 +75,7 @@ Run:  mpirun -n 2 python3 demos/hertz_sphere.py --refinement 1 --json hs.json --
 
 from __future__ import annotations
 
+import functools
 import math
 import pathlib
 import time
@@ -260,6 +261,10 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         help="n0: element size a / (n0 2^refinement) in the contact zone",
     )
     parser.add_argument(
+        "--lower-size-ratio", type=float, default=1.0,
+        help="the lower body's element sizes over the upper body's (tetrahedra)",
+    )
+    parser.add_argument(
         "--steps", type=int, default=None,
         help="load steps, uniform in the Hertz radius from the initial indentation's to a "
         f"(None: enough that the contact edge moves by at most {EDGE_ELEMENTS_PER_STEP:g} "
@@ -290,8 +295,13 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         parser.error(f"the Hertz radius a = {exact['a']:.4g} is not below R/3: lower --load")
     start = time.perf_counter()
 
-    builder = (meshes3d.hertz_sphere if args.cell == "tetrahedron"
-               else meshes3d.hertz_sphere_hexahedral)
+    if args.cell == "tetrahedron":
+        builder = functools.partial(meshes3d.hertz_sphere,
+                                    lower_size_ratio=args.lower_size_ratio)
+    elif args.lower_size_ratio != 1.0:
+        parser.error("--lower-size-ratio applies to --cell tetrahedron")
+    else:
+        builder = meshes3d.hertz_sphere_hexahedral
     tagged = builder(
         case=args.case,
         refinement=args.refinement,
@@ -368,6 +378,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         "E2": args.E2,
         "nu2": args.nu2,
         "block_size": args.block_size,
+        "lower_size_ratio": args.lower_size_ratio,
         "slave": args.slave,
         "material": args.material,
         "configuration": configuration,

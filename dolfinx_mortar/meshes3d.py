@@ -90,6 +90,7 @@ def hertz_sphere(
     slave: str = "sphere",
     elements_per_radius: int = ELEMENTS_PER_RADIUS,
     comm: MPI.Comm = MPI.COMM_WORLD,
+    lower_size_ratio: float = 1.0,
 ) -> TaggedMesh:
     """Quarter model (x >= 0, y >= 0) of a sphere pressed onto a block or onto a sphere.
 
@@ -106,7 +107,9 @@ def hertz_sphere(
     within the distance 1.5 a of the origin, growing linearly by
     GROWTH_3D / 2**refinement per unit distance beyond, up to h_max = R / (4 2**refinement).
     Every length is a multiple of R or a and the model is meshed at R = 1 and scaled, so
-    the same dimensionless problem gets the same mesh in any unit system.
+    the same dimensionless problem gets the same mesh in any unit system. The lower body's
+    sizes are ``lower_size_ratio`` times these (non-matching contact meshes of a chosen
+    size ratio; its largest size h_max times the ratio too).
 
     Args:
         case: "block" or "sphere".
@@ -119,6 +122,7 @@ def hertz_sphere(
             "block" (the lower body's contact surface is).
         elements_per_radius: n0.
         comm: Communicator of the mesh.
+        lower_size_ratio: The lower body's element sizes over the upper body's, > 0.
 
     Returns:
         The mesh with cells "sphere", "block" and facets "sphere_surface" (the upper
@@ -130,6 +134,7 @@ def hertz_sphere(
     """
     level, n0, unit, a, L = _hertz_arguments(case, slave, refinement, elements_per_radius,
                                              radius, contact_radius, block_size)
+    ratio = _check_positive("lower_size_ratio", lower_size_ratio)
     cap = 1.0 - math.sqrt(1.0 - CAP_RADIUS**2)
     scale = 0.5**level
     h_contact = a / n0 * scale
@@ -204,14 +209,31 @@ def hertz_sphere(
         field = gmsh.model.mesh.field
         distance = field.add("Distance")
         field.setNumbers(distance, "PointsList", origins)
-        threshold = field.add("Threshold")
-        field.setNumber(threshold, "InField", distance)
-        field.setNumber(threshold, "SizeMin", h_contact)
-        field.setNumber(threshold, "SizeMax", h_max)
-        field.setNumber(threshold, "DistMin", zone)
-        field.setNumber(threshold, "DistMax", zone + max(h_max - h_contact, 0.0) / growth)
-        field.setAsBackgroundMesh(threshold)
-        gmsh.option.setNumber("Mesh.MeshSizeMax", h_max)
+
+        def sizes(factor: float, volumes: list[int]) -> int:
+            """The graded sizes times ``factor``, restricted to ``volumes`` and their
+            boundaries."""
+            threshold = field.add("Threshold")
+            field.setNumber(threshold, "InField", distance)
+            field.setNumber(threshold, "SizeMin", factor * h_contact)
+            field.setNumber(threshold, "SizeMax", factor * h_max)
+            field.setNumber(threshold, "DistMin", zone)
+            field.setNumber(threshold, "DistMax",
+                            zone + factor * max(h_max - h_contact, 0.0) / growth)
+            restricted = field.add("Restrict")
+            field.setNumber(restricted, "InField", threshold)
+            field.setNumbers(restricted, "VolumesList", volumes)
+            entities = [(3, v) for v in volumes]
+            for dim, key in ((2, "SurfacesList"), (1, "CurvesList"), (0, "PointsList")):
+                entities = gmsh.model.getBoundary(entities, combined=False, oriented=False)
+                entities = sorted({e for e in entities if e[0] == dim})
+                field.setNumbers(restricted, key, [tag for _, tag in entities])
+            return restricted
+
+        smallest = field.add("Min")
+        field.setNumbers(smallest, "FieldsList", [sizes(1.0, upper), sizes(ratio, lower)])
+        field.setAsBackgroundMesh(smallest)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", max(1.0, ratio) * h_max)
         gmsh.option.setNumber("Mesh.MeshSizeMin", 0.0)
         gmsh.model.mesh.generate(3)
         types = set(gmsh.model.mesh.getElementTypes(3))

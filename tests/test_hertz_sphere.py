@@ -218,3 +218,28 @@ def test_hexahedral_serial_equals_parallel():
     assert parallel["active_nodes"] == serial["active_nodes"]
     for key in ("p_max", "total_force", "a_contact", "l2_pressure_error_rel"):
         assert parallel[key] == pytest.approx(serial[key], rel=1e-8), key
+
+
+def _contact_edge_length(tagged, name: str, within: float) -> float:
+    """Mean edge length of the facets ``name`` whose midpoints lie within ``within`` of
+    the z axis (serial mesh)."""
+    mesh = tagged.mesh
+    facets = tagged.facet_tags.find(tagged.markers[name])
+    points = mesh.geometry.x[dolfinx.mesh.entities_to_geometry(mesh, 2, facets, False)]
+    near = np.hypot(*points.mean(axis=1)[:, :2].T) < within
+    ring = points[near]
+    return float(np.linalg.norm(np.roll(ring, -1, axis=1) - ring, axis=2).mean())
+
+
+@pytest.mark.parametrize("ratio", [0.5, 2.0])
+def test_lower_size_ratio_scales_the_lower_contact_mesh(ratio):
+    """The lower body's contact facets are ``ratio`` times the upper body's (within 15 %
+    for gmsh's sizes), the upper body's unchanged."""
+    a = 0.1
+    meshes = {r: meshes3d.hertz_sphere(case="sphere", contact_radius=a, lower_size_ratio=r,
+                                       comm=MPI.COMM_SELF) for r in (1.0, ratio)}
+    upper = {r: _contact_edge_length(m, "sphere_surface", 1.5 * a) for r, m in meshes.items()}
+    lower = {r: _contact_edge_length(m, "block_top", 1.5 * a) for r, m in meshes.items()}
+    assert upper[ratio] == pytest.approx(upper[1.0], rel=0.05)
+    assert lower[ratio] / upper[ratio] == pytest.approx(ratio, rel=0.15)
+    assert lower[1.0] / upper[1.0] == pytest.approx(1.0, rel=0.1)
