@@ -48,6 +48,9 @@ CELL_TYPES = ("triangle", "quadrilateral")
 HERTZ_CASES = ("A", "B", "C")
 """Accepted values of :func:`hertz`'s ``case``."""
 
+HERTZ_SLAVES = ("cylinder", "block")
+"""Accepted values of :func:`hertz`'s ``slave``: the upper cylinder or the lower body."""
+
 GROWTH = 0.25
 """Increase of the element size per unit distance from a refined curve (graded meshes),
 at refinement 0; level k uses GROWTH / 2**k, so that refining halves the element size
@@ -354,6 +357,7 @@ def hertz(
     cell_type: str = "triangle",
     comm: MPI.Comm = MPI.COMM_WORLD,
     half_width: float | None = None,
+    slave: str = "cylinder",
 ) -> TaggedMesh:
     """Plane-strain Hertz contact: a half-cylinder pressed onto a block or a half-cylinder.
 
@@ -366,9 +370,9 @@ def hertz(
       on its flat face y = -R (a = 0.7). The cell tag "cylinder" is the upper body and
       "block" the lower half-cylinder, so solvers treat all cases alike.
 
-    Every body is split by the line x = 0 (tagged ``symmetry_slave`` in the upper body,
-    ``symmetry_master`` in the lower one) so a solver can stop rigid horizontal motion
-    there. With a = ``half_width`` (by default :func:`hertz_half_width`), the element
+    Every body is split by the line x = 0 (tagged ``symmetry_slave`` in the slave's
+    body, ``symmetry_master`` in the master's) so a solver can stop rigid horizontal
+    motion there. With a = ``half_width`` (by default :func:`hertz_half_width`), the element
     size is h_contact = a/5 (0.078, 0.2, 0.14 for A, B, C at R = 8 by default) on both
     contact surfaces for |x| < min(3a, R/2), R/8 on the rest of the arcs and the flat
     faces of the cylinders, at most R/2 anywhere, and grows by GROWTH per unit distance;
@@ -387,15 +391,21 @@ def hertz(
         half_width: Contact half-width a that sizes the refined zone, e.g. the Hertz a
             of the load and moduli to be solved; None for :func:`hertz_half_width`
             (the benchmark loads).
+        slave: "cylinder" (default) makes the upper cylinder's arc the slave surface,
+            "block" the lower body's contact surface; the mesh is the same either way,
+            only the tags "contact_*" and "symmetry_*" swap their facets.
 
     Returns:
-        The mesh with cells "cylinder", "block" and facets "contact_slave" (whole arc of
-        the upper cylinder), "contact_master" (top of the block, or arc of the lower
-        cylinder), "load" (y = R), "support" (bottom of the lower body),
-        "symmetry_slave", "symmetry_master".
+        The mesh with cells "cylinder", "block" and facets "contact_slave" (the whole
+        arc of the upper cylinder, or with ``slave="block"`` the top of the block or
+        the arc of the lower cylinder), "contact_master" (the other of the two), "load"
+        (y = R), "support" (bottom of the lower body), "symmetry_slave",
+        "symmetry_master".
     """
     level = _check_refinement(refinement)
     quadrilateral = _check_cell_type(cell_type)
+    if slave not in HERTZ_SLAVES:
+        raise ValueError(f"slave must be one of {HERTZ_SLAVES}, got {slave!r}")
     R = _check_positive("radius", radius)
     a = hertz_half_width(case, R)  # also checks case
     if half_width is not None:
@@ -462,20 +472,24 @@ def hertz(
         upper = half_disk(m, 1.0)
         if case == "C":
             lower = half_disk(m, -1.0)
-            master, support = lower["arc"], lower["flat"]
+            lower_contact, support = lower["arc"], lower["flat"]
         else:
             size = (R, 0.5 * R) if case == "A" else (4.0 * R, 4.0 * R)
             lower = block(m, *size)
-            master, support = lower["top"], lower["bottom"]
+            lower_contact, support = lower["top"], lower["bottom"]
+        sides = [(upper["arc"], upper["symmetry"]), (lower_contact, lower["symmetry"])]
+        if slave == "block":
+            sides.reverse()
+        (slave_contact, slave_symmetry), (master_contact, master_symmetry) = sides
         m.mesh(
             cells={markers["cylinder"]: upper["surfaces"], markers["block"]: lower["surfaces"]},
             facets={
-                markers["contact_slave"]: upper["arc"],
-                markers["contact_master"]: master,
+                markers["contact_slave"]: slave_contact,
+                markers["contact_master"]: master_contact,
                 markers["load"]: upper["flat"],
                 markers["support"]: support,
-                markers["symmetry_slave"]: upper["symmetry"],
-                markers["symmetry_master"]: lower["symmetry"],
+                markers["symmetry_slave"]: slave_symmetry,
+                markers["symmetry_master"]: master_symmetry,
             },
             names=_names(markers),
             h_max=h_max,

@@ -176,6 +176,31 @@ def test_hertz_contact_zone_resolution(case, cell_type):
         assert sizes[1, name] < 0.6 * sizes[0, name]
 
 
+@pytest.mark.parametrize("case", ["B", "C"])
+def test_hertz_slave_block_swaps_the_contact_and_symmetry_tags(case):
+    """slave="block": the same mesh, with "contact_slave" on the lower body's surface
+    and "symmetry_slave" on its symmetry line; the markers' values do not change."""
+    cylinder, block = (meshes.hertz(case, slave=s, comm=MPI.COMM_SELF)
+                       for s in ("cylinder", "block"))
+    assert block.markers == cylinder.markers
+    np.testing.assert_array_equal(cylinder.mesh.geometry.x, block.mesh.geometry.x)
+    assert block.h_contact == cylinder.h_contact
+    for role in ("contact", "symmetry"):
+        slave, master = (cylinder.facet_tags.find(cylinder.markers[f"{role}_{side}"])
+                         for side in ("slave", "master"))
+        np.testing.assert_array_equal(block.facet_tags.find(block.markers[f"{role}_slave"]),
+                                      master)
+        np.testing.assert_array_equal(block.facet_tags.find(block.markers[f"{role}_master"]),
+                                      slave)
+    if case == "B":
+        width, height = HERTZ_BLOCK[case]
+        assert length(block, "contact_slave") == pytest.approx(width, rel=1e-12)
+        assert length(block, "symmetry_slave") == pytest.approx(height, rel=1e-12)
+        assert length(block, "symmetry_master") == pytest.approx(R, rel=1e-12)
+        segments = facet_segments(block, "contact_slave")
+        assert np.abs(segments[..., 1]).max() == 0.0
+
+
 def test_hertz_cell_counts_stay_moderate():
     counts = [num_cells(meshes.hertz("B", refinement=r)) for r in (0, 1, 2)]
     assert counts[0] < counts[1] < counts[2] < 25_000
@@ -406,6 +431,7 @@ def test_quadrilateral_structured_counts():
         lambda: meshes.hertz(half_width=-1.0),
         lambda: meshes.hertz(half_width=float("nan")),
         lambda: meshes.hertz(cell_type="tetrahedron"),
+        lambda: meshes.hertz(slave="master"),
         lambda: meshes.patch_test(ratio=(0, 2)),
         lambda: meshes.patch_test(ratio=(1, 2, 3)),
         lambda: meshes.patch_test(ratio=(1.5, 2)),
