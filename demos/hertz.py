@@ -6,10 +6,13 @@ as a uniform traction on the cylinder's flat top. Hertz:
 a = sqrt(4 P R / (pi E*)) = 0.9628, p0 = 2 P / (pi a) = 6.612. Cases A (rigid
 plate) and C (two cylinders) with ``--case``.
 
-The slave surface is the cylinder's arc, the master the block's top. Both
-bodies carry a line x = 0 on which u_x = 0 (no rigid sliding); the cylinder is
-held only by contact, so the first Newton iterate starts it slightly pressed
-into the block.
+The slave surface is the cylinder's arc and the master the block's top, or the
+other way round with ``--slave block`` (the lower body's surface as the slave; the
+same mesh). Everything reported is measured on the slave side's nodes and
+multipliers (p_max, the L2 error, the half-width), and the total force is the
+cylinder's whichever side it is. Both bodies carry a line x = 0 on which u_x = 0
+(no rigid sliding); the cylinder is held only by contact, so the first Newton
+iterate starts it slightly pressed into the block.
 
 Normals: with linear elasticity (the default, what Hertz theory assumes) the
 mortar integrals live on the undeformed configuration, where the averaged
@@ -17,8 +20,9 @@ normals of the cylinder's arc tilt by x/R (0.12 rad at the edge of the zone)
 away from the common normal of the linearized theory, the block's. That tilt
 moves the converged pressure 1.7 % (L2) away from Hertz however fine the mesh
 (benchmarks/results/hertz_convergence_R8_averaged.md), so ``--normals`` defaults to
-``master`` for ``--material linear`` and to the library's ``averaged`` for the
-finite-strain models, whose integrals follow the deformed, flattened arc.
+the block's for ``--material linear`` (``master``, or ``slave`` with ``--slave
+block``) and to the library's ``averaged`` for the finite-strain models, whose
+integrals follow the deformed, flattened arc.
 
 Mesh: refined (h = a/5, halved per --refinement) where the contact zone is, with
 a the Hertz half-width of the --load, --radius and moduli given, and every other
@@ -154,6 +158,12 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         default=None,
         help="Poisson's ratio of the lower body (None: the case's, 0.3)",
     )
+    parser.add_argument(
+        "--slave",
+        choices=meshes.HERTZ_SLAVES,
+        default="cylinder",
+        help="slave surface: the cylinder's arc or the lower body's contact surface",
+    )
     cli.add_material_argument(
         parser, "linear (small strain, what Hertz theory assumes) or finite-strain models"
     )
@@ -165,12 +175,16 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     )
     parser.add_argument("--steps", type=int, default=2, help="load steps")
     cli.add_common_arguments(
-        parser, normals=None, normals_help="None: master for --material linear, else averaged"
+        parser,
+        normals=None,
+        normals_help="None: the block's for --material linear (master, or slave with "
+        "--slave block), else averaged",
     )
     cli.add_predictor_argument(parser)
     args = parser.parse_args(argv)
     if args.normals is None:
-        args.normals = "master" if args.material == "linear" else "averaged"
+        block_side = "master" if args.slave == "cylinder" else "slave"
+        args.normals = block_side if args.material == "linear" else "averaged"
     configure_logging(comm)
     case = CASES[args.case]
     load = args.load if args.load is not None else case["load"]
@@ -201,6 +215,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         cell_type=args.cell_type,
         comm=comm,
         half_width=exact["a"],
+        slave=args.slave,
     )
     mesh, markers = tagged.mesh, tagged.markers
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
@@ -251,13 +266,21 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     spacing = float(np.max(np.diff(x_nodes[zone]))) if zone.sum() > 1 else float("nan")
     error, error_rel = l2_pressure_error(x_nodes[zone], pressure[zone], exact["a"], exact["p0"])
     slave_force, master_force = problem.contact_forces()
+    # the upward force on the cylinder
+    cylinder_force = slave_force if args.slave == "cylinder" else master_force
     summary = {
         "case": args.case,
         "radius": args.radius,
         "load": load,
+        "E_cylinder": args.E_cylinder,
+        "nu_cylinder": args.nu_cylinder,
+        "E_block": E_block,
+        "nu_block": nu_block,
+        "slave": args.slave,
         "material": args.material,
         "configuration": configuration,
         **problem_options(args),
+        "linear_solver": problem.linear_solver,
         "c_n": problem.c_n,
         "penalty_used": problem.penalty,
         "refinement": args.refinement,
@@ -272,13 +295,14 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         "a_contact": float(a_contact),
         "a_exact": exact["a"],
         "a_error_in_elements": float(abs(a_contact - exact["a"]) / spacing),
-        "total_force": float(slave_force[1]),
-        "total_force_error_rel": float(abs(slave_force[1] - load) / load),
+        "total_force": float(cylinder_force[1]),
+        "total_force_error_rel": float(abs(cylinder_force[1] - load) / load),
         "force_balance": float(np.linalg.norm(slave_force + master_force) / load),
         "l2_pressure_error": error,
         "l2_pressure_error_rel": error_rel,
         "pressure_profile": {
             "x": x_nodes[zone].tolist(),
+            "y": coordinates[zone, 1].tolist(),
             "pressure": pressure[zone].tolist(),
         },
         "newton_iterations": [r.iterations for r in records],
