@@ -163,6 +163,12 @@ class ContactProblem:
         petsc_options: SNES/KSP options (defaults: newtonls, full steps,
             MUMPS LU); the user's options database with the prefix wins.
         petsc_options_prefix: prefix of those options.
+        pressure_recovery: whether :meth:`contact_pressure` (and what reads it) gives the
+            recovered pressure (:mod:`dolfinx_mortar.recovery`) or the multipliers; None
+            (default): recovered in 3D, where the multipliers of tetrahedral meshes
+            scatter, the multipliers in 2D, where they do not and the fit would only add
+            its curvature error (docs/benchmarks.md, "Contact pressure: nodal multipliers
+            and their recovery").
     """
 
     def __init__(
@@ -191,6 +197,7 @@ class ContactProblem:
         c_t: float | None = None,
         petsc_options: dict | None = None,
         petsc_options_prefix: str = "dolfinx_mortar_",
+        pressure_recovery: bool | None = None,
     ):
         _check_choice("method", method, METHODS)
         _check_choice("active_set", active_set, ACTIVE_SET_STRATEGIES)
@@ -234,6 +241,8 @@ class ContactProblem:
         self.V = u.function_space
         self.comm: MPI.Intracomm = self.V.mesh.comm
         self.bcs = list(bcs)
+        self.pressure_recovery = (self.V.mesh.geometry.dim == 3 if pressure_recovery is None
+                                  else bool(pressure_recovery))
         self.method = method
         self.condensation = bool(condensation)
         self.linear_solver = linear_solver
@@ -849,16 +858,18 @@ class ContactProblem:
         rank: coordinates (n, gdim), pressures (n,); :meth:`gathered_pressure` gives all of
         them on every rank. The rows are those of :meth:`friction_state`, in the same order.
 
-        The pressure is the nodal multipliers recovered on their patches
-        (:mod:`dolfinx_mortar.recovery`): the linear fit of the multiplier field over each
-        active node's patch, which keeps linear pressures exact and averages the node to
-        node scatter of unstructured meshes; ``raw=True``: the multipliers z_j themselves
-        (each node's contact force over its area, what the forces are made of). Collective.
+        With ``pressure_recovery`` (the default in 3D) the pressure is the nodal
+        multipliers recovered on their patches (:mod:`dolfinx_mortar.recovery`): the linear
+        fit of the multiplier field over each active node's patch, which keeps linear
+        pressures exact and averages the node to node scatter of unstructured meshes;
+        otherwise, or with ``raw=True``, the multipliers z_j themselves (each node's
+        contact force over its area, what the forces are made of). Collective.
         """
         interface = self.interfaces[k]
         z = self.multipliers[k]
-        pressure = (z.getArray(readonly=True).copy() if raw
-                    else recovery.recovered_pressure(interface, z, self.active[k]))
+        pressure = (recovery.recovered_pressure(interface, z, self.active[k])
+                    if self.pressure_recovery and not raw
+                    else z.getArray(readonly=True).copy())
         return interface.owned_multiplier_coordinates.copy(), pressure
 
     def gathered_pressure(self, k: int = 0, raw: bool = False) -> tuple[np.ndarray, np.ndarray]:

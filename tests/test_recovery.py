@@ -1,6 +1,7 @@
 """The recovered contact pressure (dolfinx_mortar.recovery): exact for linear pressures on
 irregular flat surfaces, equal to an independent least-squares fit over each node's
-patch, the multipliers where no fit applies, and the same on any number of ranks."""
+patch, the multipliers where no fit applies, and the same on any number of ranks; on by
+default in 3D only."""
 
 from __future__ import annotations
 
@@ -31,7 +32,8 @@ def _irregular(tagged) -> None:
     x[:, 1] += 0.6 * bump * np.cos(23.0 * x[:, 0] - 7.0 * x[:, 1] + 3.0 * x[:, 2])
 
 
-def _problem(dim: int, cell: str, slave: str, comm) -> ContactProblem:
+def _problem(dim: int, cell: str, slave: str, comm, recovery: bool | None = True
+             ) -> ContactProblem:
     build = meshes.patch_test if dim == 2 else meshes.patch_test_3d
     tagged = build(ratio=(3, 2), slave=slave, refinement=1, cell_type=cell, comm=comm)
     _irregular(tagged)
@@ -45,7 +47,7 @@ def _problem(dim: int, cell: str, slave: str, comm) -> ContactProblem:
     dofs = dolfinx.fem.locate_dofs_topological(V, fdim, held)
     bcs = [dolfinx.fem.dirichletbc(np.zeros(dim), dofs, V)]
     pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"])
-    return ContactProblem(F, u, bcs, [pair])
+    return ContactProblem(F, u, bcs, [pair], pressure_recovery=recovery)
 
 
 def _scatter(coordinates: np.ndarray) -> np.ndarray:
@@ -159,3 +161,15 @@ def test_recovery_in_parallel_equals_serial(dim, cell):
         problem.destroy()
     assert np.array_equal(values["serial"][0], values["parallel"][0])
     assert np.abs(values["serial"][1] - values["parallel"][1]).max() <= 1e-13
+
+
+@pytest.mark.parametrize("dim, cell", [(2, "triangle"), (3, "tetrahedron")])
+def test_recovery_is_the_default_in_3d_only(dim, cell):
+    """pressure_recovery=None: the recovered pressure in 3D, the multipliers in 2D."""
+    problem = _problem(dim, cell, "top", MPI.COMM_SELF, recovery=None)
+    assert problem.pressure_recovery == (dim == 3)
+    values = _scatter(problem.interfaces[0].owned_multiplier_coordinates)
+    _set_multipliers(problem, values, np.ones(values.size, dtype=bool))
+    _, pressure = problem.contact_pressure()
+    assert np.array_equal(pressure, values) == (dim == 2)
+    problem.destroy()
