@@ -322,6 +322,9 @@ class ContactProblem:
         scales = enforcement.Scales(self._row_scale, self._slave_length,
                                     self.V.mesh.geometry.dim)
         self._dirichlet_scale = scales.dirichlet
+        # residual rounding follows the stiffer body: a soft slave on a stiff master
+        # must not ask for a residual below what the master's rows can hold
+        self._force_scale = scales.dirichlet * max(1.0, master_scale / self._row_scale)
         # the two sides in series: the compliance of the contact, so that a stiff
         # slave on a soft master (ironing's die) does not get an overly stiff c_n
         contact_scale = 1.0 / (1.0 / self._row_scale + 1.0 / master_scale)
@@ -581,7 +584,7 @@ class ContactProblem:
     def _setup_snes(self, petsc_options: dict, prefix: str) -> None:
         """SNES with our defaults (:mod:`dolfinx_mortar.solvers`); ``petsc_options`` and then
         the options database win. The default absolute tolerance 1e-11 k h is a force that
-        moves a node by 1e-11 h, in the units of the problem."""
+        moves a node of the stiffer side by 1e-11 h, in the units of the problem."""
         snes = PETSc.SNES().create(self.comm)
         self._residual_history: list[float] = []
 
@@ -601,7 +604,7 @@ class ContactProblem:
 
         kept = solvers.configure_snes(
             snes, prefix, petsc_options, self.condensation,
-            1e-11 * self._dirichlet_scale * self._slave_length, callbacks, condensation,
+            1e-11 * self._force_scale * self._slave_length, callbacks, condensation,
             self.linear_solver)
         self._options_finalizer = weakref.finalize(self, solvers.release_options, kept)
         self.snes = snes
