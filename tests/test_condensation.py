@@ -294,4 +294,4 @@ def test_condensation_without_kept_products_gives_the_same_newton_steps():
     assert linear[True] == linear[False]
     assert_same_solution(solutions[False], solutions[True], tolerance=1e-12)
     assert kept[True][1] > 0 and kept[False][1] == 0
-    assert kept[False][0] == ["A_prime", "C", "G", "G_p", "K_inner", "T"]
+    assert kept[False][0] == ["A_prime", "C", "E_q", "G", "G_p", "K_inner", "T"]
