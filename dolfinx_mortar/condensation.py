@@ -24,9 +24,10 @@ near the contact took, through G P^-1 T, the slave body's normal stiffness as
 couplings to them. Where the slave body is the stiffer one these couplings are
 its stiffness, far above the master rows' own diagonal, and algebraic multigrid
 does not converge on such rows (the inner solve's error then kept the outer
-method from converging; docs/benchmarks.md, "Iterative solver under contrast"). So every other row takes the slave normal
-displacements out with the constraint rows (T K_r = -C_a), i.e. n_j^T du_j is
-replaced by what constraint j says it is, in terms of the master nodes:
+method from converging; docs/benchmarks.md, "Iterative solver under contrast").
+So every other row takes the slave normal displacements out with the constraint
+rows (T K_r = -C_a), i.e. n_j^T du_j is replaced by what constraint j says it
+is, in terms of the master nodes:
 
     K_c = (I - E Q^-1 T) K_r,    E = (I - T^T T) K_r T^T,    Q = diag(T K_r T^T)
 
@@ -52,6 +53,8 @@ from __future__ import annotations
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
+
+from . import diagnostics
 
 
 class CondensedPreconditioner:
@@ -90,6 +93,8 @@ class CondensedPreconditioner:
         self.z_node_dofs = z_node_dofs.reshape(self.num_z, self.block_size)
         self.near_nullspace = near_nullspace
         self.inner_iterations: list[int] = []
+        self.inner_failure = ""
+        """Why an inner solve broke down (empty if none did since the owner last cleared it)."""
         self.ksp = PETSc.KSP().create(comm)
         self.ksp.setOptionsPrefix(prefix)
         self.ksp.setFromOptions()
@@ -254,9 +259,11 @@ class CondensedPreconditioner:
         self.inner_iterations.append(self.ksp.getIterationNumber())
         reason = self.ksp.getConvergedReason()
         if reason < 0 and reason != PETSc.KSP.ConvergedReason.DIVERGED_MAX_IT:
-            # a breakdown: a NaN makes the outer Krylov method, and the Newton step, fail
-            # (an iterative inner solve stopped by its iteration limit is still a
-            # preconditioner, which fgmres allows to vary)
+            # a breakdown: a NaN makes the outer Krylov method fail (DIVERGED_NANORINF),
+            # and SNES stops before it applies the step (an iterative inner solve stopped
+            # by its iteration limit is still a preconditioner, which fgmres allows to vary)
+            self.inner_failure = (f"{diagnostics.describe_ksp_failure(self.ksp)} after "
+                                  f"{self.ksp.getIterationNumber()} iterations")
             y.set(np.nan)
             return
         # dz = d^-1 (r_z - C du) on the eliminated rows, P^-1 T (r' - A' du) on the active ones

@@ -17,6 +17,8 @@ module holds the checks behind the messages of :class:`ContactProblem` and
   accepted load step);
 * :func:`free_translations`: bodies whose rigid-body translation nothing in the
   bulk form holds;
+* :func:`describe_ksp_failure`, :func:`describe_iterative_failure`: why a linear
+  solve failed (and, for the iterative solver, what to try);
 * :func:`warn`: a :class:`ContactWarning` that the user sees, once, on rank 0.
 
 All functions that take a communicator are collective.
@@ -160,6 +162,29 @@ def describe_ksp_failure(ksp) -> str:
             text += (" (the factorization ran out of the working space it had estimated, e.g. "
                      "MUMPS' INFOG(1) = -9 after many delayed pivots: raise the estimate's "
                      "margin, the option <prefix>mat_mumps_icntl_14, a percentage, default 20)")
+    return text
+
+
+def describe_iterative_failure(ksp, prefix: str, inner_failure: str = "",
+                               advice: bool = True) -> str:
+    """Why the iterative linear solver failed: fgmres on the monolithic system (``ksp``),
+    preconditioned by the condensed GMRES + AMG solve (:mod:`dolfinx_mortar.condensation`),
+    whose breakdown, if any, ``inner_failure`` says; with ``advice``, what to try."""
+    from petsc4py import PETSc
+
+    text = describe_ksp_failure(ksp)
+    if ksp.getConvergedReason() == PETSc.KSP.ConvergedReason.DIVERGED_MAX_IT:
+        text += (f" (fgmres on the monolithic system did not reach its tolerance in "
+                 f"{ksp.getIterationNumber()} iterations, the limit {prefix}ksp_max_it)")
+    if inner_failure:
+        text += f"; the condensed inner solve ({prefix}condensed_) broke down: {inner_failure}"
+    text += "."
+    if advice:
+        text += (
+            " The iterative solver (GMRES + AMG on the condensed system) did not solve this "
+            "Newton system: try linear_solver='direct' (MUMPS LU), or other options for the "
+            f"inner solve under {prefix}condensed_ (or a larger {prefix}ksp_max_it). A body "
+            "that nothing holds against a rigid-body motion makes it fail too.")
     return text
 
 

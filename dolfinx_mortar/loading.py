@@ -315,7 +315,7 @@ def _diagnosis(problem, report: SolveReport, inverting, since: float) -> str:
             "there: refine the mesh, use a material that resists compression, or check that "
             "no body is free to move as a rigid body."
         )
-    if report.linear_solver_failure:
+    if report.linear_solver_failure and getattr(problem, "linear_solver", "") != "iterative":
         text += (
             " The linear solver failed: a singular system usually means a body whose rigid-body "
             "motion no boundary condition or active contact holds."

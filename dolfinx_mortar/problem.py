@@ -152,6 +152,10 @@ class ContactProblem:
             matrix, its block size set and the rigid-body modes of each body as
             near-nullspace (options under ``<prefix>condensed_``, e.g. ``pc_type:
             gamg`` for PETSc's GAMG). ``problem.linear_solver`` is the one chosen.
+            When the iterative solver that ``auto`` chose fails a linear solve, the
+            direct one solves that load step again and the rest of the run, with a
+            ContactWarning that says why; an explicit ``iterative`` is kept (the
+            failed step is cut back, and the report says what to try).
         friction: ``None`` (frictionless, the default), ``("coulomb", mu)``,
             ``("tresca", bound)`` (a pressure), or a list of these, one per
             pair (:mod:`dolfinx_mortar.friction`; direct linear solver, with
@@ -205,6 +209,8 @@ class ContactProblem:
         _check_choice("normals", normals, kernels.NORMAL_OPTIONS)
         _check_choice("multipliers", multipliers, kernels.BASIS_OPTIONS)
         _check_choice("linear_solver", linear_solver, solvers.LINEAR_SOLVERS)
+        self._automatic_linear_solver = linear_solver == "auto"
+        self._condensation_requested = bool(condensation)
         if linear_solver == "auto":
             V = u.function_space
             linear_solver = solvers.automatic_linear_solver(
@@ -359,7 +365,9 @@ class ContactProblem:
             "mortar integration": 0.0,
             "linear solve": 0.0,
         }
-        self._setup_snes(petsc_options or {}, petsc_options_prefix)
+        self._petsc_options = dict(petsc_options or {})
+        self._petsc_options_prefix = petsc_options_prefix
+        self._setup_snes(self._petsc_options, petsc_options_prefix)
         self._check_free_bodies(body_labels, free_bodies)
         self._building = False
 
@@ -609,6 +617,39 @@ class ContactProblem:
         self._options_finalizer = weakref.finalize(self, solvers.release_options, kept)
         self.snes = snes
 
+    def _falls_back_to_direct(self, report: SolveReport) -> bool:
+        """Did the iterative solver that ``auto`` chose fail a linear solve (then the
+        direct one takes over)?"""
+        return (self._automatic_linear_solver and self.linear_solver == "iterative"
+                and not report.converged and bool(report.linear_solver_failure))
+
+    def _fall_back_to_direct(self, report: SolveReport) -> None:
+        """Replace the iterative linear solver by the direct one (MUMPS LU, of the
+        monolithic system unless condensation was asked for) for the rest of the run, with
+        a ContactWarning that says why. Collective.
+
+        ``auto`` promises a solver that works where the direct one would: the direct one
+        is the more robust, and a problem whose iterative solve failed once (a contrast
+        or a geometry its preconditioner does not handle) would likely fail again."""
+        self._warn(
+            ("linear solver fallback",),
+            "linear_solver='auto' chose the iterative solver (GMRES + AMG on the condensed "
+            f"system) for this problem, and a linear solve failed: "
+            f"{report.linear_solver_failure} The direct solver (MUMPS LU) solves this load "
+            "step again and every later one. Pass linear_solver='direct' to skip the "
+            "iterative attempt, or linear_solver='iterative' to keep it (the load stepping "
+            "then cuts the step back).",
+        )
+        self._options_finalizer()
+        self.snes.destroy()
+        del self.snes
+        if self._condenser is not None:
+            self._condenser.destroy()
+            self._condenser = None
+        self.linear_solver = "direct"
+        self.condensation = self._condensation_requested
+        self._setup_snes(self._petsc_options, self._petsc_options_prefix)
+
     # -- state -------------------------------------------------------------
 
     def _read_state_into_x(self) -> None:
@@ -758,7 +799,10 @@ class ContactProblem:
         """Solve one load step from the current state (u and multipliers). Collective.
 
         Returns a report; does not raise when Newton fails (the load stepper
-        cuts the step back), but raises for errors in the input.
+        cuts the step back), but raises for errors in the input. A failed linear solve
+        stops Newton before its step is applied. If it was the iterative solver that
+        ``linear_solver="auto"`` chose, the direct solver takes over and solves the step
+        again from the same start.
         """
         start = time.perf_counter()
         before = dict(self.timings)
@@ -771,8 +815,15 @@ class ContactProblem:
         if self._reference_norm is not None:
             self.snes.setTolerances(atol=max(atol, rtol * self._reference_norm))
         self._reference_norm = None
+        step_atol = self.snes.getTolerances()[1]
+        saved = self.save_state() if self._automatic_linear_solver else None
         try:
             report = self.enforcement.solve(self)
+            if self._falls_back_to_direct(report):
+                self._fall_back_to_direct(report)
+                self.restore_state(saved)
+                self.snes.setTolerances(atol=step_atol)
+                report = self.enforcement.solve(self)
         finally:
             self.snes.setTolerances(atol=atol)
         total = time.perf_counter() - start
@@ -787,6 +838,8 @@ class ContactProblem:
     def _newton(self) -> SolveReport:
         self._residual_history = []
         self._last_inversion = diagnostics.Inversion()
+        if self._condenser is not None:
+            self._condenser.inner_failure = ""
         self.snes.solve(None, self.x)
         reason = self.snes.getConvergedReason()
         self._write_x_into_state(self.x)
@@ -801,7 +854,16 @@ class ContactProblem:
         if reason <= 0:
             report.inversion = self._last_inversion
         if reason == PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE:
-            report.linear_solver_failure = diagnostics.describe_ksp_failure(self.snes.getKSP())
+            # SNES stops before the step is applied (a NaN step included): x is the last
+            # iterate, and the load stepping cuts the step back
+            ksp = self.snes.getKSP()
+            if self.linear_solver == "iterative":
+                # with ``auto`` the direct solver takes over: no advice
+                report.linear_solver_failure = diagnostics.describe_iterative_failure(
+                    ksp, self._petsc_options_prefix, self._condenser.inner_failure,
+                    advice=not self._automatic_linear_solver)
+            else:
+                report.linear_solver_failure = diagnostics.describe_ksp_failure(ksp)
         return report
 
     # -- state for load stepping --------------------------------------------

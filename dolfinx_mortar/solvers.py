@@ -6,10 +6,12 @@ solve (:mod:`dolfinx_mortar.condensation`): MUMPS LU (``linear_solver="direct"``
 GMRES with algebraic multigrid whose near-nullspace is the rigid-body modes of each
 body (``linear_solver="iterative"``; BoomerAMG, with :data:`BOOMERAMG_3D_OPTIONS` in
 3D). ``linear_solver="auto"``, the problem's default, is one of the two by dimension
-and size (:func:`automatic_linear_solver`). The option ``condensed_keep_products``
-(default true) keeps the condensation's sub-matrices and products between Newton
-iterations, so that a Jacobian of the same pattern only recomputes values; false
-frees them after each set-up (less memory, every product built anew).
+and size (:func:`automatic_linear_solver`), and falls back to the direct solver for
+the rest of the run where the iterative one fails a linear solve. The option
+``condensed_keep_products`` (default true) keeps the condensation's sub-matrices and
+products between Newton iterations, so that a Jacobian of the same pattern only
+recomputes values; false frees them after each set-up (less memory, every product
+built anew).
 ``petsc_options`` given to the problem override the defaults, and the user's options
 database under the problem's prefix overrides both.
 
@@ -76,7 +78,10 @@ def automatic_linear_solver(gdim: int, num_dofs: int, multipliers: str,
     refinements later, and its memory grows about linearly with the dofs. Below the
     threshold the two are close (on 2 ranks of a loaded machine LU was faster) and LU
     is the more robust. Both give the same Newton iterates (the iterative solve
-    preconditions FGMRES on the full system, rtol 1e-12).
+    preconditions FGMRES on the full system, rtol 1e-12). Where the iterative solve
+    fails, the problem falls back to the direct one
+    (:meth:`~dolfinx_mortar.problem.ContactProblem.solve`): a linear solve that only
+    the iterative solver fails does not stop an ``auto`` run.
     """
     if (gdim == 3 and num_dofs >= AUTO_ITERATIVE_MIN_DOFS and multipliers == "dual"
             and not has_friction):
