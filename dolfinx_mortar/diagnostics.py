@@ -178,10 +178,9 @@ def describe_iterative_failure(ksp, prefix: str, inner_failure: str = "",
                  f"{ksp.getIterationNumber()} iterations, the limit {prefix}ksp_max_it)")
     if inner_failure:
         text += f"; the condensed inner solve ({prefix}condensed_) broke down: {inner_failure}"
-    text += "."
     if advice:
         text += (
-            " The iterative solver (GMRES + AMG on the condensed system) did not solve this "
+            ". The iterative solver (GMRES + AMG on the condensed system) did not solve this "
             "Newton system: try linear_solver='direct' (MUMPS LU), or other options for the "
             f"inner solve under {prefix}condensed_ (or a larger {prefix}ksp_max_it). A body "
             "that nothing holds against a rigid-body motion makes it fail too.")

@@ -635,7 +635,7 @@ class ContactProblem:
             ("linear solver fallback",),
             "linear_solver='auto' chose the iterative solver (GMRES + AMG on the condensed "
             f"system) for this problem, and a linear solve failed: "
-            f"{report.linear_solver_failure} The direct solver (MUMPS LU) solves this load "
+            f"{report.linear_solver_failure}. The direct solver (MUMPS LU) solves this load "
             "step again and every later one. Pass linear_solver='direct' to skip the "
             "iterative attempt, or linear_solver='iterative' to keep it (the load stepping "
             "then cuts the step back).",
