@@ -67,6 +67,11 @@ INITIAL_OVERLAP = 0.05
 """A surface node deeper than this many facet lengths behind the other surface at
 the start is reported as an initial overlap."""
 
+STIFF_SLAVE_RATIO = 30.0
+"""In 3D, a slave side this many times stiffer (about E) than its master gets a set-up
+warning advising the swap: the dual multipliers of a stiff curved slave on a much softer
+curved master oscillate (docs/benchmarks.md, "Contrast sweep in 3D")."""
+
 
 @dataclasses.dataclass(frozen=True)
 class ContactPair:
@@ -324,6 +329,7 @@ class ContactProblem:
         self._read_state_into_x()
 
         self._row_scale, self._slave_length, master_scale = self._stiffness_scale()
+        self._check_stiff_slave()
         free_bodies = diagnostics.free_translations(self.V, self._K, body_labels, self.bcs)
         scales = enforcement.Scales(self._row_scale, self._slave_length,
                                     self.V.mesh.geometry.dim)
@@ -464,6 +470,24 @@ class ContactProblem:
                     "geometry's units and the facet tags.",
                 )
 
+    def _check_stiff_slave(self) -> None:
+        """Advise the swap when, in 3D, the slave sides are :data:`STIFF_SLAVE_RATIO` times
+        stiffer than the master sides (the bulk stiffness diagonal times the facet size,
+        about E, of each)."""
+        ratio = self._slave_stiffness_ratio
+        if self.V.mesh.geometry.dim != 3 or not ratio >= STIFF_SLAVE_RATIO:
+            return
+        names = ", ".join(self._pair_name(k) for k in range(len(self.interfaces)))
+        self._warn(
+            ("stiff slave",),
+            f"{names}: the slave side is about {ratio:.3g} times stiffer than the master "
+            "side. The contact pressure of a stiff curved slave on a much softer curved "
+            "body can oscillate node to node (the mean pressure and the force stay "
+            "right); the softer body as the slave does not. Swap the two tags in "
+            "ContactPair(facet_tags, slave, master) unless the soft side is flat or much "
+            "coarser.",
+        )
+
     def _check_free_bodies(self, labels: np.ndarray, free: list[diagnostics.FreeBody]) -> None:
         """Warn about bodies that only contact could hold (``free``, from
         :func:`diagnostics.free_translations`) where none touches the other body at the start
@@ -587,6 +611,7 @@ class ContactProblem:
             scales.append((float(sums[0] / sums[1]) / length ** (self.V.mesh.geometry.dim - 1),
                            length))
         diagonal.destroy()
+        self._slave_stiffness_ratio = (scales[0][0] * scales[0][1]) / (scales[1][0] * scales[1][1])
         return scales[0][0], scales[0][1], scales[1][0]
 
     def _setup_snes(self, petsc_options: dict, prefix: str) -> None:
