@@ -841,7 +841,8 @@ class ContactProblem:
             self.snes.setTolerances(atol=max(atol, rtol * self._reference_norm))
         self._reference_norm = None
         step_atol = self.snes.getTolerances()[1]
-        saved = self.save_state() if self._automatic_linear_solver else None
+        may_fall_back = self._automatic_linear_solver and self.linear_solver == "iterative"
+        saved = self.save_state() if may_fall_back else None
         try:
             report = self.enforcement.solve(self)
             if self._falls_back_to_direct(report):
