@@ -67,6 +67,11 @@ INITIAL_OVERLAP = 0.05
 """A surface node deeper than this many facet lengths behind the other surface at
 the start is reported as an initial overlap."""
 
+MAX_TOLERANCE_FACTOR = 1e3
+"""The default SNES atol (1e-11 k h, k the slave's stiffness scale) grows with the
+master's stiffness over the slave's up to this factor: a node of the slave then moves by
+at most 1e-8 h when the test passes."""
+
 STIFF_SLAVE_RATIO = 30.0
 """In 3D, a slave side this many times stiffer (about E) than its master gets a set-up
 warning advising the swap: the dual multipliers of a stiff curved slave on a much softer
@@ -334,9 +339,11 @@ class ContactProblem:
         scales = enforcement.Scales(self._row_scale, self._slave_length,
                                     self.V.mesh.geometry.dim)
         self._dirichlet_scale = scales.dirichlet
-        # residual rounding follows the stiffer body: a soft slave on a stiff master
-        # must not ask for a residual below what the master's rows can hold
-        self._force_scale = scales.dirichlet * max(1.0, master_scale / self._row_scale)
+        # a moving master much stiffer than the slave holds the residual above the
+        # slave-scaled tolerance by rounding (docs/benchmarks.md, "Contrast sweep in
+        # 2D"); capped so that a near-rigid master does not loosen the test for the slave
+        self._force_scale = scales.dirichlet * min(
+            MAX_TOLERANCE_FACTOR, max(1.0, master_scale / self._row_scale))
         # the two sides in series: the compliance of the contact, so that a stiff
         # slave on a soft master (ironing's die) does not get an overly stiff c_n
         contact_scale = 1.0 / (1.0 / self._row_scale + 1.0 / master_scale)
@@ -617,7 +624,9 @@ class ContactProblem:
     def _setup_snes(self, petsc_options: dict, prefix: str) -> None:
         """SNES with our defaults (:mod:`dolfinx_mortar.solvers`); ``petsc_options`` and then
         the options database win. The default absolute tolerance 1e-11 k h is a force that
-        moves a node of the stiffer side by 1e-11 h, in the units of the problem."""
+        moves a node of the slave by 1e-11 h, in the units of the problem, times the
+        master's stiffness over the slave's where the master is the stiffer (at most
+        :data:`MAX_TOLERANCE_FACTOR`)."""
         snes = PETSc.SNES().create(self.comm)
         self._residual_history: list[float] = []
 
