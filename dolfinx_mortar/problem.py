@@ -333,8 +333,10 @@ class ContactProblem:
         self.b = self.layout.create_vector()
         self._read_state_into_x()
 
-        self._row_scale, self._slave_length, master_scale = self._stiffness_scale()
-        self._check_stiff_slave()
+        self._row_scale, self._slave_length, master_scale, master_length = (
+            self._stiffness_scale())
+        self._check_stiff_slave(self._row_scale * self._slave_length
+                                / (master_scale * master_length))
         free_bodies = diagnostics.free_translations(self.V, self._K, body_labels, self.bcs)
         scales = enforcement.Scales(self._row_scale, self._slave_length,
                                     self.V.mesh.geometry.dim)
@@ -477,11 +479,10 @@ class ContactProblem:
                     "geometry's units and the facet tags.",
                 )
 
-    def _check_stiff_slave(self) -> None:
+    def _check_stiff_slave(self, ratio: float) -> None:
         """Advise the swap when, in 3D, the slave sides are :data:`STIFF_SLAVE_RATIO` times
-        stiffer than the master sides (the bulk stiffness diagonal times the facet size,
-        about E, of each)."""
-        ratio = self._slave_stiffness_ratio
+        stiffer than the master sides (``ratio``: the stiffness scale s times the facet
+        length h, about E, of each, slave over master)."""
         if self.V.mesh.geometry.dim != 3 or not ratio >= STIFF_SLAVE_RATIO:
             return
         names = ", ".join(self._pair_name(k) for k in range(len(self.interfaces)))
@@ -586,10 +587,10 @@ class ContactProblem:
                 )
         return reports
 
-    def _stiffness_scale(self) -> tuple[float, float, float]:
-        """(s, h, s_master): s about E/h of the slave side (the mean bulk stiffness
-        diagonal at slave dofs over h^(d-1), h the mean slave facet length in the
-        reference configuration) and the same s_master of the master side."""
+    def _stiffness_scale(self) -> tuple[float, float, float, float]:
+        """(s, h, s_master, h_master): s about E/h of the slave side (the mean bulk
+        stiffness diagonal at slave dofs over h^(d-1), h the mean slave facet length in the
+        reference configuration) and the same of the master side."""
         self._K.zeroEntries()
         dolfinx.fem.petsc.assemble_matrix(self._K, self.J_form)
         self._K.assemble()
@@ -618,8 +619,7 @@ class ContactProblem:
             scales.append((float(sums[0] / sums[1]) / length ** (self.V.mesh.geometry.dim - 1),
                            length))
         diagonal.destroy()
-        self._slave_stiffness_ratio = (scales[0][0] * scales[0][1]) / (scales[1][0] * scales[1][1])
-        return scales[0][0], scales[0][1], scales[1][0]
+        return scales[0][0], scales[0][1], scales[1][0], scales[1][1]
 
     def _setup_snes(self, petsc_options: dict, prefix: str) -> None:
         """SNES with our defaults (:mod:`dolfinx_mortar.solvers`); ``petsc_options`` and then
