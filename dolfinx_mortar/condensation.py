@@ -122,99 +122,8 @@ class CondensedPreconditioner:
         if not reuse:
             self._release_matrices()
         self._fingerprint = fingerprint
-        m, v = self._matrices, self._vectors
-        structure = PETSc.Mat.Structure
-        A = m["A"] = J.createSubMatrix(self.is_u, self.is_u, submat=m.get("A"))
-        G = m["G"] = J.createSubMatrix(self.is_u, self.is_z, submat=m.get("G"))
-        C = m["C"] = J.createSubMatrix(self.is_z, self.is_u, submat=m.get("C"))
-        diagonal = J.getDiagonal()
-        d = diagonal.getArray(readonly=True)[self.num_u:].copy()
-        diagonal.destroy()
-        active = d == 0.0
-        self.num_active = self.comm.allreduce(int(active.sum()), op=MPI.SUM)
-        normals, lengths = self._normals(G, active)
-        if not reuse:
-            for name in ("inverse_d", "inverse_p", "inverse_q", "active", "rz", "sz", "tz"):
-                v[name] = G.createVecRight()
-            for name in ("ru", "rp", "rc", "du", "tu"):
-                v[name] = A.createVecRight()
-        v["inverse_d"].getArray()[:] = np.where(active, 0.0, 1.0 / np.where(active, 1.0, d))
-        v["inverse_p"].getArray()[:] = np.where(active, 1.0 / np.where(active, lengths, 1.0), 0.0)
-        v["active"].getArray()[:] = active
-        T = m["T"] = self._normal_matrix(normals, A, m.get("T"))
-
-        def scaled_copy(name, source, left=None, right=None):
-            if name in m:
-                source.copy(m[name], structure=structure.SAME_NONZERO_PATTERN)
-            else:
-                m[name] = source.copy()
-            m[name].diagonalScale(L=left, R=right)
-            return m[name]
-
-        def combination(name, terms):
-            """sum of factor * matrix over ``terms`` in one matrix of their joint pattern."""
-            if name not in m:
-                first_factor, first = terms[0]
-                m[name] = first.copy()
-                m[name].scale(first_factor)
-                for factor, matrix in terms[1:]:
-                    m[name].axpy(factor, matrix, structure=structure.DIFFERENT_NONZERO_PATTERN)
-                return m[name]
-            m[name].zeroEntries()
-            for factor, matrix in terms:
-                m[name].axpy(factor, matrix, structure=structure.SUBSET_NONZERO_PATTERN)
-            return m[name]
-
-        def product(name, left, right, transpose=False):
-            multiply = left.transposeMatMult if transpose else left.matMult
-            m[name] = multiply(right, result=m.get(name))
-            return m[name]
-
-        def release(*names):
-            """Without ``keep_products``: free what the rest of the set-up and apply
-            do not need."""
-            if not self.keep_products:
-                for name in names:
-                    m.pop(name).destroy()
-
-        # A' = A - G d^-1 C: the exact elimination of the rows with d != 0
-        scaled = scaled_copy("scaled_C", C, left=v["inverse_d"])
-        A_prime = combination("A_prime", [(1.0, A), (-1.0, product("G_C", G, scaled))])
-        release("A", "scaled_C", "G_C")
-        # B1 = (I - G P^-1 T) A'
-        G_p = scaled_copy("G_p", G, right=v["inverse_p"])
-        correction = product("G_p_T_A", G_p, product("T_A", T, A_prime))
-        release("T_A")
-        B1 = combination("B1", [(1.0, A_prime), (-1.0, correction)])
-        release("G_p_T_A")
-        # K_r = B1 - T^T (T B1 + C_a): the normal rows at active nodes become the
-        # constraints, negated so that their diagonal (c_n D_jj) is positive as the
-        # stiffness is (the constraints row C_a is -c_n D n on the slave node)
-        C_a = scaled_copy("C_a", C, left=v["active"])
-        normal_rows = combination("normal_rows", [(1.0, product("T_B1", T, B1)), (1.0, C_a)])
-        release("T_B1")
-        replaced = product("replaced", T, normal_rows, transpose=True)
-        release("normal_rows")
-        K_r = combination("K_r", [(1.0, B1), (-1.0, replaced)])
-        release("B1", "replaced")
-        # K_c = (I - E Q^-1 T) K_r = K_r + E Q^-1 C_a, E = (I - T^T T) K_r T^T,
-        # Q = diag(T K_r T^T): the slave normal displacements taken out of every other
-        # row with the constraint rows (T K_r = -C_a)
-        T_t = m["T_t"] = T.transpose(m["T_t"] if "T_t" in m else PETSc.Mat())
-        K_T = product("K_T", K_r, T_t)
-        normal_block = product("T_K_T", T, K_T)
-        q = normal_block.getDiagonal()
-        q_values = q.getArray(readonly=True)
-        usable = active & (q_values != 0.0)
-        v["inverse_q"].getArray()[:] = np.where(usable, 1.0 / np.where(usable, q_values, 1.0),
-                                                0.0)
-        q.destroy()
-        E = combination("E", [(1.0, K_T), (-1.0, product("T_t_T_K_T", T_t, normal_block))])
-        release("K_T", "T_K_T", "T_t_T_K_T")
-        E_q = scaled_copy("E_q", E, right=v["inverse_q"])
-        release("E")
-        K_c = combination("K_c", [(1.0, K_r), (1.0, product("E_q_C_a", E_q, C_a))])
-        release("K_r", "E_q_C_a", "C_a", "T_t")
+        active = self._split(J, reuse)
+        K_c = self._condensed_operator(active)
         if reuse:
             self.reuses += 1
         else:
@@ -223,6 +132,7 @@ class CondensedPreconditioner:
         # K_c's pattern holds every product's, zeros included (2/3 of it on the 3D
         # Hertz problem); the inner solver gets its nonzeros only, on which
         # algebraic multigrid builds far sparser coarse levels
+        m = self._matrices
         inner = self._nonzero_part(K_c, m.get("K_inner"))
         if inner is not m.get("K_inner"):
             if "K_inner" in m:
@@ -230,7 +140,7 @@ class CondensedPreconditioner:
             m["K_inner"] = inner
             self._set_near_nullspace(inner)
             self.ksp.setOperators(inner)
-        release("K_c")
+        _MatrixStore(m, self.keep_products).release("K_c")
         self.ksp.setUp()
 
     def apply(self, pc: PETSc.PC, x: PETSc.Vec, y: PETSc.Vec) -> None:
@@ -284,6 +194,78 @@ class CondensedPreconditioner:
         self.ksp.view(viewer)
 
     # -- pieces ------------------------------------------------------------
+
+    def _split(self, J: PETSc.Mat, reuse: bool) -> np.ndarray:
+        """J's blocks A, G, C, the scalings d^-1 and P^-1 and T from them; returns which
+        multipliers are active (d_j = 0)."""
+        m, v = self._matrices, self._vectors
+        A = m["A"] = J.createSubMatrix(self.is_u, self.is_u, submat=m.get("A"))
+        G = m["G"] = J.createSubMatrix(self.is_u, self.is_z, submat=m.get("G"))
+        m["C"] = J.createSubMatrix(self.is_z, self.is_u, submat=m.get("C"))
+        diagonal = J.getDiagonal()
+        d = diagonal.getArray(readonly=True)[self.num_u:].copy()
+        diagonal.destroy()
+        active = d == 0.0
+        self.num_active = self.comm.allreduce(int(active.sum()), op=MPI.SUM)
+        normals, lengths = self._normals(G, active)
+        if not reuse:
+            for name in ("inverse_d", "inverse_p", "inverse_q", "active", "rz", "sz", "tz"):
+                v[name] = G.createVecRight()
+            for name in ("ru", "rp", "rc", "du", "tu"):
+                v[name] = A.createVecRight()
+        v["inverse_d"].getArray()[:] = np.where(active, 0.0, 1.0 / np.where(active, 1.0, d))
+        v["inverse_p"].getArray()[:] = np.where(active, 1.0 / np.where(active, lengths, 1.0), 0.0)
+        v["active"].getArray()[:] = active
+        m["T"] = self._normal_matrix(normals, A, m.get("T"))
+        return active
+
+    def _condensed_operator(self, active: np.ndarray) -> PETSc.Mat:
+        """K_c from A, G, C, T and the scalings (the module docstring's products, in
+        order; what ``apply`` needs stays in the store)."""
+        m, v = self._matrices, self._vectors
+        store = _MatrixStore(m, self.keep_products)
+        A, G, C, T = m["A"], m["G"], m["C"], m["T"]
+        # A' = A - G d^-1 C: the exact elimination of the rows with d != 0
+        scaled = store.scaled_copy("scaled_C", C, left=v["inverse_d"])
+        A_prime = store.combination("A_prime", [(1.0, A), (-1.0, store.product("G_C", G, scaled))])
+        store.release("A", "scaled_C", "G_C")
+        # B1 = (I - G P^-1 T) A'
+        G_p = store.scaled_copy("G_p", G, right=v["inverse_p"])
+        correction = store.product("G_p_T_A", G_p, store.product("T_A", T, A_prime))
+        store.release("T_A")
+        B1 = store.combination("B1", [(1.0, A_prime), (-1.0, correction)])
+        store.release("G_p_T_A")
+        # K_r = B1 - T^T (T B1 + C_a): the normal rows at active nodes become the
+        # constraints, negated so that their diagonal (c_n D_jj) is positive as the
+        # stiffness is (the constraints row C_a is -c_n D n on the slave node)
+        C_a = store.scaled_copy("C_a", C, left=v["active"])
+        normal_rows = store.combination("normal_rows",
+                                        [(1.0, store.product("T_B1", T, B1)), (1.0, C_a)])
+        store.release("T_B1")
+        replaced = store.product("replaced", T, normal_rows, transpose=True)
+        store.release("normal_rows")
+        K_r = store.combination("K_r", [(1.0, B1), (-1.0, replaced)])
+        store.release("B1", "replaced")
+        # K_c = (I - E Q^-1 T) K_r = K_r + E Q^-1 C_a, E = (I - T^T T) K_r T^T,
+        # Q = diag(T K_r T^T): the slave normal displacements taken out of every other
+        # row with the constraint rows (T K_r = -C_a)
+        T_t = m["T_t"] = T.transpose(m["T_t"] if "T_t" in m else PETSc.Mat())
+        K_T = store.product("K_T", K_r, T_t)
+        normal_block = store.product("T_K_T", T, K_T)
+        q = normal_block.getDiagonal()
+        q_values = q.getArray(readonly=True)
+        usable = active & (q_values != 0.0)
+        v["inverse_q"].getArray()[:] = np.where(usable, 1.0 / np.where(usable, q_values, 1.0),
+                                                0.0)
+        q.destroy()
+        E = store.combination("E", [(1.0, K_T),
+                                    (-1.0, store.product("T_t_T_K_T", T_t, normal_block))])
+        store.release("K_T", "T_K_T", "T_t_T_K_T")
+        E_q = store.scaled_copy("E_q", E, right=v["inverse_q"])
+        store.release("E")
+        K_c = store.combination("K_c", [(1.0, K_r), (1.0, store.product("E_q_C_a", E_q, C_a))])
+        store.release("K_r", "E_q_C_a", "C_a", "T_t")
+        return K_c
 
     def _normals(self, G: PETSc.Mat, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Unit normals (n_z, gdim) and |G[node j dofs, j]| of the active multipliers (0
@@ -386,3 +368,47 @@ def _pattern_fingerprint(J: PETSc.Mat, comm: MPI.Intracomm) -> tuple:
     local = (J.getOwnershipRange(), indices.size,
              hash(indptr.tobytes()), hash(indices.tobytes()))
     return tuple(comm.allgather(local))
+
+
+class _MatrixStore:
+    """The named matrices of a set-up: each result is written into the matrix of its
+    name if there is one (its pattern reused), and freed after its last use unless
+    the products are kept between set-ups."""
+
+    def __init__(self, matrices: dict[str, PETSc.Mat], keep: bool):
+        self.matrices, self.keep = matrices, keep
+
+    def scaled_copy(self, name, source, left=None, right=None) -> PETSc.Mat:
+        m = self.matrices
+        if name in m:
+            source.copy(m[name], structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+        else:
+            m[name] = source.copy()
+        m[name].diagonalScale(L=left, R=right)
+        return m[name]
+
+    def combination(self, name, terms) -> PETSc.Mat:
+        """sum of factor * matrix over ``terms`` in one matrix of their joint pattern."""
+        m, structure = self.matrices, PETSc.Mat.Structure
+        if name not in m:
+            first_factor, first = terms[0]
+            m[name] = first.copy()
+            m[name].scale(first_factor)
+            for factor, matrix in terms[1:]:
+                m[name].axpy(factor, matrix, structure=structure.DIFFERENT_NONZERO_PATTERN)
+            return m[name]
+        m[name].zeroEntries()
+        for factor, matrix in terms:
+            m[name].axpy(factor, matrix, structure=structure.SUBSET_NONZERO_PATTERN)
+        return m[name]
+
+    def product(self, name, left, right, transpose=False) -> PETSc.Mat:
+        multiply = left.transposeMatMult if transpose else left.matMult
+        self.matrices[name] = multiply(right, result=self.matrices.get(name))
+        return self.matrices[name]
+
+    def release(self, *names) -> None:
+        """Without kept products: free what the rest of the set-up and apply do not need."""
+        if not self.keep:
+            for name in names:
+                self.matrices.pop(name).destroy()
