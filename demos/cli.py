@@ -1,11 +1,15 @@
-"""Command-line helpers shared by the demos and the benchmark scripts.
+"""Command-line helpers shared by the demos.
 
 Every demo builds its parser with :func:`parser`, which gives ``--help`` its
 defaults and the two output options all demos take: ``--output DIR`` (PNG,
 ParaView and CSV files) and ``--json FILE`` (the summary that ``main`` returns).
 The contact demos add the solver options with :func:`add_common_arguments` and
-pass them on with :func:`problem_options`. The package never imports ``demos/``;
-the demos import this module.
+pass them on with :func:`problem_options`.
+
+It lives beside the demos, not in the library: ``python3 demos/NAME.py`` finds it
+first on ``sys.path``, and a demo loaded from its path (the tests, the benchmarks)
+puts its own folder there before importing it. The package never imports
+``demos/``.
 """
 
 from __future__ import annotations
@@ -56,7 +60,7 @@ def add_material_argument(
 ) -> None:
     """``--material``: one of the library's models (:data:`dolfinx_mortar.materials.MODELS`),
     default ``linear``."""
-    from .materials import MODELS
+    from dolfinx_mortar.materials import MODELS
 
     parser.add_argument("--material", choices=MODELS, default="linear", help=help)
 
