@@ -35,18 +35,18 @@ stress:
 	DOLFINX_MORTAR_STRESS_REPORT=$(RESULTS)/stress $(RUN) $(PYTEST) -q -m "slow or not slow" tests/stress --run-slow
 
 benchmark:
-	$(RUN) python3 -m dolfinx_mortar.benchmarks --output $(RESULTS)/benchmarks
+	$(RUN) python3 benchmarks/run.py --output $(RESULTS)/benchmarks
 
 benchmark-quick:
-	$(RUN) python3 -m dolfinx_mortar.benchmarks --quick --output $(RESULTS)/benchmarks-quick
+	$(RUN) python3 benchmarks/run.py --quick --output $(RESULTS)/benchmarks-quick
 
 # 3D: patch test, Hertz sphere (refinements 0..3), direct vs iterative on 1 and 2 ranks
 # (the largest meshes take hours: --stop-at HH:MM skips what would not end in time)
 benchmark-3d:
-	$(RUN) python3 -m dolfinx_mortar.benchmarks --dim 3 --output $(RESULTS)/benchmarks-3d
+	$(RUN) python3 benchmarks/run.py --dim 3 --output $(RESULTS)/benchmarks-3d
 
 benchmark-3d-quick:
-	$(RUN) python3 -m dolfinx_mortar.benchmarks --dim 3 --quick --output $(RESULTS)/benchmarks-3d-quick
+	$(RUN) python3 benchmarks/run.py --dim 3 --quick --output $(RESULTS)/benchmarks-3d-quick
 
 clean:
 	rm -rf $(RESULTS) .pytest_cache

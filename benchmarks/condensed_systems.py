@@ -21,7 +21,8 @@ import numpy as np
 from petsc4py import PETSc
 
 from dolfinx_mortar import condensation
-from dolfinx_mortar.benchmarks.runner import demo
+
+from suite.runner import demo
 
 
 def save(obj, path: pathlib.Path) -> None:

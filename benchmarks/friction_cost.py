@@ -24,7 +24,7 @@ import statistics
 import numpy as np
 from mpi4py import MPI
 
-from dolfinx_mortar.benchmarks.runner import demo
+from suite.runner import demo
 
 CASES = {
     "ironing": ("ironing", ["--steps", "500"], "vertical_force_at_t1_5"),

@@ -22,7 +22,8 @@ import numpy as np
 from mpi4py import MPI
 
 from dolfinx_mortar import condensation, problem
-from dolfinx_mortar.benchmarks.runner import demo
+
+from suite.runner import demo
 
 
 def run(module, n0: int, refinement: int, solver: str) -> dict:

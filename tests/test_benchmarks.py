@@ -1,5 +1,7 @@
-"""The benchmark package: its pure parts (fits, tables, command line) on hand-made data,
-and one real 3D patch-test run through the benchmark code path."""
+"""The benchmark suite (``benchmarks/suite``, run by ``benchmarks/run.py``): its pure parts
+(fits, tables, command line) on hand-made data, one real 3D patch-test run through the
+benchmark code path, and the library apart from it (nothing of the benchmarks or the demos'
+command line is installed with ``dolfinx_mortar``)."""
 
 from __future__ import annotations
 
@@ -12,7 +14,12 @@ import sys
 import numpy as np
 import pytest
 
-from dolfinx_mortar.benchmarks import cli, common, report, report3d, three_d
+REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
+BENCHMARKS = REPOSITORY / "benchmarks"
+if str(BENCHMARKS) not in sys.path:  # as ``python3 benchmarks/run.py`` finds it
+    sys.path.insert(0, str(BENCHMARKS))
+
+from suite import cli, common, report, report3d, three_d  # noqa: E402
 
 
 def test_loglog_slope_recovers_powers():
@@ -105,15 +112,15 @@ def test_cli_parses_3d_options():
 
 
 def test_import_loads_no_demo_and_help_runs():
-    """Importing the package loads no demo module; ``-m dolfinx_mortar.benchmarks --help``
-    lists the 3D sections."""
-    code = ("import sys, dolfinx_mortar.benchmarks as b; "
+    """Importing the suite loads no demo module; ``python3 benchmarks/run.py --help`` lists
+    the 3D sections."""
+    code = (f"import sys; sys.path.insert(0, {str(BENCHMARKS)!r}); import suite as b; "
             "print(sorted(m for m in sys.modules if m.startswith('benchmark_demo_')), "
             "len(b.runner._MODULES))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout
     assert out.strip() == "[] 0"
-    help_text = subprocess.run([sys.executable, "-m", "dolfinx_mortar.benchmarks", "--help"],
+    help_text = subprocess.run([sys.executable, str(BENCHMARKS / "run.py"), "--help"],
                                capture_output=True, text=True, check=True).stdout
     for word in ("--dim {2,3}", "patch3d", "hertz3d", "scaling3d", "--render-only"):
         assert word in help_text
@@ -127,7 +134,7 @@ MACHINE = {"nproc": 2, "cpu": "test cpu", "memory_gib": 1.0, "os": "test os",
 def test_render_and_render_only_3d(tmp_path):
     """A 3D patch section renders its table and the goal row; render-only from the saved
     JSON gives the same summary."""
-    meta = {"command": "python3 -m dolfinx_mortar.benchmarks --only patch3d", "label": "",
+    meta = {"command": "python3 benchmarks/run.py --only patch3d", "label": "",
             "quick": True, "machine": MACHINE, "elapsed_s": 60.0, "note": "test",
             "section_times_s": {"patch3d": 60.0},
             "load_average_1min": {"min": 0.0, "mean": 0.5, "max": 1.0, "samples": 3}}
@@ -176,3 +183,22 @@ def test_scaling3d_stored_run_becomes_a_marked_row(tmp_path):
     assert lines[2] == ("| iterative (stored) | 2 | 2:4 | 1000 | 3+2 | 4.2 | 6.5 / 9 | 2 | 1 | "
                         "10 | 12 | 13 | 300, 200 | 0.01 | 2.0 / 3.5 |")
     assert "commands: `mpirun -n 2 python3 x`" in lines
+
+
+def test_library_ships_neither_benchmarks_nor_demo_helpers():
+    """``dolfinx_mortar`` has no ``benchmarks`` subpackage and no ``cli`` module, and no
+    module of it imports the suite, the demos or their command line (``benchmarks/``,
+    ``demos/`` and ``demos/cli.py`` live in the repository only)."""
+    import importlib.util
+
+    import dolfinx_mortar
+
+    assert importlib.util.find_spec("dolfinx_mortar.benchmarks") is None
+    assert importlib.util.find_spec("dolfinx_mortar.cli") is None
+    package = pathlib.Path(dolfinx_mortar.__file__).parent
+    for path in package.rglob("*.py"):
+        for line in path.read_text().splitlines():
+            words = line.split()
+            if words[:1] in (["import"], ["from"]) and len(words) > 1:
+                module = words[1].split(".")[0]
+                assert module not in ("benchmarks", "suite", "demos", "cli"), (path, line)

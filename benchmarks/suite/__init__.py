@@ -1,13 +1,18 @@
 """Benchmarks of dolfinx_mortar: work-precision, cost of contact, skipped work, parallel runs.
 
-One command runs everything and writes JSON, PNG and markdown into ``--output``
-(default ``benchmarks/results``); what it prints on stdout is ``summary.md``
-there, byte for byte::
+A package of the repository's ``benchmarks/`` folder, not of the library: it runs
+the demos of a source checkout, imports ``dolfinx_mortar`` like a user would and is
+not installed with it. One command runs everything and writes JSON, PNG and
+markdown into ``--output`` (default ``benchmarks/results``); what it prints on
+stdout is ``summary.md`` there, byte for byte::
 
-    tools/run python3 -m dolfinx_mortar.benchmarks --quick       # < 10 min on 2 cores
-    tools/run python3 -m dolfinx_mortar.benchmarks               # the full run (about 65 min)
-    tools/run python3 -m dolfinx_mortar.benchmarks --only cost skip --output scratch/b
-    tools/run python3 -m dolfinx_mortar.benchmarks --dim 3 --quick   # the 3D sections
+    tools/run python3 benchmarks/run.py --quick       # < 10 min on 2 cores
+    tools/run python3 benchmarks/run.py               # the full run (about 65 min)
+    tools/run python3 benchmarks/run.py --only cost skip --output scratch/b
+    tools/run python3 benchmarks/run.py --dim 3 --quick   # the 3D sections
+
+The top-level scripts of ``benchmarks/`` (run as ``python3 benchmarks/NAME.py``,
+which puts ``benchmarks/`` first on ``sys.path``) import it as ``suite``.
 
 Sections (``--only`` picks some):
 
@@ -58,7 +63,7 @@ import); everything timed is ``ContactProblem.solve`` (the ``timings`` of its
 ``SolveReport``), wall times (with mesh generation and setup) are reported next to it.
 Modules: common (paths, formats), machine (load, versions), runner (running the
 demos), work_precision, far_apart, cost, skipping, three_d (the runs of each
-section), report, report3d and plots (markdown, PNG), cli (this command).
+section), report, report3d and plots (markdown, PNG), cli (this command, started by ``run.py``).
 """
 
 

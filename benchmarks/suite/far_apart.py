@@ -33,7 +33,7 @@ class PlainNewton:
         import ufl
         from petsc4py import PETSc
 
-        from .. import compat
+        from dolfinx_mortar import compat
 
         self.u, self.bcs = u, bcs
         self.F = dolfinx.fem.form(F)
@@ -61,7 +61,7 @@ class PlainNewton:
         import dolfinx.fem.petsc
         from petsc4py import PETSc
 
-        from .. import compat
+        from dolfinx_mortar import compat
 
         start = time.perf_counter()
         x.copy(self.u.x.petsc_vec)
@@ -117,9 +117,9 @@ def far_apart_scene(refinement: int, comm: MPI.Intracomm, lift_radii: float = 2.
     import dolfinx
     import ufl
 
-    from .. import meshes
-    from ..materials import Material, internal_work
-    from ..problem import ContactPair
+    from dolfinx_mortar import meshes
+    from dolfinx_mortar.materials import Material, internal_work
+    from dolfinx_mortar.problem import ContactPair
 
     tagged = meshes.hertz(case="B", refinement=refinement, comm=comm)
     mesh, markers = tagged.mesh, tagged.markers
@@ -162,7 +162,7 @@ def far_apart_scene(refinement: int, comm: MPI.Intracomm, lift_radii: float = 2.
 
 def far_apart(refinement: int, repeats: int, steps: int = 2) -> dict:
     """ContactProblem with a pair that never comes near, against PlainNewton; interleaved."""
-    from ..problem import ContactProblem
+    from dolfinx_mortar.problem import ContactProblem
 
     comm = MPI.COMM_WORLD
     scene = far_apart_scene(refinement, comm)

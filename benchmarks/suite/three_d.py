@@ -3,7 +3,7 @@
 serial and on MPI ranks (``scaling3d``).
 
 ``patch3d`` and ``hertz3d`` run the demos in-process like the 2D sections; every
-``scaling3d`` run is a process of its own (``python3 -m dolfinx_mortar.benchmarks
+``scaling3d`` run is a process of its own (``python3 benchmarks/run.py
 --worker-demo hertz_sphere ...``, under ``mpirun -n N`` for N > 1), so that its peak
 resident memory (ru_maxrss, per rank) is its own.
 """
@@ -26,7 +26,7 @@ import time
 
 from mpi4py import MPI
 
-from .common import REPOSITORY, log, loglog_slope
+from .common import REPOSITORY, RUN, log, loglog_slope
 from .runner import median_timings, run_demo
 
 PATCH_CELLS = ("tetrahedron", "hexahedron")
@@ -263,7 +263,7 @@ def scaling_command(n0: int, refinement: int, solver: str, ranks: int,
                     path: pathlib.Path) -> list[str]:
     argv = ["--elements-per-radius", str(n0), "--refinement", str(refinement),
             "--linear-solver", solver]
-    command = [sys.executable, "-m", "dolfinx_mortar.benchmarks", "--worker-demo",
+    command = [sys.executable, str(RUN), "--worker-demo",
                "hertz_sphere", "--worker-json", str(path), "--worker-argv", shlex.join(argv)]
     return (["mpirun", "-n", str(ranks)] if ranks > 1 else []) + command
 
@@ -308,7 +308,8 @@ def scaling3d(meshes: list[tuple[int, int]], solvers=SCALING3D_SOLVERS, ranks=(1
                 command = scaling_command(n0, refinement, solver, n, path)
                 shown = shlex.join(["mpirun", "-n", str(n)] if n > 1 else [])
                 shown = (shown + " " if shown else "") + shlex.join(
-                    ["python3"] + command[command.index("-m"):command.index("--worker-json")]
+                    ["python3", "benchmarks/run.py"]
+                    + command[command.index("--worker-demo"):command.index("--worker-json")]
                     + ["--worker-json", path.name] + command[command.index("--worker-argv"):])
                 record = {"elements_per_radius": n0, "refinement": refinement,
                           "linear_solver": solver, "num_ranks": n, "command": shown}

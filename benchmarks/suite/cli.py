@@ -1,4 +1,4 @@
-"""The command line: ``python3 -m dolfinx_mortar.benchmarks`` (options: ``--help``)."""
+"""The command line: ``python3 benchmarks/run.py`` (options: ``--help``)."""
 
 from __future__ import annotations
 
@@ -133,7 +133,7 @@ def main(argv=None) -> int:
     refinements = args.refinements or ([0, 1, 2] if args.quick else [0, 1, 2, 3, 4])
     variants = [v for v in VARIANTS if args.variants is None or v["name"] in args.variants
                 or v["name"] == "default"]
-    command = ("python3 -m dolfinx_mortar.benchmarks "
+    command = ("python3 benchmarks/run.py "
                + shlex.join(argv if argv is not None else sys.argv[1:])).rstrip()
     three_d_run = any(s in SECTIONS_3D for s in sections)
     machine = machine_info(("hertz", "patch_test") + (("hertz_sphere",) if three_d_run else ()))

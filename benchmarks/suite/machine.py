@@ -75,8 +75,10 @@ def machine_info(demos: tuple[str, ...] = ("hertz", "patch_test")) -> dict:
                 os_release = line.split("=", 1)[1].strip('"')
     import hashlib
 
-    package = pathlib.Path(__file__).resolve().parents[1]
-    sources = sorted(p for p in package.glob("*.py") if p.name != "benchmarks.py")
+    import dolfinx_mortar
+
+    package = pathlib.Path(dolfinx_mortar.__file__).resolve().parent
+    sources = sorted(package.glob("*.py"))
     sources += [DEMOS / f"{name}.py" for name in demos]
     digest = hashlib.sha256()
     for path in sources:

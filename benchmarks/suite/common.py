@@ -12,6 +12,8 @@ from mpi4py import MPI
 
 REPOSITORY = pathlib.Path(__file__).resolve().parents[2]
 DEMOS = REPOSITORY / "demos"
+RUN = REPOSITORY / "benchmarks" / "run.py"
+"""The suite's command line, which the parallel and scaling runs start under mpirun."""
 DEFAULT_OUTPUT = REPOSITORY / "benchmarks" / "results"
 SECTIONS = ("work-precision", "cost", "skip")
 SECTIONS_3D = ("patch3d", "hertz3d", "scaling3d")

@@ -14,7 +14,7 @@ import time
 
 from mpi4py import MPI
 
-from .common import REPOSITORY, log, loglog_slope
+from .common import REPOSITORY, RUN, log, loglog_slope
 from .far_apart import far_apart
 from .runner import contact_share_record, hertz_runs, run_demo
 
@@ -33,7 +33,7 @@ def parallel_worker(refinement: int, repeats: int, path: pathlib.Path) -> None:
 
 
 def parallel_runs(refinement: int, repeats: int, ranks: list[int]) -> dict:
-    """Start ``mpirun -n N python3 -m dolfinx_mortar.benchmarks --only parallel ...`` per N."""
+    """Start ``mpirun -n N python3 benchmarks/run.py --only parallel ...`` per N."""
     import tempfile
 
     results, commands = [], []
@@ -44,11 +44,12 @@ def parallel_runs(refinement: int, repeats: int, ranks: list[int]) -> dict:
             del env[key]
     for n in ranks:
         path = scratch / f"parallel_{n}.json"
-        command = ["mpirun", "-n", str(n), sys.executable, "-m", "dolfinx_mortar.benchmarks",
+        command = ["mpirun", "-n", str(n), sys.executable, str(RUN),
                    "--only", "parallel", "--worker-json", str(path),
                    "--parallel-refinement", str(refinement), "--repeats", str(repeats)]
-        commands.append(shlex.join(["mpirun", "-n", str(n), "python3"] + command[4:8]
-                                   + ["--worker-json", f"parallel_{n}.json"] + command[10:]))
+        commands.append(shlex.join(["mpirun", "-n", str(n), "python3", "benchmarks/run.py"]
+                                   + command[5:7] + ["--worker-json", f"parallel_{n}.json"]
+                                   + command[9:]))
         log(f"[parallel] {shlex.join(command)}")
         start = time.perf_counter()
         completed = subprocess.run(command, env=env, cwd=REPOSITORY, capture_output=True,
