@@ -30,6 +30,7 @@ import math
 import operator
 import pathlib
 from collections.abc import Callable, Sequence
+from typing import NamedTuple
 
 import basix.ufl
 import dolfinx
@@ -350,6 +351,116 @@ def hertz_half_width(case: str, radius: float = 8.0) -> float:
     return _HERTZ_HALF_WIDTH[case] * math.sqrt(_check_positive("radius", radius) / 8.0)
 
 
+class _HertzSizes(NamedTuple):
+    """The lengths of :func:`hertz`'s model, in the units of R = 8 where it is meshed."""
+
+    R: float
+    x_zone: float
+    h_contact: float
+    h_arc: float
+    h_max: float
+    growth: float
+
+
+def _hertz_sizes(case: str, level: int, radius: float, half_width: float | None):
+    """(unit, sizes): the model is meshed at R = 8 and scaled by ``unit`` afterwards."""
+    R = _check_positive("radius", radius)
+    a = hertz_half_width(case, R)  # also checks case
+    if half_width is not None:
+        a = _check_positive("half_width", half_width)
+    # gmsh's output is not similar under a change of units (absolute tolerances, rounding),
+    # so the model is always built at R = 8 and the coordinates scaled afterwards; a/R is
+    # rounded so that the same ratio in other units gives gmsh identical input
+    unit = R / _HERTZ_RADIUS
+    R = _HERTZ_RADIUS
+    a = float(f"{a / unit:.12g}")
+    scale = 0.5**level
+    sizes = _HertzSizes(R=R, x_zone=min(3.0 * a, 0.5 * R), h_contact=a / 5.0 * scale,
+                        h_arc=R / 8.0 * scale, h_max=R / 2.0 * scale, growth=GROWTH * scale)
+    return unit, sizes
+
+
+def _hertz_half_disk(m: _Model, sign: float, sizes: _HertzSizes) -> dict[str, list[int]]:
+    """Half disk centred at (0, sign R) whose arc passes through the origin."""
+    R, x_zone = sizes.R, sizes.x_zone
+    y_zone = sign * (R - math.sqrt(R * R - x_zone * x_zone))
+    centre = m.point(0.0, sign * R)
+    left, right = m.point(-R, sign * R), m.point(R, sign * R)
+    zone_left, zone_right = m.point(-x_zone, y_zone), m.point(x_zone, y_zone)
+    origin = m.point(0.0, 0.0)
+    arcs = [
+        m.arc(left, centre, zone_left),
+        m.arc(zone_left, centre, origin),
+        m.arc(origin, centre, zone_right),
+        m.arc(zone_right, centre, right),
+    ]
+    flats = [m.line(left, centre), m.line(centre, right)]
+    symmetry = m.line(origin, centre)
+    surfaces = [
+        m.surface([arcs[0], arcs[1], symmetry, flats[0]]),
+        m.surface([arcs[2], arcs[3], flats[1], symmetry]),
+    ]
+    m.refine_near(arcs[1:3], sizes.h_contact, sizes.growth)
+    m.refine_near(arcs + flats, sizes.h_arc, sizes.growth)
+    return {"surfaces": surfaces, "arc": arcs, "flat": flats, "symmetry": [symmetry]}
+
+
+def _hertz_block(m: _Model, half_width: float, height: float,
+                 sizes: _HertzSizes) -> dict[str, list[int]]:
+    """The block [-half_width, half_width] x [-height, 0], split at x = 0."""
+    x_zone = sizes.x_zone
+    top = [m.point(x, 0.0) for x in (-half_width, -x_zone, 0.0, x_zone, half_width)]
+    bottom = [m.point(x, -height) for x in (-half_width, 0.0, half_width)]
+    top_lines = [m.line(p, q) for p, q in itertools.pairwise(top)]
+    bottom_lines = [m.line(bottom[0], bottom[1]), m.line(bottom[1], bottom[2])]
+    symmetry = m.line(top[2], bottom[1])
+    sides = [m.line(bottom[0], top[0]), m.line(top[4], bottom[2])]
+    surfaces = [
+        m.surface([*top_lines[:2], symmetry, bottom_lines[0], sides[0]]),
+        m.surface([*top_lines[2:], sides[1], bottom_lines[1], symmetry]),
+    ]
+    m.refine_near(top_lines[1:3], sizes.h_contact, sizes.growth)
+    return {
+        "surfaces": surfaces,
+        "top": top_lines,
+        "bottom": bottom_lines,
+        "symmetry": [symmetry],
+    }
+
+
+def _hertz_model(m: _Model, case: str, slave: str, sizes: _HertzSizes,
+                 markers: dict[str, int], quadrilateral: bool) -> None:
+    """:func:`hertz`'s gmsh model on rank 0: the two bodies with their size fields, then
+    the physical groups (which side is the slave decides which arc or top gets which tag)."""
+    R = sizes.R
+    upper = _hertz_half_disk(m, 1.0, sizes)
+    if case == "C":
+        lower = _hertz_half_disk(m, -1.0, sizes)
+        lower_contact, support = lower["arc"], lower["flat"]
+    else:
+        size = (R, 0.5 * R) if case == "A" else (4.0 * R, 4.0 * R)
+        lower = _hertz_block(m, *size, sizes)
+        lower_contact, support = lower["top"], lower["bottom"]
+    sides = [(upper["arc"], upper["symmetry"]), (lower_contact, lower["symmetry"])]
+    if slave == "block":
+        sides.reverse()
+    (slave_contact, slave_symmetry), (master_contact, master_symmetry) = sides
+    m.mesh(
+        cells={markers["cylinder"]: upper["surfaces"], markers["block"]: lower["surfaces"]},
+        facets={
+            markers["contact_slave"]: slave_contact,
+            markers["contact_master"]: master_contact,
+            markers["load"]: upper["flat"],
+            markers["support"]: support,
+            markers["symmetry_slave"]: slave_symmetry,
+            markers["symmetry_master"]: master_symmetry,
+        },
+        names=_names(markers),
+        h_max=sizes.h_max,
+        quadrilateral=quadrilateral,
+    )
+
+
 def hertz(
     case: str = "B",
     refinement: int = 0,
@@ -406,100 +517,55 @@ def hertz(
     quadrilateral = _check_cell_type(cell_type)
     if slave not in HERTZ_SLAVES:
         raise ValueError(f"slave must be one of {HERTZ_SLAVES}, got {slave!r}")
-    R = _check_positive("radius", radius)
-    a = hertz_half_width(case, R)  # also checks case
-    if half_width is not None:
-        a = _check_positive("half_width", half_width)
-    # gmsh's output is not similar under a change of units (absolute tolerances, rounding),
-    # so the model is always built at R = 8 and the coordinates scaled afterwards; a/R is
-    # rounded so that the same ratio in other units gives gmsh identical input
-    unit = R / _HERTZ_RADIUS
-    R = _HERTZ_RADIUS
-    a = float(f"{a / unit:.12g}")
-    scale = 0.5**level
-    x_zone = min(3.0 * a, 0.5 * R)
-    h_contact = a / 5.0 * scale
-    h_arc = R / 8.0 * scale
-    h_max = R / 2.0 * scale
+    unit, sizes = _hertz_sizes(case, level, radius, half_width)
     markers = _numbered(
         ["cylinder", "block"],
         ["contact_slave", "contact_master", "load", "support", "symmetry_slave", "symmetry_master"],
     )
 
-    def half_disk(m: _Model, sign: float) -> dict[str, list[int]]:
-        """Half disk centred at (0, sign R) whose arc passes through the origin."""
-        y_zone = sign * (R - math.sqrt(R * R - x_zone * x_zone))
-        centre = m.point(0.0, sign * R)
-        left, right = m.point(-R, sign * R), m.point(R, sign * R)
-        zone_left, zone_right = m.point(-x_zone, y_zone), m.point(x_zone, y_zone)
-        origin = m.point(0.0, 0.0)
-        arcs = [
-            m.arc(left, centre, zone_left),
-            m.arc(zone_left, centre, origin),
-            m.arc(origin, centre, zone_right),
-            m.arc(zone_right, centre, right),
-        ]
-        flats = [m.line(left, centre), m.line(centre, right)]
-        symmetry = m.line(origin, centre)
-        surfaces = [
-            m.surface([arcs[0], arcs[1], symmetry, flats[0]]),
-            m.surface([arcs[2], arcs[3], flats[1], symmetry]),
-        ]
-        m.refine_near(arcs[1:3], h_contact, GROWTH * scale)
-        m.refine_near(arcs + flats, h_arc, GROWTH * scale)
-        return {"surfaces": surfaces, "arc": arcs, "flat": flats, "symmetry": [symmetry]}
-
-    def block(m: _Model, half_width: float, height: float) -> dict[str, list[int]]:
-        top = [m.point(x, 0.0) for x in (-half_width, -x_zone, 0.0, x_zone, half_width)]
-        bottom = [m.point(x, -height) for x in (-half_width, 0.0, half_width)]
-        top_lines = [m.line(p, q) for p, q in itertools.pairwise(top)]
-        bottom_lines = [m.line(bottom[0], bottom[1]), m.line(bottom[1], bottom[2])]
-        symmetry = m.line(top[2], bottom[1])
-        sides = [m.line(bottom[0], top[0]), m.line(top[4], bottom[2])]
-        surfaces = [
-            m.surface([*top_lines[:2], symmetry, bottom_lines[0], sides[0]]),
-            m.surface([*top_lines[2:], sides[1], bottom_lines[1], symmetry]),
-        ]
-        m.refine_near(top_lines[1:3], h_contact, GROWTH * scale)
-        return {
-            "surfaces": surfaces,
-            "top": top_lines,
-            "bottom": bottom_lines,
-            "symmetry": [symmetry],
-        }
-
     def construct(m: _Model) -> None:
-        upper = half_disk(m, 1.0)
-        if case == "C":
-            lower = half_disk(m, -1.0)
-            lower_contact, support = lower["arc"], lower["flat"]
-        else:
-            size = (R, 0.5 * R) if case == "A" else (4.0 * R, 4.0 * R)
-            lower = block(m, *size)
-            lower_contact, support = lower["top"], lower["bottom"]
-        sides = [(upper["arc"], upper["symmetry"]), (lower_contact, lower["symmetry"])]
-        if slave == "block":
-            sides.reverse()
-        (slave_contact, slave_symmetry), (master_contact, master_symmetry) = sides
-        m.mesh(
-            cells={markers["cylinder"]: upper["surfaces"], markers["block"]: lower["surfaces"]},
-            facets={
-                markers["contact_slave"]: slave_contact,
-                markers["contact_master"]: master_contact,
-                markers["load"]: upper["flat"],
-                markers["support"]: support,
-                markers["symmetry_slave"]: slave_symmetry,
-                markers["symmetry_master"]: master_symmetry,
-            },
-            names=_names(markers),
-            h_max=h_max,
-            quadrilateral=quadrilateral,
-        )
+        _hertz_model(m, case, slave, sizes, markers, quadrilateral)
 
     data = _build(comm, f"hertz_{case}", construct)
     if unit != 1.0:
         data.mesh.geometry.x[:] *= unit
-    return _tagged(data, markers, {}, h_contact * unit)
+    return _tagged(data, markers, {}, sizes.h_contact * unit)
+
+
+def _patch_test_model(m: _Model, n_punch: int, n_foundation: int, n_height: int,
+                      markers: dict[str, int], quadrilateral: bool) -> None:
+    """:func:`patch_test`'s gmsh model on rank 0: the foundation's three transfinite
+    blocks, the punch, their physical groups."""
+    xs = (0.0, 4.0, 6.0, 8.0)
+    counts = (2 * n_foundation, n_foundation, n_foundation)
+    bottom = [m.point(x, 0.0) for x in xs]
+    top = [m.point(x, 5.0) for x in xs]
+    verticals = [m.line(b, t, n_height + 1) for b, t in zip(bottom, top, strict=True)]
+    bottoms = [m.line(bottom[i], bottom[i + 1], counts[i] + 1) for i in range(3)]
+    tops = [m.line(top[i], top[i + 1], counts[i] + 1) for i in range(3)]
+    foundation = [
+        m.surface([bottoms[i], verticals[i + 1], tops[i], verticals[i]], transfinite=True)
+        for i in range(3)
+    ]
+    corners = [m.point(x, y) for x, y in ((4.0, 5.0), (6.0, 5.0), (6.0, 7.0), (4.0, 7.0))]
+    punch_bottom = m.line(corners[0], corners[1], n_punch + 1)
+    punch_right = m.line(corners[1], corners[2], n_punch + 1)
+    punch_top = m.line(corners[2], corners[3], n_punch + 1)
+    punch_left = m.line(corners[3], corners[0], n_punch + 1)
+    punch = m.surface([punch_bottom, punch_right, punch_top, punch_left], transfinite=True)
+    m.mesh(
+        cells={markers["punch"]: [punch], markers["foundation"]: foundation},
+        facets={
+            markers["punch_contact"]: [punch_bottom],
+            markers["foundation_contact"]: [tops[1]],
+            markers["punch_top"]: [punch_top],
+            markers["foundation_top_free"]: [tops[0], tops[2]],
+            markers["foundation_bottom"]: bottoms,
+        },
+        names=_names(markers),
+        h_max=8.0,
+        quadrilateral=quadrilateral,
+    )
 
 
 def patch_test(
@@ -556,36 +622,7 @@ def patch_test(
         h_contact = 2.0 / n_foundation
 
     def construct(m: _Model) -> None:
-        xs = (0.0, 4.0, 6.0, 8.0)
-        counts = (2 * n_foundation, n_foundation, n_foundation)
-        bottom = [m.point(x, 0.0) for x in xs]
-        top = [m.point(x, 5.0) for x in xs]
-        verticals = [m.line(b, t, n_height + 1) for b, t in zip(bottom, top, strict=True)]
-        bottoms = [m.line(bottom[i], bottom[i + 1], counts[i] + 1) for i in range(3)]
-        tops = [m.line(top[i], top[i + 1], counts[i] + 1) for i in range(3)]
-        foundation = [
-            m.surface([bottoms[i], verticals[i + 1], tops[i], verticals[i]], transfinite=True)
-            for i in range(3)
-        ]
-        corners = [m.point(x, y) for x, y in ((4.0, 5.0), (6.0, 5.0), (6.0, 7.0), (4.0, 7.0))]
-        punch_bottom = m.line(corners[0], corners[1], n_punch + 1)
-        punch_right = m.line(corners[1], corners[2], n_punch + 1)
-        punch_top = m.line(corners[2], corners[3], n_punch + 1)
-        punch_left = m.line(corners[3], corners[0], n_punch + 1)
-        punch = m.surface([punch_bottom, punch_right, punch_top, punch_left], transfinite=True)
-        m.mesh(
-            cells={markers["punch"]: [punch], markers["foundation"]: foundation},
-            facets={
-                markers["punch_contact"]: [punch_bottom],
-                markers["foundation_contact"]: [tops[1]],
-                markers["punch_top"]: [punch_top],
-                markers["foundation_top_free"]: [tops[0], tops[2]],
-                markers["foundation_bottom"]: bottoms,
-            },
-            names=_names(markers),
-            h_max=8.0,
-            quadrilateral=quadrilateral,
-        )
+        _patch_test_model(m, n_punch, n_foundation, n_height, markers, quadrilateral)
 
     data = _build(comm, "patch_test", construct)
     return _tagged(data, markers, aliases, h_contact)
@@ -806,6 +843,35 @@ def _extruded(x2, quadrilaterals, layers: int):
     return x, hexahedra.reshape(-1, 8).astype(np.int64)
 
 
+def _ring(m: _Model, sign: float, r_in: float, r_out: float, gap: float, h_contact: float,
+          h_max: float, growth: float) -> tuple[int, list[int], list[int]]:
+    """:func:`rings`' ring centred at (0, sign c), c = r_out + gap / 2 (``sign`` also points
+    away from the other ring): its surface, outer and inner arcs."""
+    cy = sign * (r_out + 0.5 * gap)
+    centre = m.point(0.0, cy)
+    zone = math.radians(30.0)  # the refined arcs: within 30 degrees of the contact point
+
+    def on_circle(radius: float, angle: float) -> int:
+        return m.point(radius * math.sin(angle), cy - sign * radius * math.cos(angle))
+
+    near = on_circle(r_out, 0.0)
+    zone_a, zone_b = on_circle(r_out, zone), on_circle(r_out, -zone)
+    far = on_circle(r_out, math.pi)
+    outer = [
+        m.arc(near, centre, zone_a),
+        m.arc(zone_a, centre, far),
+        m.arc(far, centre, zone_b),
+        m.arc(zone_b, centre, near),
+    ]
+    inner_points = [on_circle(r_in, angle) for angle in (0.0, 0.5 * math.pi, math.pi)]
+    inner_points.append(on_circle(r_in, -0.5 * math.pi))
+    inner = [m.arc(inner_points[i], centre, inner_points[(i + 1) % 4]) for i in range(4)]
+    surface = m.surface(outer, holes=[inner])
+    m.refine_near([outer[0], outer[3]], h_contact, growth)
+    m.refine_near(outer + inner, h_max, growth)
+    return surface, outer, inner
+
+
 def rings(
     refinement: int = 0,
     inner_radius: float = 0.8,
@@ -851,36 +917,11 @@ def rings(
         ["ring_top_outer", "ring_bottom_outer", "ring_top_inner", "ring_bottom_inner"],
     )
     aliases = {"contact_slave": "ring_top_outer", "contact_master": "ring_bottom_outer"}
-    zone = math.radians(30.0)
-
-    def ring(m: _Model, sign: float) -> tuple[int, list[int], list[int]]:
-        """Ring centred at (0, sign c); ``sign`` also points away from the other ring."""
-        cy = sign * (r_out + 0.5 * gap)
-        centre = m.point(0.0, cy)
-
-        def on_circle(radius: float, angle: float) -> int:
-            return m.point(radius * math.sin(angle), cy - sign * radius * math.cos(angle))
-
-        near = on_circle(r_out, 0.0)
-        zone_a, zone_b = on_circle(r_out, zone), on_circle(r_out, -zone)
-        far = on_circle(r_out, math.pi)
-        outer = [
-            m.arc(near, centre, zone_a),
-            m.arc(zone_a, centre, far),
-            m.arc(far, centre, zone_b),
-            m.arc(zone_b, centre, near),
-        ]
-        inner_points = [on_circle(r_in, angle) for angle in (0.0, 0.5 * math.pi, math.pi)]
-        inner_points.append(on_circle(r_in, -0.5 * math.pi))
-        inner = [m.arc(inner_points[i], centre, inner_points[(i + 1) % 4]) for i in range(4)]
-        surface = m.surface(outer, holes=[inner])
-        m.refine_near([outer[0], outer[3]], h_contact, GROWTH * scale)
-        m.refine_near(outer + inner, h_max, GROWTH * scale)
-        return surface, outer, inner
 
     def construct(m: _Model) -> None:
-        top, top_outer, top_inner = ring(m, 1.0)
-        bottom, bottom_outer, bottom_inner = ring(m, -1.0)
+        sizes = (h_contact, h_max, GROWTH * scale)
+        top, top_outer, top_inner = _ring(m, 1.0, r_in, r_out, gap, *sizes)
+        bottom, bottom_outer, bottom_inner = _ring(m, -1.0, r_in, r_out, gap, *sizes)
         m.mesh(
             cells={markers["ring_top"]: [top], markers["ring_bottom"]: [bottom]},
             facets={
