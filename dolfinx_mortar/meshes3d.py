@@ -1,11 +1,14 @@
-"""gmsh builders for 3D benchmark geometries (Hertz contact of a sphere).
+"""Builders of the 3D Hertz geometries: quarter models of a sphere on a block or a sphere.
 
-Like :mod:`dolfinx_mortar.meshes`, the gmsh model lives on rank 0 only and
-:func:`compat.model_to_mesh` distributes it; touching bodies are separate meshes of one
-dolfinx mesh (no shared node), each body one cell tag, the boundary pieces facet tags,
-``contact_slave`` and ``contact_master`` aliases of two of them. The geometry is built
-with gmsh's OpenCASCADE kernel, which keeps separately created volumes apart (no
-fragmenting), and meshed with tetrahedra.
+Like :mod:`dolfinx_mortar.meshes`, touching bodies are separate meshes of one dolfinx
+mesh (no shared node), each body one cell tag, the boundary pieces facet tags,
+``contact_slave`` and ``contact_master`` aliases of two of them.
+:func:`hertz_sphere` meshes the balls with tetrahedra: the gmsh model lives on rank 0
+only and :func:`compat.model_to_mesh` distributes it; it is built with gmsh's
+OpenCASCADE kernel, which keeps separately created volumes apart (no fragmenting).
+:func:`hertz_sphere_hexahedral` builds structured hexahedral columns from graded
+tensor-product grids (:func:`graded_nodes`, no gmsh) and merges them with
+:func:`dolfinx_mortar.bodies.merge_meshes`.
 """
 
 from __future__ import annotations
@@ -48,17 +51,13 @@ _OPTIONS = {
     "Mesh.Optimize": 1,
 }
 
+_OCC_TOLERANCE = 1e-6
+"""Absolute tolerance of the face classification: OCC pads bounding boxes."""
+
 
 def _build_3d(comm: MPI.Comm, name: str, construct) -> compat.MeshWithTags:
     """``construct(gmsh)`` on rank 0 and the distributed volume mesh (:func:`meshes._build`)."""
     return meshes._build(comm, name, construct, gdim=3, options=_OPTIONS)
-
-
-def hertz_contact_radius(load: float, radius: float, E_star: float) -> float:
-    """Hertz contact radius a = (3 F R / (4 E*))^(1/3) of a sphere (R: effective radius)."""
-    F = _check_positive("load", load)
-    R = _check_positive("radius", radius)
-    return (3.0 * F * R / (4.0 * _check_positive("E_star", E_star))) ** (1.0 / 3.0)
 
 
 def _hertz_arguments(case, slave, refinement, elements_per_radius, radius, contact_radius,
@@ -79,6 +78,125 @@ def _hertz_arguments(case, slave, refinement, elements_per_radius, radius, conta
         raise ValueError(f"contact_radius must be below {CAP_RADIUS / 1.5:.4g} R = "
                          f"{CAP_RADIUS / 1.5 * unit:.6g}, got {contact_radius!r}")
     return level, n0, unit, a, L
+
+
+def _quarter_half_ball(occ, sign: float, cap: float) -> list[int]:
+    """The quarter of the half ball of radius 1 centred at (0, 0, sign) on the side of
+    z = 0, as two conforming volumes: the cap of radius CAP_RADIUS (height ``cap``) and
+    the rest."""
+    pieces = []
+    for low, high in ((0.0, cap), (cap, 1.0)):
+        ball = occ.addSphere(0.0, 0.0, sign, 1.0)
+        z0 = low if sign > 0 else -high
+        box = occ.addBox(0.0, 0.0, z0, 1.0, 1.0, high - low)
+        result, _ = occ.intersect([(3, ball)], [(3, box)])
+        assert len(result) == 1, result
+        pieces.append(result[0])
+    result, _ = occ.fragment([pieces[0]], [pieces[1]])
+    assert len(result) == 2, result
+    return [tag for _, tag in result]
+
+
+def _sphere_physical_groups(gmsh, upper: list[int], lower: list[int], names: list[str],
+                            markers: dict[str, int]) -> None:
+    """:func:`hertz_sphere`'s physical groups: each boundary face of the two bodies sorted
+    by its bounding box and type (plane or not), checked against the expected count."""
+    groups: dict[str, list[int]] = {name: [] for name in [*names[2:], "free"]}
+    tol = _OCC_TOLERANCE
+    for body, volumes in (("sphere", upper), ("block", lower)):
+        boundary = gmsh.model.getBoundary([(3, v) for v in volumes], oriented=False)
+        for _, face in boundary:
+            x0, y0, z0, x1, y1, z1 = gmsh.model.getBoundingBox(2, face)
+            kind = gmsh.model.getType(2, face)
+            if x1 - x0 < tol and abs(x0) < tol:
+                groups["symmetry_x"].append(face)
+            elif y1 - y0 < tol and abs(y0) < tol:
+                groups["symmetry_y"].append(face)
+            elif kind != "Plane":
+                if min(abs(z0), abs(z1)) > tol:
+                    groups["free"].append(face)
+                else:
+                    groups["sphere_surface" if body == "sphere" else "block_top"].append(face)
+            elif body == "sphere":
+                groups["load"].append(face)
+            elif z1 - z0 < tol and abs(z1) < tol:
+                groups["block_top"].append(face)
+            elif z1 - z0 < tol:
+                groups["support"].append(face)
+    free = groups.pop("free")
+    expected = {"sphere_surface": 1, "block_top": 1, "load": 1, "support": 1,
+                "symmetry_x": len(upper) + len(lower),
+                "symmetry_y": len(upper) + len(lower)}
+    found = {name: len(faces) for name, faces in groups.items()}
+    if found != expected:
+        raise RuntimeError(f"unexpected faces of the model: {found}")
+    gmsh.model.addPhysicalGroup(3, upper, markers["sphere"], name="sphere")
+    gmsh.model.addPhysicalGroup(3, lower, markers["block"], name="block")
+    if free:
+        gmsh.model.addPhysicalGroup(2, free, markers["free"], name="free")
+    for name, faces in groups.items():
+        gmsh.model.addPhysicalGroup(2, faces, markers[name], name=name)
+
+
+def _sphere_size_field(gmsh, upper: list[int], lower: list[int], h_contact: float,
+                       h_max: float, zone: float, growth: float, ratio: float) -> None:
+    """:func:`hertz_sphere`'s background size field: h_contact within ``zone`` of the
+    contact point, growing by ``growth`` up to h_max beyond, ``ratio`` times that in the
+    lower body (and the largest size of both there)."""
+    tol = _OCC_TOLERANCE
+    origins = [tag for _, tag in gmsh.model.getEntitiesInBoundingBox(
+        -tol, -tol, -tol, tol, tol, tol, dim=0)]
+    field = gmsh.model.mesh.field
+    distance = field.add("Distance")
+    field.setNumbers(distance, "PointsList", origins)
+
+    def sizes(factor: float, volumes: list[int]) -> int:
+        """The graded sizes times ``factor``, restricted to ``volumes`` and their
+        boundaries."""
+        threshold = field.add("Threshold")
+        field.setNumber(threshold, "InField", distance)
+        field.setNumber(threshold, "SizeMin", factor * h_contact)
+        field.setNumber(threshold, "SizeMax", factor * h_max)
+        field.setNumber(threshold, "DistMin", zone)
+        field.setNumber(threshold, "DistMax",
+                        zone + factor * max(h_max - h_contact, 0.0) / growth)
+        restricted = field.add("Restrict")
+        field.setNumber(restricted, "InField", threshold)
+        field.setNumbers(restricted, "VolumesList", volumes)
+        entities = [(3, v) for v in volumes]
+        for dim, key in ((2, "SurfacesList"), (1, "CurvesList"), (0, "PointsList")):
+            entities = gmsh.model.getBoundary(entities, combined=False, oriented=False)
+            entities = sorted({e for e in entities if e[0] == dim})
+            field.setNumbers(restricted, key, [tag for _, tag in entities])
+        return restricted
+
+    smallest = field.add("Min")
+    field.setNumbers(smallest, "FieldsList", [sizes(1.0, upper), sizes(ratio, lower)])
+    field.setAsBackgroundMesh(smallest)
+    gmsh.option.setNumber("Mesh.MeshSizeMax", max(1.0, ratio) * h_max)
+    gmsh.option.setNumber("Mesh.MeshSizeMin", 0.0)
+
+
+def _sphere_model(gmsh, case: str, L: float, cap: float, names: list[str],
+                  markers: dict[str, int], sizes: tuple[float, float, float, float],
+                  ratio: float) -> None:
+    """:func:`hertz_sphere`'s gmsh model on rank 0: the two bodies (OCC), their physical
+    groups, the size field (``sizes``: h_contact, h_max, the zone, the growth) and the
+    tetrahedra."""
+    occ = gmsh.model.occ
+    upper = _quarter_half_ball(occ, 1.0, cap)
+    if case == "block":
+        lower = [occ.addBox(0.0, 0.0, -L, L, L, L)]
+    else:
+        lower = _quarter_half_ball(occ, -1.0, cap)
+    occ.synchronize()
+    _sphere_physical_groups(gmsh, upper, lower, names, markers)
+    _sphere_size_field(gmsh, upper, lower, *sizes, ratio)
+    gmsh.model.mesh.generate(3)
+    types = set(gmsh.model.mesh.getElementTypes(3))
+    if types != {4}:
+        raise RuntimeError(f"gmsh produced element types {sorted(types)}, expected "
+                           "only type 4 (tetrahedra)")
 
 
 def hertz_sphere(
@@ -145,110 +263,14 @@ def hertz_sphere(
              "symmetry_x", "symmetry_y", "free"]
     markers = {name: 1 + i if i < 2 else 9 + i for i, name in enumerate(names)}
 
-    def half_ball(occ, sign: float) -> list[int]:
-        """The quarter of the half ball of radius 1 centred at (0, 0, sign) on the side of
-        z = 0, as two conforming volumes: the cap of radius CAP_RADIUS and the rest."""
-        pieces = []
-        for low, high in ((0.0, cap), (cap, 1.0)):
-            ball = occ.addSphere(0.0, 0.0, sign, 1.0)
-            z0 = low if sign > 0 else -high
-            box = occ.addBox(0.0, 0.0, z0, 1.0, 1.0, high - low)
-            result, _ = occ.intersect([(3, ball)], [(3, box)])
-            assert len(result) == 1, result
-            pieces.append(result[0])
-        result, _ = occ.fragment([pieces[0]], [pieces[1]])
-        assert len(result) == 2, result
-        return [tag for _, tag in result]
-
     def construct(gmsh) -> None:
-        occ = gmsh.model.occ
-        upper = half_ball(occ, 1.0)
-        if case == "block":
-            lower = [occ.addBox(0.0, 0.0, -L, L, L, L)]
-        else:
-            lower = half_ball(occ, -1.0)
-        occ.synchronize()
-        groups: dict[str, list[int]] = {name: [] for name in [*names[2:], "free"]}
-        tol = 1e-6  # OCC pads bounding boxes
-        for body, volumes in (("sphere", upper), ("block", lower)):
-            boundary = gmsh.model.getBoundary([(3, v) for v in volumes], oriented=False)
-            for _, face in boundary:
-                x0, y0, z0, x1, y1, z1 = gmsh.model.getBoundingBox(2, face)
-                kind = gmsh.model.getType(2, face)
-                if x1 - x0 < tol and abs(x0) < tol:
-                    groups["symmetry_x"].append(face)
-                elif y1 - y0 < tol and abs(y0) < tol:
-                    groups["symmetry_y"].append(face)
-                elif kind != "Plane":
-                    if min(abs(z0), abs(z1)) > tol:
-                        groups["free"].append(face)
-                    else:
-                        groups["sphere_surface" if body == "sphere" else "block_top"].append(face)
-                elif body == "sphere":
-                    groups["load"].append(face)
-                elif z1 - z0 < tol and abs(z1) < tol:
-                    groups["block_top"].append(face)
-                elif z1 - z0 < tol:
-                    groups["support"].append(face)
-        free = groups.pop("free")
-        expected = {"sphere_surface": 1, "block_top": 1, "load": 1, "support": 1,
-                    "symmetry_x": len(upper) + len(lower),
-                    "symmetry_y": len(upper) + len(lower)}
-        found = {name: len(faces) for name, faces in groups.items()}
-        if found != expected:
-            raise RuntimeError(f"unexpected faces of the model: {found}")
-        gmsh.model.addPhysicalGroup(3, upper, markers["sphere"], name="sphere")
-        gmsh.model.addPhysicalGroup(3, lower, markers["block"], name="block")
-        if free:
-            gmsh.model.addPhysicalGroup(2, free, markers["free"], name="free")
-        for name, faces in groups.items():
-            gmsh.model.addPhysicalGroup(2, faces, markers[name], name=name)
-
-        origins = [tag for _, tag in gmsh.model.getEntitiesInBoundingBox(
-            -tol, -tol, -tol, tol, tol, tol, dim=0)]
-        field = gmsh.model.mesh.field
-        distance = field.add("Distance")
-        field.setNumbers(distance, "PointsList", origins)
-
-        def sizes(factor: float, volumes: list[int]) -> int:
-            """The graded sizes times ``factor``, restricted to ``volumes`` and their
-            boundaries."""
-            threshold = field.add("Threshold")
-            field.setNumber(threshold, "InField", distance)
-            field.setNumber(threshold, "SizeMin", factor * h_contact)
-            field.setNumber(threshold, "SizeMax", factor * h_max)
-            field.setNumber(threshold, "DistMin", zone)
-            field.setNumber(threshold, "DistMax",
-                            zone + factor * max(h_max - h_contact, 0.0) / growth)
-            restricted = field.add("Restrict")
-            field.setNumber(restricted, "InField", threshold)
-            field.setNumbers(restricted, "VolumesList", volumes)
-            entities = [(3, v) for v in volumes]
-            for dim, key in ((2, "SurfacesList"), (1, "CurvesList"), (0, "PointsList")):
-                entities = gmsh.model.getBoundary(entities, combined=False, oriented=False)
-                entities = sorted({e for e in entities if e[0] == dim})
-                field.setNumbers(restricted, key, [tag for _, tag in entities])
-            return restricted
-
-        smallest = field.add("Min")
-        field.setNumbers(smallest, "FieldsList", [sizes(1.0, upper), sizes(ratio, lower)])
-        field.setAsBackgroundMesh(smallest)
-        gmsh.option.setNumber("Mesh.MeshSizeMax", max(1.0, ratio) * h_max)
-        gmsh.option.setNumber("Mesh.MeshSizeMin", 0.0)
-        gmsh.model.mesh.generate(3)
-        types = set(gmsh.model.mesh.getElementTypes(3))
-        if types != {4}:
-            raise RuntimeError(f"gmsh produced element types {sorted(types)}, expected "
-                               "only type 4 (tetrahedra)")
+        _sphere_model(gmsh, case, L, cap, names, markers, (h_contact, h_max, zone, growth),
+                      ratio)
 
     data = _build_3d(comm, f"hertz_sphere_{case}", construct)
     if unit != 1.0:
         data.mesh.geometry.x[:] *= unit
-    every = {name: markers[name] for name in names}
-    sides = ("sphere_surface", "block_top") if slave == "sphere" else ("block_top",
-                                                                       "sphere_surface")
-    every["contact_slave"] = markers[sides[0]]
-    every["contact_master"] = markers[sides[1]]
+    every = _with_contact_aliases({name: markers[name] for name in names}, slave)
     return TaggedMesh(data.mesh, data.cell_tags, data.facet_tags, every, h_contact * unit)
 
 
@@ -272,6 +294,40 @@ def graded_nodes(length: float, h_fine: float, zone: float, ratio: float, h_max:
         return nodes[: n_fine + 1] * (length / start)
     nodes[n_fine:] = start + (nodes[n_fine:] - start) * (length - start) / (nodes[-1] - start)
     return nodes
+
+
+def _with_contact_aliases(markers: dict[str, int], slave: str) -> dict[str, int]:
+    """``markers`` with "contact_slave" and "contact_master", the sphere's cap and the
+    block's top in the order ``slave`` ("sphere" or "block") says."""
+    sides = ("sphere_surface", "block_top") if slave == "sphere" else ("block_top",
+                                                                       "sphere_surface")
+    markers["contact_slave"] = markers[sides[0]]
+    markers["contact_master"] = markers[sides[1]]
+    return markers
+
+
+def _mapped_box(comm: MPI.Comm, x_nodes, y_nodes, z_nodes, place) -> dolfinx.mesh.Mesh:
+    """create_box on the unit cube with the given node counts, its nodes moved to
+    place(x, y, depth) of the node coordinates along each axis."""
+    counts = [x_nodes.size - 1, y_nodes.size - 1, z_nodes.size - 1]
+    box = dolfinx.mesh.create_box(comm, [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]], counts,
+                                  dolfinx.mesh.CellType.hexahedron)
+    x = box.geometry.x
+    index = [np.rint(x[:, i] * counts[i]).astype(np.int64) for i in range(3)]
+    x[:] = place(x_nodes[index[0]], y_nodes[index[1]], z_nodes[index[2]])
+    return box
+
+
+def _regrouped_facet_tags(merged: TaggedMesh, groups: dict[str, list[str]],
+                          markers: dict[str, int]) -> dolfinx.mesh.MeshTags:
+    """The facet tags of ``merged`` with the tags of each group's parts (names of
+    ``merged.markers``) replaced by the group's marker, -1 for facets in no group."""
+    old = merged.facet_tags
+    values = np.full(old.values.shape, -1, dtype=np.int32)
+    for name, parts in groups.items():
+        for part in parts:
+            values[old.values == merged.markers[part]] = markers[name]
+    return dolfinx.mesh.meshtags(merged.mesh, 2, old.indices, values)
 
 
 def hertz_sphere_hexahedral(
@@ -304,16 +360,6 @@ def hertz_sphere_hexahedral(
     def axis(length: float):
         return graded_nodes(length, h_contact, 1.5 * a, HEXAHEDRAL_GROWTH, h_max)
 
-    def grid(x_nodes, y_nodes, z_nodes, place):
-        """create_box on the unit cube, its nodes moved to place(x, y, depth)."""
-        counts = [x_nodes.size - 1, y_nodes.size - 1, z_nodes.size - 1]
-        box = dolfinx.mesh.create_box(comm, [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]], counts,
-                                      dolfinx.mesh.CellType.hexahedron)
-        x = box.geometry.x
-        index = [np.rint(x[:, i] * counts[i]).astype(np.int64) for i in range(3)]
-        x[:] = place(x_nodes[index[0]], y_nodes[index[1]], z_nodes[index[2]])
-        return box
-
     def surface(x, y):
         return 1.0 - np.sqrt(1.0 - x**2 - y**2)
 
@@ -325,7 +371,7 @@ def hertz_sphere_hexahedral(
             s = surface(x, y)
             return np.column_stack([x, y, sign * (s + depth * (1.0 - s))])
 
-        return grid(nodes, nodes, axis(1.0), place)
+        return _mapped_box(comm, nodes, nodes, axis(1.0), place)
 
     tol = 1e-9
     on_plane = {
@@ -337,8 +383,8 @@ def hertz_sphere_hexahedral(
         "load": lambda x: np.abs(x[2] - 1.0) < tol, **on_plane})
     if case == "block":
         nodes = axis(L)
-        lower_mesh = grid(nodes, nodes, axis(L),
-                          lambda x, y, depth: np.column_stack([x, y, -depth]))
+        lower_mesh = _mapped_box(comm, nodes, nodes, axis(L),
+                                 lambda x, y, depth: np.column_stack([x, y, -depth]))
         lower = (lower_mesh, {"surface": lambda x: np.abs(x[2]) < tol,
                               "support": lambda x: np.abs(x[2] + L) < tol, **on_plane})
     else:
@@ -353,16 +399,8 @@ def hertz_sphere_hexahedral(
               "symmetry_y": ["sphere_symmetry_y", "block_symmetry_y"]}
     names = ["sphere", "block", *groups]
     markers = {name: 1 + i if i < 2 else 9 + i for i, name in enumerate(names)}
-    old = merged.facet_tags
-    values = np.full(old.values.shape, -1, dtype=np.int32)
-    for name, parts in groups.items():
-        for part in parts:
-            values[old.values == merged.markers[part]] = markers[name]
-    facet_tags = dolfinx.mesh.meshtags(merged.mesh, 2, old.indices, values)
+    facet_tags = _regrouped_facet_tags(merged, groups, markers)
     if unit != 1.0:
         merged.mesh.geometry.x[:] *= unit
-    sides = ("sphere_surface", "block_top") if slave == "sphere" else ("block_top",
-                                                                       "sphere_surface")
-    markers["contact_slave"] = markers[sides[0]]
-    markers["contact_master"] = markers[sides[1]]
+    markers = _with_contact_aliases(markers, slave)
     return TaggedMesh(merged.mesh, merged.cell_tags, facet_tags, markers, h_contact * unit)
