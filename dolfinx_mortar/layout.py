@@ -101,6 +101,30 @@ def dirichlet_dofs(bcs, V) -> np.ndarray:
     return np.unique(np.concatenate(fixed))
 
 
+def _block_csr_columns(block_cols: np.ndarray, block_starts: np.ndarray,
+                       block_lengths: np.ndarray, br: int, bc: int) -> tuple[np.ndarray, list]:
+    """(CSR column indices, row starts) of a pattern of dense br x bc blocks.
+
+    ``block_cols`` are the global block columns of the block rows in CSR order, block
+    row r holding ``block_lengths[r]`` of them from ``block_starts[r]``. Row (r, a) of
+    the matrix holds the columns c * bc + b of the blocks c of block row r. With br > 1
+    the row starts list, for each a, the CSR slot (in units of bc) of row a of every
+    block: block p of block row r is slot p + (br - 1) start(r) + a length(r); with
+    br == 1 the rows' runs of block columns follow each other and the list is empty.
+    """
+    if br == 1:
+        return _interleave(block_cols, bc), []
+    num_blocks = block_cols.size
+    starts = (br - 1) * block_starts
+    block_numbers = np.arange(num_blocks, dtype=np.int64)
+    row_starts = [block_numbers + np.repeat(starts + a * block_lengths, block_lengths)
+                  for a in range(br)]
+    slot_blocks = np.empty(br * num_blocks, dtype=np.int64)
+    for start in row_starts:
+        slot_blocks[start] = block_numbers
+    return _interleave(block_cols[slot_blocks], bc), row_starts
+
+
 class CooMatrix:
     """A parallel AIJ matrix assembled from (row, col, value) triplets.
 
@@ -196,21 +220,8 @@ class CooMatrix:
         indptr = np.zeros(row_lengths.size + 1, dtype=np.int64)
         np.cumsum(row_lengths, out=indptr[1:])
         self._indptr = indptr.astype(PETSc.IntType)
-        row_starts = []
-        if br == 1:  # the rows' runs of block columns follow each other
-            self._indices = _interleave(global_cols, bc)
-        else:
-            # block p of block row r is block slot p + (br - 1) start(r) + a length(r) of
-            # the CSR rows, in row (r, a)
-            lengths = per_row[present]
-            starts = (br - 1) * block_indptr[present]
-            block_numbers = np.arange(num_blocks, dtype=np.int64)
-            row_starts = [block_numbers + np.repeat(starts + a * lengths, lengths)
-                          for a in range(br)]
-            slot_blocks = np.empty(br * num_blocks, dtype=np.int64)
-            for start in row_starts:
-                slot_blocks[start] = block_numbers
-            self._indices = _interleave(global_cols[slot_blocks], bc)
+        self._indices, row_starts = _block_csr_columns(global_cols, block_indptr[present],
+                                                       per_row[present], br, bc)
         self._num_unique = num_blocks * br * bc
         # 1 + the block's position: a lookup of an absent block (a dropped one) gives 0
         pattern.data = np.arange(1, num_blocks + 1,

@@ -40,6 +40,7 @@ class ContactSurface:
         node_owned: (num_nodes,) whether this rank owns the node's dofs.
         reference_coordinates: (num_nodes, gdim) undeformed coordinates.
         cells: (num_facets,) the cell of each facet (for body checks).
+        block_size: the displacement space's block size (gdim), for :meth:`node_dofs`.
     """
 
     name: str
@@ -112,20 +113,10 @@ def check_space(V: dolfinx.fem.FunctionSpace) -> None:
         raise SurfaceError("the displacement space must be linear Lagrange (P1 or Q1)")
 
 
-def extract_surface(
-    V: dolfinx.fem.FunctionSpace,
-    facet_tags: dolfinx.mesh.MeshTags,
-    marker: int,
-    name: str = "surface",
-) -> ContactSurface:
-    """Build this rank's part of the contact surface tagged ``marker``.
-
-    Raises:
-        SurfaceError: the tag is absent or empty on every rank, a tagged facet
-            is not on the boundary, or the space is not supported.
-    """
-    check_space(V)
-    mesh = V.mesh
+def _tagged_facets(mesh: dolfinx.mesh.Mesh, facet_tags: dolfinx.mesh.MeshTags, marker: int,
+                   name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(facets, cells): this rank's owned facets tagged ``marker``, sorted, and the one
+    cell of each; raises if no rank has any or if one of them is an interior facet."""
     comm = mesh.comm
     tdim = mesh.topology.dim
     fdim = tdim - 1
@@ -154,8 +145,17 @@ def extract_surface(
             "in one mesh must not share nodes (build the mesh from one mesh per body "
             "with dolfinx_mortar.bodies.merge_meshes)"
         )
-    cells = f_to_c.array[f_to_c.offsets[facets]]
-    c_to_f = mesh.topology.connectivity(tdim, fdim)
+    return facets, f_to_c.array[f_to_c.offsets[facets]]
+
+
+def _outward_facet_nodes(V: dolfinx.fem.FunctionSpace, facets: np.ndarray,
+                         cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(dof blocks, geometry nodes) of each facet's nodes, (num_facets, k) each, in the
+    order of :attr:`ContactSurface.facets`: cyclic, and reversed where the facet's normal
+    would point into its cell."""
+    mesh = V.mesh
+    fdim = mesh.topology.dim - 1
+    c_to_f = mesh.topology.connectivity(fdim + 1, fdim)
     facets_per_cell = c_to_f.offsets[1] - c_to_f.offsets[0]
     cell_facets = c_to_f.array.reshape(-1, facets_per_cell)[cells]
     local_facet = np.argmax(cell_facets == facets[:, None], axis=1)
@@ -187,12 +187,38 @@ def extract_surface(
     flip = np.einsum("ij,ij->i", outward, corners.mean(axis=1) - cell_midpoints) < 0.0
     facet_blocks[flip] = facet_blocks[flip, ::-1]
     facet_geometry[flip] = facet_geometry[flip, ::-1]
+    return facet_blocks, facet_geometry
 
+
+def extract_surface(
+    V: dolfinx.fem.FunctionSpace,
+    facet_tags: dolfinx.mesh.MeshTags,
+    marker: int,
+    name: str = "surface",
+) -> ContactSurface:
+    """Build this rank's part of the contact surface tagged ``marker``.
+
+    Collective: every rank of the mesh's communicator must call it.
+
+    Args:
+        V: The displacement space (vector P1 or Q1 on a linear mesh).
+        facet_tags: Facet tags of ``V``'s mesh.
+        marker: The tag value of the surface.
+        name: Names the surface in error messages.
+
+    Raises:
+        SurfaceError: the tag is absent or empty on every rank, a tagged facet
+            is not on the boundary, or the space is not supported.
+    """
+    check_space(V)
+    facets, cells = _tagged_facets(V.mesh, facet_tags, marker, name)
+    facet_blocks, facet_geometry = _outward_facet_nodes(V, facets, cells)
     node_blocks, inverse = np.unique(facet_blocks.ravel(), return_inverse=True)
     node_facets = inverse.reshape(facet_blocks.shape).astype(np.int32)
     geometry_of_node = np.empty(node_blocks.size, dtype=np.int64)
     geometry_of_node[inverse] = facet_geometry.ravel()
     dof_map = V.dofmap.index_map
+    X = V.mesh.geometry.x[:, : V.mesh.geometry.dim]
     return ContactSurface(
         name=name,
         marker=int(marker),
