@@ -134,7 +134,15 @@ def _enum_name(enum, value: int, prefixes: tuple[str, ...] = ("CONVERGED", "DIVE
 
 
 def describe_snes_reason(reason: int) -> str:
-    """``"-4 DIVERGED_FNORM_NAN (the residual is NaN or infinite)"`` for a reason code."""
+    """``"-4 DIVERGED_FNORM_NAN (the residual is NaN or infinite)"`` for a reason code.
+
+    The name is PETSc's (it differs between versions, see :func:`_enum_name`) or ours
+    for the reasons of the outer loops (fixed point, Uzawa).
+
+    Examples:
+        >>> describe_snes_reason(3)
+        '3 CONVERGED_FNORM_RELATIVE (the residual norm fell below the relative tolerance)'
+    """
     from petsc4py import PETSc
 
     reason = int(reason)

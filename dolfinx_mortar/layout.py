@@ -1,11 +1,18 @@
-"""Monolithic numbering of displacements and multipliers in one PETSc system.
+"""Monolithic numbering of displacements and multipliers in one PETSc system, and the
+preallocated matrices assembled in it.
 
 Rank r owns a contiguous range of rows: first its displacement dofs, then its
 multipliers. MUMPS needs one AIJ matrix, so the saddle-point systems of
 mesh tying and Lagrange-multiplier contact are assembled in this numbering;
-the maps below translate global displacement and multiplier indices (as
+:class:`BlockLayout` translates global displacement and multiplier indices (as
 dolfinx and :class:`~dolfinx_mortar.mortar.MortarInterface` number them)
 into it, keeping negative indices negative (PETSc ignores those).
+
+:class:`CooMatrix` is a PETSc matrix of a fixed pattern assembled from
+triplets or from dense blocks per group (a mortar pair), preallocated once;
+:class:`MonolithicMatrix` is the [u, z] system matrix: the bulk block assembled
+in place, the mortar blocks and a diagonal added; :class:`BlockIncidence` holds
+the block patterns that several matrices share.
 """
 
 from __future__ import annotations
@@ -24,6 +31,22 @@ class BlockLayout:
             contiguous by rank, so global u index = rank offset + local).
         num_owned_z: multipliers this rank owns, one count per multiplier
             field (each field's global numbering is contiguous by rank too).
+
+    Collective (the counts of every rank are gathered).
+
+    Examples:
+        One rank with 4 displacement dofs and 2 multipliers: the multipliers follow
+        the displacements, and a negative index stays negative.
+
+        >>> layout = BlockLayout(MPI.COMM_SELF, 4, 2)
+        >>> layout.u([0, 3, -1])
+        array([ 0,  3, -1])
+        >>> layout.z([0, 1])
+        array([4, 5])
+        >>> layout.owned_u, layout.owned_z, layout.num_global
+        (slice(0, 4, None), slice(4, 6, None), 6)
+        >>> BlockLayout(MPI.COMM_SELF, 4, [2, 3]).z([0, 1], field=2)
+        array([6, 7])
     """
 
     def __init__(self, comm: MPI.Intracomm, num_owned_u: int, num_owned_z: int | list[int]):
@@ -68,6 +91,7 @@ class BlockLayout:
         return self.index(field, index)
 
     def create_vector(self) -> PETSc.Vec:
+        """A zero vector of this layout (collective)."""
         vector = PETSc.Vec().createMPI((self.num_owned, self.num_global), comm=self.comm)
         vector.zeroEntries()
         return vector

@@ -1,10 +1,10 @@
-"""Strain energies and residual forms of 2D (plane strain) and 3D bodies in UFL (total
-Lagrangian).
+"""Materials of 2D (plane strain) and 3D bodies in UFL (total Lagrangian).
 
-Each function returns the first Piola-Kirchhoff stress P(u) of a material;
-:func:`residual` turns a list of (stress, cells) into the weak form
-sum_b int_{Omega_b} P : grad(v) dX - external work, for several bodies with
-different materials in one mesh (cell tags pick the body).
+:class:`Material` holds Young's modulus, Poisson's ratio and the model; each
+``*_stress`` function returns the first Piola-Kirchhoff stress P(u) of a model
+(the Cauchy stress of the linear one); :func:`internal_work` is the internal
+virtual work sum_b int_{Omega_b} P : grad(v) dX of several bodies with different
+materials in one mesh (cell tags pick the body). The external work is the caller's.
 """
 
 from __future__ import annotations
@@ -20,7 +20,16 @@ class Material:
 
     model: ``neo-hookean`` (compressible, W = mu/2 (I1 - d - 2 ln J) +
     lambda/2 (ln J)^2 in dimension d), ``saint-venant-kirchhoff``
-    (W = mu E:E + lambda/2 tr(E)^2), or ``linear`` (small strain).
+    (W = mu E:E + lambda/2 tr(E)^2), or ``linear`` (small strain). The values are
+    checked when the material is made, not when a form is built from it.
+
+    Examples:
+        >>> Material(E=200.0, nu=0.3, model="linear").model
+        'linear'
+        >>> Material(E=1.0, nu=0.5)
+        Traceback (most recent call last):
+        ...
+        ValueError: Poisson's ratio must lie in (-1, 0.5), got 0.5
     """
 
     E: float
@@ -37,10 +46,25 @@ class Material:
 
     @property
     def mu(self) -> float:
+        """Lame's second parameter, the shear modulus: mu = E / (2 (1 + nu)).
+
+        Examples:
+            >>> Material(E=200.0, nu=0.3).mu
+            76.92307692307692
+        """
         return self.E / (2.0 * (1.0 + self.nu))
 
     @property
     def lmbda(self) -> float:
+        """Lame's first parameter, lambda = E nu / ((1 + nu)(1 - 2 nu)), in 2D the
+        plane-strain value (the same formula: the 2D bodies are in plane strain).
+
+        Examples:
+            >>> Material(E=200.0, nu=0.3).lmbda
+            115.38461538461539
+            >>> Material(E=1.0, nu=0.25).lmbda
+            0.4
+        """
         return self.E * self.nu / ((1.0 + self.nu) * (1.0 - 2.0 * self.nu))
 
     def stress(self, u):
@@ -49,10 +73,12 @@ class Material:
 
 
 def deformation_gradient(u):
+    """F = I + grad u (UFL)."""
     return ufl.Identity(len(u)) + ufl.grad(u)
 
 
 def neo_hookean_stress(u, mu: float, lmbda: float):
+    """P = dW/dF of the compressible Neo-Hookean energy of :class:`Material` (UFL)."""
     F = ufl.variable(deformation_gradient(u))
     J = ufl.det(F)
     C = F.T * F
@@ -62,6 +88,7 @@ def neo_hookean_stress(u, mu: float, lmbda: float):
 
 
 def saint_venant_kirchhoff_stress(u, mu: float, lmbda: float):
+    """P = F S, S = 2 mu E + lambda tr(E) I with the Green strain E (UFL)."""
     F = deformation_gradient(u)
     green = 0.5 * (F.T * F - ufl.Identity(len(u)))
     S = 2.0 * mu * green + lmbda * ufl.tr(green) * ufl.Identity(len(u))
@@ -69,6 +96,7 @@ def saint_venant_kirchhoff_stress(u, mu: float, lmbda: float):
 
 
 def linear_stress(u, mu: float, lmbda: float):
+    """Cauchy stress of small-strain linear elasticity, 2 mu eps + lambda tr(eps) I (UFL)."""
     strain = ufl.sym(ufl.grad(u))
     return 2.0 * mu * strain + lmbda * ufl.tr(strain) * ufl.Identity(len(u))
 

@@ -345,6 +345,10 @@ def hertz_half_width(case: str, radius: float = 8.0) -> float:
 
     The values (0.39, 1.0, 0.7 at radius 8 for cases A, B, C) are those of the
     benchmark loads; a grows like sqrt(radius) at fixed load and moduli.
+
+    Examples:
+        >>> hertz_half_width("A"), hertz_half_width("B"), hertz_half_width("B", radius=32.0)
+        (0.39, 1.0, 2.0)
     """
     if case not in HERTZ_CASES:
         raise ValueError(f"case must be one of {HERTZ_CASES}, got {case!r}")

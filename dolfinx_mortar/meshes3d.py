@@ -281,7 +281,14 @@ HEXAHEDRAL_GROWTH = 1.5
 
 def graded_nodes(length: float, h_fine: float, zone: float, ratio: float, h_max: float):
     """Node coordinates on [0, length]: cells of size ``h_fine`` up to ``zone``, then growing by
-    ``ratio`` per cell up to ``h_max``; the graded part is shrunk to end at ``length``."""
+    ``ratio`` per cell up to ``h_max``; the graded part is shrunk to end at ``length``.
+
+    Examples:
+        Cells of 0.1 up to 0.3, then 0.2 and 0.4 (the largest allowed) scaled to end at 1:
+
+        >>> graded_nodes(1.0, 0.1, 0.3, 2.0, 0.4)
+        array([0.  , 0.1 , 0.2 , 0.3 , 0.44, 0.72, 1.  ])
+    """
     n_fine = max(1, math.ceil(zone / h_fine - 1e-9))
     nodes = [i * h_fine for i in range(n_fine + 1)]
     h = h_fine

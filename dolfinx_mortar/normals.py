@@ -115,7 +115,20 @@ def facet_corner_normals(x: np.ndarray, facets: np.ndarray, jacobian: bool = Fal
 
 def facet_normals(x: np.ndarray, facets: np.ndarray) -> np.ndarray:
     """Unit normal of each facet (quadrilaterals: along the cross product of the diagonals,
-    the normal at the centre of a bilinear facet)."""
+    the normal at the centre of a bilinear facet).
+
+    Examples:
+        Two segments of a V, each pointing out of the body below it, and a triangle
+        counter-clockwise seen from +z:
+
+        >>> x = np.array([[-1.0, 1.0], [0.0, 0.0], [1.0, 1.0]])
+        >>> facet_normals(x, np.array([[0, 1], [1, 2]]))
+        array([[-0.70710678, -0.70710678],
+               [ 0.70710678, -0.70710678]])
+        >>> x = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+        >>> facet_normals(x, np.array([[0, 1, 2]]))
+        array([[0., 0., 1.]])
+    """
     corners = np.asarray(x, dtype=np.float64)[facets]
     if corners.shape[1] == 4:
         v = np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1])
@@ -127,6 +140,24 @@ def averaged_nodal_normals(x: np.ndarray, facets: np.ndarray) -> NodalNormals:
     """The averaged nodal normal of every node of ``x`` and its derivative over its star.
 
     Vectorized over nodes and facets; no loop over nodes.
+
+    Examples:
+        The V of :func:`facet_normals`: its bottom node's normal is the mean direction
+        of both segments' and depends on all three nodes, each end node's on its
+        segment's two:
+
+        >>> x = np.array([[-1.0, 1.0], [0.0, 0.0], [1.0, 1.0]])
+        >>> nodal = averaged_nodal_normals(x, np.array([[0, 1], [1, 2]]))
+        >>> nodal.normals
+        array([[-0.70710678, -0.70710678],
+               [ 0.        , -1.        ],
+               [ 0.70710678, -0.70710678]])
+        >>> nodal.star
+        array([[ 0,  1, -1],
+               [ 0,  1,  2],
+               [ 1,  2, -1]])
+        >>> nodal.jacobian.shape
+        (3, 2, 3, 2)
     """
     x = np.asarray(x, dtype=np.float64)
     facets = np.asarray(facets, dtype=np.int64)

@@ -56,6 +56,16 @@ def facet_boxes(
     normal (into its body): a surface that already lies up to ``depth``
     inside the other body, with no earlier state to sweep from, is still
     paired.
+
+    Examples:
+        >>> x = np.array([[1.5, 0.0], [0.5, 0.0], [4.0, 0.0], [3.0, 0.0]])
+        >>> lower, upper = facet_boxes(x, np.array([[0, 1], [2, 3]]))
+        >>> lower
+        array([[0.5, 0. ],
+               [3. , 0. ]])
+        >>> upper
+        array([[1.5, 0. ],
+               [4. , 0. ]])
     """
     lower, upper = _corner_box(coordinates, facets)
     if depth > 0.0 and facets.shape[0]:
@@ -95,7 +105,18 @@ def _corner_box(coordinates: np.ndarray, facets: np.ndarray):
 
 
 def boxes_overlap(lower_a, upper_a, lower_b, upper_b, margin: float) -> np.ndarray:
-    """Elementwise: do the boxes, each grown by ``margin``, overlap?"""
+    """Elementwise: do the boxes, each grown by ``margin``, overlap?
+
+    Examples:
+        Two unit boxes 0.1 apart touch once each is grown by 0.05:
+
+        >>> lower_a, upper_a = np.array([0.0, 0.0]), np.array([1.0, 1.0])
+        >>> lower_b, upper_b = np.array([1.1, 0.0]), np.array([2.0, 1.0])
+        >>> bool(boxes_overlap(lower_a, upper_a, lower_b, upper_b, 0.05))
+        True
+        >>> bool(boxes_overlap(lower_a, upper_a, lower_b, upper_b, 0.0))
+        False
+    """
     return np.all(
         (lower_a - margin <= upper_b + margin) & (lower_b - margin <= upper_a + margin), axis=-1
     )
@@ -134,6 +155,16 @@ def candidate_pairs(
 
     Returns:
         (num_pairs, 2) int array, sorted by slave facet then master facet.
+
+    Examples:
+        A slave segment 0.1 above two master segments, of which only the first is
+        within the margin:
+
+        >>> slave_x = np.array([[0.0, 0.1], [1.0, 0.1]])
+        >>> master_x = np.array([[1.5, 0.0], [0.5, 0.0], [4.0, 0.0], [3.0, 0.0]])
+        >>> candidate_pairs(slave_x, np.array([[0, 1]]), master_x,
+        ...                 np.array([[0, 1], [2, 3]]), margin=0.2)
+        array([[0, 0]])
     """
     empty = np.zeros((0, 2), dtype=np.int64)
     if slave_facets.shape[0] == 0 or master_facets.shape[0] == 0:
