@@ -204,6 +204,15 @@ class Inversion:
     """Reference coordinates of the midpoint of the cell with the most negative determinant."""
 
     def describe(self) -> str:
+        """The inverted cells in words, for messages.
+
+        Examples:
+            >>> Inversion().describe()
+            'no inverted element'
+            >>> print(Inversion(2, (0.5, 1.25)).describe())  # doctest: +NORMALIZE_WHITESPACE
+            2 inverted elements (Jacobian determinant <= 0; the worst at reference point
+            (0.5, 1.25))
+        """
         if not self.count:
             return "no inverted element"
         location = ", ".join(f"{c:.4g}" for c in self.where) if self.where else "?"
@@ -330,11 +339,13 @@ class Facing:
     facets_looking_away: int
     """Of those, how many have n_slave . n_master > 0.5 with their nearest master facet."""
     mean_cosine: float
+    """Mean n_slave . n_master over the compared facets (-1: facing each other)."""
     distance: float
     """The smallest distance between a slave and a master facet centre."""
 
     @property
     def looks_away(self) -> bool:
+        """More than half the compared slave facets look away from their master."""
         return self.facets_compared > 0 and 2 * self.facets_looking_away > self.facets_compared
 
 

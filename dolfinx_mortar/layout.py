@@ -485,6 +485,7 @@ class CooMatrix:
         self._ijv = None
 
     def destroy(self) -> None:
+        """Free the PETSc matrix (collective); the object cannot assemble afterwards."""
         if self.mat is not None:
             self.mat.destroy()
             self.mat = None
@@ -597,6 +598,7 @@ class MonolithicMatrix:
                            PETSc.InsertMode.ADD_VALUES)
 
     def destroy(self) -> None:
+        """Free the PETSc matrix (collective)."""
         self.mat.destroy()
 
 

@@ -314,6 +314,7 @@ class SearchReuse:
         self.searches_done += 1
 
     def skipped(self) -> None:
+        """Count an update that kept the last search's pairs."""
         self.searches_skipped += 1
 
     def invalidate(self) -> None:

@@ -56,18 +56,22 @@ class ContactSurface:
 
     @property
     def num_facets(self) -> int:
+        """Facets this rank owns."""
         return self.facets.shape[0]
 
     @property
     def num_nodes(self) -> int:
+        """Nodes of this rank's facets (owned or not)."""
         return self.node_blocks.shape[0]
 
     @property
     def gdim(self) -> int:
+        """Geometric dimension, 2 or 3."""
         return self.reference_coordinates.shape[1]
 
     @property
     def nodes_per_facet(self) -> int:
+        """2 (segments), 3 (triangles) or 4 (quadrilaterals)."""
         return self.facets.shape[1]
 
     def node_dofs(self) -> np.ndarray:
