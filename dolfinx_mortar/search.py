@@ -129,6 +129,36 @@ def _size_classes(half: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarr
     return np.floor(np.log2(np.maximum(reach, np.finfo(float).tiny))).astype(np.int64), reach
 
 
+def _close_centres(slave_lower, slave_upper, master_lower, master_upper,
+                   margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """(slave, master) facet indices of the boxes whose centres are close enough to
+    overlap once grown by ``margin``: k-d trees of the centres, one per size class."""
+    slave_centre = 0.5 * (slave_lower + slave_upper)
+    master_centre = 0.5 * (master_lower + master_upper)
+    slave_class, slave_reach = _size_classes(0.5 * (slave_upper - slave_lower), margin)
+    master_class, master_reach = _size_classes(0.5 * (master_upper - master_lower), margin)
+    # overlapping boxes: |centre difference|_k <= half_s,k + half_m,k + 2 margin
+    # <= reach_s + reach_m in each coordinate k
+    scale = np.sqrt(slave_lower.shape[1])
+    found_slave, found_master = [], []
+    master_groups = []
+    for c in np.unique(master_class):
+        members = np.flatnonzero(master_class == c)
+        tree = cKDTree(master_centre[members])
+        master_groups.append((members, tree, master_reach[members].max()))
+    for c in np.unique(slave_class):
+        slave_members = np.flatnonzero(slave_class == c)
+        slave_tree = cKDTree(slave_centre[slave_members])
+        largest = slave_reach[slave_members].max()
+        for master_members, master_tree, master_largest in master_groups:
+            radius = scale * (largest + master_largest)
+            close = slave_tree.sparse_distance_matrix(master_tree, radius, output_type="ndarray")
+            found_slave.append(slave_members[close["i"]])
+            found_master.append(master_members[close["j"]])
+    return (np.concatenate(found_slave).astype(np.int64),
+            np.concatenate(found_master).astype(np.int64))
+
+
 def candidate_pairs(
     slave_coordinates: np.ndarray,
     slave_facets: np.ndarray,
@@ -177,30 +207,7 @@ def candidate_pairs(
         master_lower.min(axis=0), master_upper.max(axis=0), margin,
     ):
         return empty
-    slave_centre = 0.5 * (slave_lower + slave_upper)
-    master_centre = 0.5 * (master_lower + master_upper)
-    slave_class, slave_reach = _size_classes(0.5 * (slave_upper - slave_lower), margin)
-    master_class, master_reach = _size_classes(0.5 * (master_upper - master_lower), margin)
-    # overlapping boxes: |centre difference|_k <= half_s,k + half_m,k + 2 margin
-    # <= reach_s + reach_m in each coordinate k
-    scale = np.sqrt(slave_lower.shape[1])
-    found_slave, found_master = [], []
-    master_groups = []
-    for c in np.unique(master_class):
-        members = np.flatnonzero(master_class == c)
-        tree = cKDTree(master_centre[members])
-        master_groups.append((members, tree, master_reach[members].max()))
-    for c in np.unique(slave_class):
-        slave_members = np.flatnonzero(slave_class == c)
-        slave_tree = cKDTree(slave_centre[slave_members])
-        largest = slave_reach[slave_members].max()
-        for master_members, master_tree, master_largest in master_groups:
-            radius = scale * (largest + master_largest)
-            close = slave_tree.sparse_distance_matrix(master_tree, radius, output_type="ndarray")
-            found_slave.append(slave_members[close["i"]])
-            found_master.append(master_members[close["j"]])
-    slave = np.concatenate(found_slave).astype(np.int64)
-    master = np.concatenate(found_master).astype(np.int64)
+    slave, master = _close_centres(slave_lower, slave_upper, master_lower, master_upper, margin)
     # boxes_overlap on the candidates, one coordinate at a time (the same comparisons)
     keep = np.ones(slave.size, dtype=bool)
     for k in range(slave_lower.shape[1]):
