@@ -34,6 +34,7 @@ import dataclasses
 import numpy as np
 
 from .dual import RowSubsetDual
+from .kernels import KernelOptions, PairQuantities
 
 COVERAGE_FLOOR = 1e-12
 """Nodal weights int N_j over the covered part below this fraction of the covered
@@ -121,10 +122,22 @@ def _stride(stencil, name: str) -> int:
     return {"Dn": ns * g, "Mn": nm * g, "area": 1, "gap": 1, "D": ns, "M": nm}[name]
 
 
-def transformed_quantities(stencil, q_std, crosspoint: np.ndarray, keep_scalars: bool):
-    """The covered-dual quantities of the standard-basis ones ``q_std``; the result
-    carries ``covered = (q_std, FacetCoefficients, rows)`` for the derivatives."""
-    rows = q_std.gap.rows
+@dataclasses.dataclass(kw_only=True)
+class CoveredQuantities(PairQuantities):
+    """Pair quantities in the covered dual basis, with what their derivatives need: the
+    standard-basis quantities they were made from (``standard``, nonzero on the pairs
+    ``standard.rows``), the facets' coefficients, and the per-evaluation gradients of
+    D^std (``facet_gradients``, made on first use by :class:`CoveredStencil`)."""
+
+    standard: PairQuantities
+    coefficients: FacetCoefficients
+    facet_gradients: tuple[np.ndarray, np.ndarray] | None = None
+
+
+def transformed_quantities(stencil, q_std: PairQuantities, crosspoint: np.ndarray,
+                           keep_scalars: bool) -> CoveredQuantities:
+    """The covered-dual quantities of the standard-basis ones ``q_std``."""
+    rows = q_std.rows
     coefficients = FacetCoefficients(q_std.D[rows], stencil.slave_facets[rows],
                                      crosspoint[rows])
 
@@ -141,17 +154,14 @@ def transformed_quantities(stencil, q_std, crosspoint: np.ndarray, keep_scalars:
     def subset(array: np.ndarray) -> RowSubsetDual:
         return RowSubsetDual(values(array), rows, no_gradient)
 
-    extra = {}
-    if keep_scalars:
-        extra = {"D_dual": subset(q_std.D), "M_dual": subset(q_std.M)}
-    elif hasattr(q_std, "D_dual"):
-        extra = {"D_dual": None, "M_dual": None}
-    q = dataclasses.replace(
-        q_std, D=values(q_std.D), M=values(q_std.M), Dn=subset(q_std.Dn.value),
+    return CoveredQuantities(
+        D=values(q_std.D), M=values(q_std.M), Dn=subset(q_std.Dn.value),
         Mn=subset(q_std.Mn.value), gap=subset(q_std.gap.value),
-        area=subset(q_std.area.value), **extra)
-    q.covered = (q_std, coefficients, rows)
-    return q
+        area=subset(q_std.area.value), valid=q_std.valid, overlap=q_std.overlap,
+        num_variables=q_std.num_variables, normals_vary=q_std.normals_vary,
+        D_dual=subset(q_std.D) if keep_scalars else None,
+        M_dual=subset(q_std.M) if keep_scalars else None,
+        standard=q_std, coefficients=coefficients)
 
 
 def _standard_values(q_std, name: str) -> np.ndarray:
@@ -159,10 +169,10 @@ def _standard_values(q_std, name: str) -> np.ndarray:
             "gap": q_std.gap.value, "D": q_std.D, "M": q_std.M}[name]
 
 
-def translated_terms(stencil, q, rows: np.ndarray, terms):
+def translated_terms(stencil, q: CoveredQuantities, rows: np.ndarray, terms):
     """Terms over the covered-dual outputs of pairs ``rows`` as terms over the standard
     outputs of the same pairs, and W (len(terms), rows, ns, ns): the weights of dM_e."""
-    q_std, coefficients, contributing = q.covered
+    q_std, coefficients, contributing = q.standard, q.coefficients, q.standard.rows
     ns = stencil.ns
     position = np.searchsorted(contributing, rows)
     inside = (position < contributing.size) & (
@@ -353,26 +363,27 @@ class CoveredStencil:
     def width(self) -> int:
         return self.nodes.shape[1]
 
-    def evaluate(self, node_x: np.ndarray, *, crosspoint, basis="dual", **options):
-        keep_scalars = bool(options.get("scalar_gradients", False))
-        if self.base.gdim == 3:
-            options["scalar_gradients"] = True
-        q_std = self.base.evaluate(node_x, basis="standard", crosspoint=None, **options)
+    def evaluate(self, node_x: np.ndarray, options: KernelOptions,
+                 crosspoint: np.ndarray | None = None) -> CoveredQuantities:
+        """The base kernel with the standard basis, keeping the gradients of D (the 2D
+        kernel always does), transformed per slave facet."""
+        standard = dataclasses.replace(options, basis="standard", scalar_gradients=True)
+        q_std = self.base.evaluate(node_x, standard, crosspoint=None)
         if crosspoint is None:
             crosspoint = np.zeros((self.num_pairs, self.ns), dtype=bool)
         q = transformed_quantities(self, q_std, np.asarray(crosspoint, dtype=bool),
-                                   keep_scalars)
+                                   options.scalar_gradients)
         if self.coupled:
-            self.widen(self._partly_covered(q.covered[1], node_x))
+            self.widen(self._partly_covered(q.coefficients, node_x))
         return q
 
-    def _facet_gradients(self, q):
+    def _facet_gradients(self, q: CoveredQuantities):
         """Per evaluation: d D^std of the contributing pairs on their master columns
         (contributing, ns ns, nm gdim) and its facet sums on the other columns
         (facets, ns ns, other columns)."""
-        cached = getattr(q, "_covered_gradients", None)
+        cached = q.facet_gradients
         if cached is None:
-            q_std, coefficients, contributing = q.covered
+            q_std, coefficients, contributing = q.standard, q.coefficients, q.standard.rows
             ns = self.ns
             terms = [[(self.base.d(i, m), 1.0)] for i in range(ns) for m in range(ns)]
             dD = self.base.combined_gradients(q_std, contributing, terms).transpose(2, 0, 1)
@@ -380,7 +391,7 @@ class CoveredStencil:
             summed = np.zeros((coefficients.facets.size, ns * ns, shared.size))
             np.add.at(summed, coefficients.index, dD[:, :, shared])
             cached = (np.ascontiguousarray(dD[:, :, master]), summed)
-            q._covered_gradients = cached
+            q.facet_gradients = cached
         return cached
 
     def _column_split(self):
@@ -390,16 +401,16 @@ class CoveredStencil:
         shared = np.setdiff1d(np.arange(self.base.width * gdim), master)
         return master, shared
 
-    def combined_gradients(self, q, rows, terms) -> np.ndarray:
+    def combined_gradients(self, q: PairQuantities, rows, terms) -> np.ndarray:
         gdim, base_columns = self.gdim, self.base.width * self.gdim
         result = np.zeros((len(terms), self.width * gdim, rows.size))
-        if not hasattr(q, "covered"):
+        if not isinstance(q, CoveredQuantities):
             # frozen (reference-configuration) quantities: pair-local, as the base's
             result[:, :base_columns] = self.base.combined_gradients(q, rows, terms)
             return result
-        _, coefficients, contributing = q.covered
+        coefficients, contributing = q.coefficients, q.standard.rows
         translated, W = translated_terms(self, q, rows, terms)
-        result[:, :base_columns] = self.base.combined_gradients(q.covered[0], rows, translated)
+        result[:, :base_columns] = self.base.combined_gradients(q.standard, rows, translated)
         if contributing.size == 0 or rows.size == 0:
             return result
         master_dD, summed_dD = self._facet_gradients(q)

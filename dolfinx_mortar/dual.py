@@ -107,19 +107,15 @@ class RowSubsetDual(Dual):
 
     Only those rows' gradients are kept (``rows``; ``grad_rows``, given as an
     array or as a function that computes it when first needed); ``grad`` is
-    built in full on first access and kept. ``factors`` is whatever the
-    producer attaches to let consumers combine gradients before expanding
-    them (the mortar kernels attach their factorized derivatives). Most
-    candidate pairs of a mortar interface do not overlap: their rows are
-    never stored.
+    built in full on first access and kept. Most candidate pairs of a mortar
+    interface do not overlap: their rows are never stored.
     """
 
-    __slots__ = ("rows", "factors", "_grad_rows", "_full")
+    __slots__ = ("rows", "_grad_rows", "_full")
 
-    def __init__(self, value, rows, grad_rows, factors=None):
+    def __init__(self, value, rows, grad_rows):
         self.value = np.asarray(value, dtype=np.float64)
         self.rows = np.asarray(rows)
-        self.factors = factors
         self._grad_rows = grad_rows
         self._full = None
 

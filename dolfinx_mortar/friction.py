@@ -266,26 +266,15 @@ def frame_axis(interface) -> np.ndarray:
 
 class PairTangents:
     """The tangential coefficients of some pairs of one interface and the combined-gradient
-    terms of their derivatives (2D: R applied to Dn, Mn; 3D: D, M and the nodal frames).
+    terms of their derivatives (one subclass per dimension: :class:`RotatedPairTangents`,
+    :class:`FramePairTangents`).
 
     Attributes:
         coefficients: T (rows, m, j, ns + nm nodes, gdim): -tau D on slave nodes,
             +tau M on master nodes.
     """
 
-    def __init__(self, interface, q, rows: np.ndarray, axis: np.ndarray | None):
-        self.stencil = stencil = interface.stencil
-        self.gdim = interface.gdim
-        self.components = self.gdim - 1
-        if self.gdim == 2:
-            forces = interface._force_coefficient_values(q, rows)  # -Dn slave, +Mn master
-            self.coefficients = (forces @ ROTATION.T)[:, None]
-            return
-        self.frames, self.frame_derivatives = tangent_frames(stencil.slave_normals(rows), axis)
-        self.D, self.M = q.D[rows], q.M[rows]
-        weights = np.concatenate([-self.D, self.M], axis=2)  # (rows, j, nodes)
-        tau = self.frames.transpose(0, 2, 1, 3)  # (rows, a, j, 3)
-        self.coefficients = weights[:, None, :, :, None] * tau[:, :, :, None, :]
+    coefficients: np.ndarray
 
     def slip(self, du: np.ndarray) -> np.ndarray:
         """(rows, m, j): each pair's part of u~^a_j = -T^a_j du, du (rows, nodes, gdim)."""
@@ -298,14 +287,57 @@ class PairTangents:
     def force_terms(self, y: np.ndarray) -> tuple[list, list]:
         """Combined-gradient terms of the force rows' d(-T^T y)/dx at fixed y (rows, m, j):
         (per slave node and component, per master node and component)."""
-        stencil, gdim, js = self.stencil, self.gdim, range(self.stencil.ns)
-        if gdim == 2:
-            R = ROTATION
-            slave = [[(stencil.dn(j, a, e), R[c, e] * y[:, 0, j]) for j in js for e in range(2)
-                      if R[c, e]] for a in range(stencil.ns) for c in range(2)]
-            master = [[(stencil.mn(j, a, e), -R[c, e] * y[:, 0, j]) for j in js
-                       for e in range(2) if R[c, e]] for a in range(stencil.nm) for c in range(2)]
-            return slave, master
+        raise NotImplementedError
+
+    def slip_terms(self, j: int, a: int, du_slave: np.ndarray, du_master: np.ndarray,
+                   weight: np.ndarray) -> list:
+        """Combined-gradient terms of weight * u~^a_j at fixed du (du_*: (rows, nodes, gdim))."""
+        raise NotImplementedError
+
+
+class RotatedPairTangents(PairTangents):
+    """2D: tau = R n, so T is R applied to the kernel's Dn and Mn (R constant)."""
+
+    def __init__(self, interface, rows: np.ndarray):
+        self.stencil = interface.stencil
+        forces = interface.force_coefficients(rows)  # -Dn slave, +Mn master
+        self.coefficients = (forces @ ROTATION.T)[:, None]
+
+    def force_terms(self, y: np.ndarray) -> tuple[list, list]:
+        stencil, js, R = self.stencil, range(self.stencil.ns), ROTATION
+        slave = [[(stencil.dn(j, a, e), R[c, e] * y[:, 0, j]) for j in js for e in range(2)
+                  if R[c, e]] for a in range(stencil.ns) for c in range(2)]
+        master = [[(stencil.mn(j, a, e), -R[c, e] * y[:, 0, j]) for j in js
+                   for e in range(2) if R[c, e]] for a in range(stencil.nm) for c in range(2)]
+        return slave, master
+
+    def slip_terms(self, j: int, a: int, du_slave: np.ndarray, du_master: np.ndarray,
+                   weight: np.ndarray) -> list:
+        # u~_j = sum_k Dn_jk . (R^T du_k) - sum_l Mn_jl . (R^T du_l)
+        stencil = self.stencil
+        rotated_slave = du_slave @ ROTATION
+        rotated_master = du_master @ ROTATION
+        terms = [(stencil.dn(j, k, c), weight * rotated_slave[:, k, c])
+                 for k in range(stencil.ns) for c in range(2)]
+        return terms + [(stencil.mn(j, m, c), -weight * rotated_master[:, m, c])
+                        for m in range(stencil.nm) for c in range(2)]
+
+
+class FramePairTangents(PairTangents):
+    """3D: the nodal frames tau^a on the averaged normals; T^a = -D tau^a / +M tau^a, the
+    frames' derivatives chained through the normals' (stencil outputs ``normal``)."""
+
+    def __init__(self, interface, rows: np.ndarray, axis: np.ndarray):
+        self.stencil = stencil = interface.stencil
+        q = interface.quantities
+        self.frames, self.frame_derivatives = tangent_frames(stencil.slave_normals(rows), axis)
+        self.D, self.M = q.D[rows], q.M[rows]
+        weights = np.concatenate([-self.D, self.M], axis=2)  # (rows, j, nodes)
+        tau = self.frames.transpose(0, 2, 1, 3)  # (rows, a, j, 3)
+        self.coefficients = weights[:, None, :, :, None] * tau[:, :, :, None, :]
+
+    def force_terms(self, y: np.ndarray) -> tuple[list, list]:
+        stencil, js = self.stencil, range(self.stencil.ns)
         # -T^T y = sum_j (D_jk on slave, -M_jl on master) y_j . tau_j
         traction = np.einsum("raj,rjac->rjc", y, self.frames)  # sum_a y^a tau^a
         turning = np.einsum("raj,rjace->rjce", y, self.frame_derivatives)
@@ -321,17 +353,8 @@ class PairTangents:
 
     def slip_terms(self, j: int, a: int, du_slave: np.ndarray, du_master: np.ndarray,
                    weight: np.ndarray) -> list:
-        """Combined-gradient terms of weight * u~^a_j at fixed du (du_*: (rows, nodes, gdim))."""
-        stencil = self.stencil
-        if self.gdim == 2:
-            # u~_j = sum_k Dn_jk . (R^T du_k) - sum_l Mn_jl . (R^T du_l)
-            rotated_slave = du_slave @ ROTATION
-            rotated_master = du_master @ ROTATION
-            terms = [(stencil.dn(j, k, c), weight * rotated_slave[:, k, c])
-                     for k in range(stencil.ns) for c in range(2)]
-            return terms + [(stencil.mn(j, m, c), -weight * rotated_master[:, m, c])
-                            for m in range(stencil.nm) for c in range(2)]
         # u~^a_j = tau^a_j . r_j, r_j = sum_k D_jk du_k - sum_l M_jl du_l
+        stencil = self.stencil
         tau = self.frames[:, j, a]
         r = (np.einsum("rk,rkc->rc", self.D[:, j], du_slave)
              - np.einsum("rl,rlc->rc", self.M[:, j], du_master))
@@ -341,6 +364,109 @@ class PairTangents:
         terms += [(stencil.m(j, l), -weight * np.einsum("rc,rc->r", tau, du_master[:, l]))
                   for l in range(stencil.nm)]
         return terms + [(stencil.normal(j, e), weight * turning[:, e]) for e in range(3)]
+
+
+class RotatedNormal:
+    """2D tangent directions of one interface: tau = R n, one component, defined wherever
+    the normal is; no symmetry-plane holding (the tangent of a 2D symmetry line's node is
+    along the line: a prescribed component there is the normal one)."""
+
+    components = 1
+    holds_fixed_components = False
+
+    def __init__(self, interface):
+        self.interface = interface
+
+    def pair_tangents(self, rows: np.ndarray) -> PairTangents:
+        return RotatedPairTangents(self.interface, rows)
+
+    def check(self, active: np.ndarray) -> None:
+        """Nothing to check: the rotated normal is always a tangent."""
+
+    def per_node(self, values: np.ndarray) -> np.ndarray:
+        """(n, 1) per-node component arrays as the nodal state reports them, (n,)."""
+        return values[:, 0]
+
+    def state(self) -> dict:
+        return {}
+
+
+class AxisFrames:
+    """3D tangent frames of one interface: tau^1 the projection of the coordinate axis
+    least aligned with the slave surface (:func:`frame_axis`, collective), tau^2 = n x tau^1,
+    on the averaged nodal normals (:func:`tangent_frames`)."""
+
+    components = 2
+    holds_fixed_components = True
+
+    def __init__(self, interface):
+        self.interface = interface
+        self.axis = frame_axis(interface)
+        stencil = interface.stencil
+        if stencil is not None and stencil.max_star == 0 and interface.normals != "averaged":
+            raise RuntimeError("3D friction: set interface.scalar_gradients before the "
+                               "first search (the stencils need the normals' stars)")
+
+    def pair_tangents(self, rows: np.ndarray) -> PairTangents:
+        return FramePairTangents(self.interface, rows, self.axis)
+
+    def check(self, active: np.ndarray) -> None:
+        """Raise (on every rank) if an active node's normal is parallel to the frame axis."""
+        interface = self.interface
+        bad = 0
+        rows = (np.zeros(0, dtype=int) if interface.quantities is None
+                else interface.contributing_pairs())
+        if rows.size:
+            normals = interface.stencil.slave_normals(rows)
+            degenerate = frame_degeneracy(normals, self.axis) < FRAME_DEGENERACY
+            local = interface.pair_multipliers[rows] - interface.multiplier_offset
+            mine = (local >= 0) & (local < interface.num_owned_multipliers)
+            local = np.where(mine, local, 0)
+            bad = int(np.count_nonzero(degenerate & mine & active[local]))
+        if interface.comm.allreduce(bad, op=MPI.SUM):
+            raise RuntimeError(
+                f"friction: {bad} active slave node(s) have a normal parallel to the tangent "
+                f"frame's axis {self.axis} (chosen as the coordinate axis least aligned "
+                "with the undeformed slave surface); a slave surface whose normals turn by "
+                "90 degrees is not supported by the 3D frames yet")
+
+    def per_node(self, values: np.ndarray) -> np.ndarray:
+        return values
+
+    def state(self) -> dict:
+        return {"frames": self.nodal_frames()}
+
+    def nodal_frames(self) -> np.ndarray:
+        """(owned slave nodes, 2, 3): the tangent frames of the owned slave nodes at the
+        last evaluation (zero at nodes in no candidate pair). Collective."""
+        interface = self.interface
+        if interface.quantities is None:
+            indices, normals = np.zeros(0, dtype=PETSc.IntType), np.zeros((0, 3))
+        else:
+            rows = interface.contributing_pairs()
+            indices = interface.pair_multipliers[rows].reshape(-1).astype(PETSc.IntType)
+            normals = interface.stencil.slave_normals(rows).reshape(-1, 3)
+        vector = interface.create_multiplier_vector()
+        sums = []
+        for values in [normals[:, c] for c in range(3)] + [np.ones(indices.size)]:
+            vector.zeroEntries()
+            vector.setValues(indices, values, addv=PETSc.InsertMode.ADD_VALUES)
+            vector.assemble()
+            sums.append(vector.getArray(readonly=True).copy())
+        vector.destroy()
+        count = sums[3]
+        seen = count > 0
+        mean = np.zeros((count.size, 3))
+        mean[seen] = np.stack(sums[:3], axis=1)[seen] / count[seen, None]
+        frames = np.zeros((count.size, 2, 3))
+        if np.any(seen):
+            unit = mean[seen] / np.linalg.norm(mean[seen], axis=1)[:, None]
+            frames[seen] = tangent_frames(unit, self.axis)[0]
+        return frames
+
+
+TANGENT_DIRECTIONS = {2: RotatedNormal, 3: AxisFrames}
+"""The tangent directions of each geometric dimension."""
 
 
 def coefficient_names(components: int) -> tuple[str, ...]:
@@ -396,20 +522,17 @@ class Friction:
         self.laws = laws
         self.interfaces = interfaces
         self.c_t, self.c_n, self.weight = c_t, c_n, weight
-        self.gdim = interfaces[0].gdim
-        self.components = self.gdim - 1
+        directions = TANGENT_DIRECTIONS[interfaces[0].gdim]
+        self.components = directions.components
         self.multipliers = [[i.create_multiplier_vector() for _ in range(self.components)]
                             for i in interfaces]
         self.slips = [np.zeros((i.num_owned_multipliers, self.components)) for i in interfaces]
         self.increments: list[np.ndarray | None] = [None] * len(interfaces)
-        self.axes = [frame_axis(i) if self.gdim == 3 else None for i in interfaces]
+        self.directions = [directions(i) for i in interfaces]
+        """Per pair, its tangent directions (:class:`RotatedNormal`, :class:`AxisFrames`)."""
         self.fixed: list[np.ndarray | None] = [None] * len(interfaces)
         self._tangents: dict[int, tuple] = {}
         self.held: list[np.ndarray | None] = [None] * len(interfaces)
-        if self.gdim == 3 and any(i.stencil is not None and i.stencil.max_star == 0
-                                  and i.normals != "averaged" for i in interfaces):
-            raise RuntimeError("3D friction: set interface.scalar_gradients before the "
-                               "first search (the stencils need the normals' stars)")
         self._start = u.x.array.copy()
 
     @property
@@ -427,8 +550,9 @@ class Friction:
         comm = self.interfaces[0].comm
         any_partial = [comm.allreduce(bool(np.any(f.any(axis=1) & ~f.all(axis=1))), op=MPI.LOR)
                        for f in fixed]
-        self.fixed = [f if self.gdim == 3 and flag else None
-                      for f, flag in zip(fixed, any_partial, strict=True)]
+        self.fixed = [f if directions.holds_fixed_components and flag else None
+                      for f, flag, directions in zip(fixed, any_partial, self.directions,
+                                                     strict=True)]
 
     def start(self, u: np.ndarray) -> None:
         """Measure slips from the displacement values u (the state a solve starts from, or
@@ -444,7 +568,7 @@ class Friction:
         kept = self._tangents.get(k)
         if kept is not None and kept[0] is q and np.array_equal(kept[1], rows):
             return kept[2]
-        tangents = PairTangents(interface, q, rows, self.axes[k])
+        tangents = self.directions[k].pair_tangents(rows)
         self._tangents[k] = (q, rows.copy(), tangents)
         return tangents
 
@@ -465,7 +589,7 @@ class Friction:
         interface = self.interfaces[k]
         table = interface.node_field(u.x.array - self._start)
         self.increments[k] = table
-        rows = interface._rows(interface.quantities)
+        rows = interface.contributing_pairs()
         stencil = interface.stencil
         du = np.concatenate([table[stencil.slave_nodes[rows]], table[stencil.master_nodes[rows]]],
                             axis=1)
@@ -477,47 +601,26 @@ class Friction:
             vector.assemble()
             self.slips[k][:, a] = vector.getArray(readonly=True)
         if self.fixed[k] is not None:
-            aligned = np.abs(self.nodal_frames(k)) > ALIGNED  # (n, a, c)
+            aligned = np.abs(self.directions[k].nodal_frames()) > ALIGNED  # (n, a, c)
             self.held[k] = (aligned & self.fixed[k][:, None, :]).any(axis=2)
 
     def rows(self, k: int, z: np.ndarray, active: np.ndarray, gap: np.ndarray,
              area: np.ndarray) -> TangentialRows:
         """Pair k's owned tangential rows at the current state."""
         y = np.stack([v.getArray(readonly=True) for v in self.multipliers[k]], axis=1)
-        if self.gdim == 3 and self.laws[k] is not None:
-            self._check_frames(k, active)
+        if self.laws[k] is not None:
+            self.directions[k].check(active)
         rows = tangential_rows(self.laws[k], self.weight, self.c_t, self.c_n, y, z, active,
                                self.slips[k], gap, area, self.held[k])
         rows.pressure = np.array(z, dtype=float, copy=True)
         return rows
 
-    def _check_frames(self, k: int, active: np.ndarray) -> None:
-        """Raise (on every rank) if an active node's normal is parallel to the frame axis."""
-        interface = self.interfaces[k]
-        bad = 0
-        rows = (np.zeros(0, dtype=int) if interface.quantities is None
-                else interface._rows(interface.quantities))
-        if rows.size:
-            normals = interface.stencil.slave_normals(rows)
-            degenerate = frame_degeneracy(normals, self.axes[k]) < FRAME_DEGENERACY
-            local = interface.pair_multipliers[rows] - interface.multiplier_offset
-            mine = (local >= 0) & (local < interface.num_owned_multipliers)
-            local = np.where(mine, local, 0)
-            bad = int(np.count_nonzero(degenerate & mine & active[local]))
-        if interface.comm.allreduce(bad, op=MPI.SUM):
-            raise RuntimeError(
-                f"friction: {bad} active slave node(s) have a normal parallel to the tangent "
-                f"frame's axis {self.axes[k]} (chosen as the coordinate axis least aligned "
-                "with the undeformed slave surface); a slave surface whose normals turn by "
-                "90 degrees is not supported by the 3D frames yet")
-
     def add_forces(self, vector: PETSc.Vec) -> None:
         """Add -T^T y of every pair to ``vector`` (displacement layout)."""
         for k, interface in enumerate(self.interfaces):
-            interface._require()
-            rows = interface._rows(interface.quantities)
+            rows = interface.contributing_pairs()
             force = self.tangents(k, rows).force(self.pair_multipliers(k, rows))
-            vector.setValues(interface._force_columns()[rows].reshape(-1).astype(PETSc.IntType),
+            vector.setValues(interface.pair_force_dofs[rows].reshape(-1).astype(PETSc.IntType),
                              force.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
             vector.assemble()
 
@@ -537,7 +640,7 @@ class Friction:
         y = np.stack([v.getArray(readonly=True) for v in self.multipliers[k]], axis=1)
         safe_area = np.where(active, area, 1.0)
         slip = np.where(active[:, None], self.slips[k] / safe_area[:, None], 0.0)
-        squeeze = (lambda a: a[:, 0]) if self.components == 1 else (lambda a: a)
+        squeeze = self.directions[k].per_node
         state = {
             "coordinates": self.interfaces[k].owned_multiplier_coordinates.copy(),
             "pressure": (np.zeros(active.size) if rows.pressure is None
@@ -548,38 +651,8 @@ class Friction:
             "slipping": active & ~rows.sticking,
             "dissipation": np.einsum("na,na->n", y, self.slips[k]),
         }
-        if self.gdim == 3:
-            state["frames"] = self.nodal_frames(k)
+        state.update(self.directions[k].state())
         return state
-
-    def nodal_frames(self, k: int) -> np.ndarray:
-        """(owned slave nodes, 2, 3): the tangent frames of pair k's owned slave nodes at the
-        last evaluation (zero at nodes in no candidate pair). Collective."""
-        interface = self.interfaces[k]
-        q = interface.quantities
-        if q is None:
-            indices, normals = np.zeros(0, dtype=PETSc.IntType), np.zeros((0, 3))
-        else:
-            rows = interface._rows(q)
-            indices = interface.pair_multipliers[rows].reshape(-1).astype(PETSc.IntType)
-            normals = interface.stencil.slave_normals(rows).reshape(-1, 3)
-        vector = interface.create_multiplier_vector()
-        sums = []
-        for values in [normals[:, c] for c in range(3)] + [np.ones(indices.size)]:
-            vector.zeroEntries()
-            vector.setValues(indices, values, addv=PETSc.InsertMode.ADD_VALUES)
-            vector.assemble()
-            sums.append(vector.getArray(readonly=True).copy())
-        vector.destroy()
-        count = sums[3]
-        seen = count > 0
-        mean = np.zeros((count.size, 3))
-        mean[seen] = np.stack(sums[:3], axis=1)[seen] / count[seen, None]
-        frames = np.zeros((count.size, 2, 3))
-        if np.any(seen):
-            unit = mean[seen] / np.linalg.norm(mean[seen], axis=1)[:, None]
-            frames[seen] = tangent_frames(unit, self.axes[k])[0]
-        return frames
 
     def destroy(self) -> None:
         for y in self.vectors:

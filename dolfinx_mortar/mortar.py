@@ -11,7 +11,17 @@ searches (COO preallocation: no allocation inside a Newton loop).
 The interface is dimension-free: the kernel of the facets' dimension and
 the nodes each pair depends on are a :mod:`stencils` object (2D:
 :class:`~dolfinx_mortar.stencils.Line2Stencil`, 3D:
-:class:`~dolfinx_mortar.stencils.Surface3Stencil`).
+:class:`~dolfinx_mortar.stencils.Surface3Stencil`), chosen once.
+
+The solver assembles the pairs' contributions itself
+(:class:`~dolfinx_mortar.system.ContactSystem`) from the public per-pair pieces:
+:meth:`MortarInterface.contributing_pairs`, :meth:`~MortarInterface.force_coefficients`
+(B), :meth:`~MortarInterface.combined_gradients` with the terms of
+:meth:`~MortarInterface.force_jacobian_terms` and of the multiplier rows, and the
+dofs :attr:`~MortarInterface.pair_dofs`, :attr:`~MortarInterface.pair_force_dofs`.
+:meth:`~MortarInterface.gap_jacobian`, :meth:`~MortarInterface.constraint_matrix` and
+:meth:`~MortarInterface.force_jacobian` put the same pieces into matrices of their
+own, for checks and benchmarks.
 
 Layouts: rows of D, M, the weighted gap and its Jacobian are multipliers
 (one per slave node, owned by the rank owning the node's dofs); columns of D
@@ -30,12 +40,11 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from . import covered, kernels, search, stencils, surface
-from .dual import RowSubsetDual
-from .kernels import BasisOption, IntegrationOption, NormalOption
+from .dual import Dual, RowSubsetDual
+from .kernels import BasisOption, IntegrationOption, KernelOptions, NormalOption, PairQuantities
 from .layout import BlockIncidence, CooMatrix
 
 CONFIGURATIONS = ("current", "reference")
-DEFAULT_GAUSS_POINTS = {"segment": 3, "element": 4}
 
 
 @dataclasses.dataclass
@@ -62,24 +71,6 @@ def _owner_of_blocks(index_map, local_blocks: np.ndarray, rank: int) -> np.ndarr
     ghost = local_blocks >= index_map.size_local
     owners[ghost] = index_map.owners[local_blocks[ghost] - index_map.size_local]
     return owners
-
-
-def _frozen_3d(reference, constant) -> dict:
-    """The 3D fields of reference quantities held constant (D, M and the nodal normals)."""
-    if not hasattr(reference, "normals_vary"):
-        return {}
-    frozen = {"normals_vary": False}
-    if reference.D_dual is not None:
-        frozen.update(D_dual=constant(reference.D), M_dual=constant(reference.M))
-    return frozen
-
-
-def _contributing_rows(q: kernels.PairQuantities) -> np.ndarray | None:
-    """The pairs outside which every quantity of ``q`` is zero, if ``q`` says so."""
-    items = (q.Dn, q.Mn, q.area, q.gap)
-    if all(isinstance(item, RowSubsetDual) and item.rows is q.gap.rows for item in items):
-        return q.gap.rows
-    return None
 
 
 def _alltoallv(
@@ -154,20 +145,18 @@ class MortarInterface:
         self.integration = integration
         self.basis = basis
         self.configuration = configuration
-        self._reference_quantities: kernels.PairQuantities | None = None
+        self._reference_quantities: PairQuantities | None = None
         self._evaluated_x: np.ndarray | None = None
         self._evaluated_version = -1
-        self.num_gauss_points = num_gauss_points or DEFAULT_GAUSS_POINTS[integration]
-        if self.num_gauss_points < 1:
+        if num_gauss_points is not None and num_gauss_points < 1:
             raise ValueError("num_gauss_points must be >= 1")
         self.slave = surface.extract_surface(V, facet_tags, slave_marker, "slave")
         self.master = surface.extract_surface(V, facet_tags, master_marker, "master")
         surface.check_disjoint(self.slave, self.master, self.comm)
         self.gdim = self.slave.reference_coordinates.shape[1]
-        if self.gdim == 3:
-            from .kernels import surface3
-
-            self.num_gauss_points = num_gauss_points or surface3.DEFAULT_GAUSS_POINTS
+        self._stencil_type = stencils.STENCILS[self.gdim]
+        self.num_gauss_points = (num_gauss_points
+                                 or self._stencil_type.kernel.default_gauss_points[integration])
         if search_margin is None:
             corners = self.slave.reference_coordinates[self.slave.facets]
             if corners.shape[1] == 2:
@@ -175,11 +164,11 @@ class MortarInterface:
             else:
                 lengths = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2).ravel()
             total = self.comm.allreduce(np.array([lengths.sum(), lengths.size]), op=MPI.SUM)
-            search_margin = (2.0 if self.gdim == 2 else 0.5) * total[0] / total[1]
+            search_margin = self._stencil_type.search_margin * total[0] / total[1]
         if not search_margin > 0.0:
             raise ValueError(f"search_margin must be positive, got {search_margin}")
         self.reuse = search.SearchReuse(margin=float(search_margin))
-        self.search_depth = 0.0 if self.gdim == 2 else 2.0 * self.reuse.margin
+        self.search_depth = self._stencil_type.search_depth * self.reuse.margin
         self.statistics = MortarStatistics()
 
         index_map = V.dofmap.index_map
@@ -192,17 +181,17 @@ class MortarInterface:
         self._pattern_version = 0
         self._matrices: dict[str, tuple[int, PETSc.Mat]] = {}
         self._pair_block_sides: dict[str, tuple[int, BlockIncidence]] = {}
-        self.quantities: kernels.PairQuantities | None = None
+        self.quantities: PairQuantities | None = None
         self._crosspoint_blocks = np.zeros(0, dtype=np.int64)
         self._pair_dofs: np.ndarray | None = None
         self.stencil: stencils.PairStencil | None = None
         self.scalar_gradients = False
-        self.assembly_chunk: int | None = 2048 if self.gdim == 3 else None
-        """Pairs whose gradient blocks (G, K) are formed at once in an assembly (None:
-        all, summed as one array; 2D's factorized gradients combine all pairs in one go)."""
         """3D: the kernel also keeps the gradients of D and M, and the stencils hold the
         averaged normals' stars whatever the normal option (friction's tangent frames;
         set before the first search)."""
+        self.assembly_chunk: int | None = self._stencil_type.assembly_chunk
+        """Pairs whose gradient blocks (G, K) are formed at once in an assembly (None:
+        all, summed as one array; 2D's factorized gradients combine all pairs in one go)."""
 
     # -- multipliers -------------------------------------------------------
 
@@ -295,7 +284,7 @@ class MortarInterface:
 
     # -- search and geometry ----------------------------------------------
 
-    def update(self, u: dolfinx.fem.Function | None = None) -> kernels.PairQuantities:
+    def update(self, u: dolfinx.fem.Function | None = None) -> PairQuantities:
         """Evaluate all mortar quantities at x = X + u (collective).
 
         Re-searches only when a surface node moved more than half the margin
@@ -374,9 +363,9 @@ class MortarInterface:
         were given their coupling to the facet's other master nodes
         (:class:`covered.CoveredStencil`): then every rank takes the new pattern.
         Collective: every rank calls it at every update of the current configuration."""
+        if self.basis != "dual" or self.configuration == "reference":
+            return  # only the covered dual basis of the current configuration widens
         stencil = self.stencil
-        if not isinstance(stencil, covered.CoveredStencil) or not stencil.coupled:
-            return
         changed = stencil.widenings != self._stencil_widenings
         if not self.comm.allreduce(changed, op=MPI.LOR):
             return
@@ -387,34 +376,21 @@ class MortarInterface:
         self._evaluated_version = self._pattern_version
         self.statistics.widenings += 1
 
-    def _evaluate(self, node_x: np.ndarray) -> kernels.PairQuantities:
-        extra = {"scalar_gradients": True} if self.scalar_gradients else {}
-        return self.stencil.evaluate(
-            node_x, normals=self.normals, integration=self.integration, basis=self.basis,
-            num_gauss_points=self.num_gauss_points, crosspoint=self.pair_crosspoint, **extra)
+    def _evaluate(self, node_x: np.ndarray) -> PairQuantities:
+        options = KernelOptions(
+            normals=self.normals, integration=self.integration, basis=self.basis,
+            num_gauss_points=self.num_gauss_points, scalar_gradients=self.scalar_gradients)
+        return self.stencil.evaluate(node_x, options, crosspoint=self.pair_crosspoint)
 
-    def _with_current_gap(self, reference: kernels.PairQuantities) -> kernels.PairQuantities:
-        """Reference integrals, constant in u; the gap linear in the current positions."""
-        from .dual import Dual
-
+    def _with_current_gap(self, reference: PairQuantities) -> PairQuantities:
+        """Reference integrals, constant in u (the nodal normals too); the gap linear in the
+        current positions. Every quantity is zero outside the pairs that contribute."""
         stencil = self.stencil
         Dn, Mn = reference.Dn.value, reference.Mn.value  # (n, j, k, c)
         gap = (np.einsum("njlc,nlc->nj", Mn, self._node_x[stencil.master_nodes])
                - np.einsum("njkc,nkc->nj", Dn, self._node_x[stencil.slave_nodes]))
         nv, ns = stencil.num_variables, stencil.ns
-        rows = _contributing_rows(reference)
-        if rows is None:
-            grad = np.zeros(gap.shape + (nv,))
-            grad[:, :, stencil.slave_variables] = -Dn.reshape(-1, ns, ns * self.gdim)
-            grad[:, :, stencil.master_variables] = Mn.reshape(-1, ns, stencil.nm * self.gdim)
-
-            def constant(value: np.ndarray) -> Dual:
-                return Dual(value, np.broadcast_to(0.0, value.shape + (nv,)))
-
-            return dataclasses.replace(reference, Dn=constant(Dn), Mn=constant(Mn),
-                                       area=constant(reference.area.value), gap=Dual(gap, grad),
-                                       **_frozen_3d(reference, constant))
-        # every quantity is zero outside the pairs that contribute: keep them apart
+        rows = reference.rows
         grad = np.zeros((rows.size, ns, nv))
         grad[:, :, stencil.slave_variables] = -Dn[rows].reshape(-1, ns, ns * self.gdim)
         grad[:, :, stencil.master_variables] = Mn[rows].reshape(-1, ns, stencil.nm * self.gdim)
@@ -423,10 +399,13 @@ class MortarInterface:
             shape = (rows.size,) + value.shape[1:] + (nv,)
             return RowSubsetDual(value, rows, np.broadcast_to(0.0, shape))
 
-        return dataclasses.replace(reference, Dn=constant(Dn), Mn=constant(Mn),
-                                   area=constant(reference.area.value),
-                                   gap=RowSubsetDual(gap, rows, grad),
-                                   **_frozen_3d(reference, constant))
+        frozen_scalars = {}
+        if reference.D_dual is not None:
+            frozen_scalars = {"D_dual": constant(reference.D), "M_dual": constant(reference.M)}
+        return reference.replaced(Dn=constant(Dn), Mn=constant(Mn),
+                                  area=constant(reference.area.value),
+                                  gap=RowSubsetDual(gap, rows, grad), normals_vary=False,
+                                  **frozen_scalars)
 
     def _exchange_plan(self, slave_x: np.ndarray, master_x: np.ndarray,
                        slave_origin: np.ndarray | None = None,
@@ -538,21 +517,16 @@ class MortarInterface:
             self._node_x, slave.facets, self._node_x, all_master_facets, self.reuse.margin,
             slave_previous=node_origin, master_previous=node_origin, depth=self.search_depth,
         )
-        local_slave_facets = slave.facets.astype(np.int64)
-        if gdim == 2:
-            stencil = stencils.Line2Stencil.build(
-                self._node_blocks, all_slave_facets, local_slave_facets, all_master_facets, pairs)
-        else:
-            stencil = stencils.Surface3Stencil.build(
-                self._node_blocks, self._node_x, all_slave_facets, local_slave_facets,
-                all_master_facets, pairs, self.normals, nodal_frames=self.scalar_gradients)
+        stencil = self._stencil_type.build(
+            self._node_blocks, self._node_x, all_slave_facets, slave.facets.astype(np.int64),
+            all_master_facets, pairs, normals=self.normals, nodal_frames=self.scalar_gradients)
         if self.basis == "dual":
             stencil = covered.CoveredStencil(
                 stencil, coupled=self.configuration != "reference",
                 master_boundary=covered.boundary_nodes(all_master_facets,
                                                        self._node_blocks.size))
         self.stencil = stencil
-        self._stencil_widenings = getattr(stencil, "widenings", 0)
+        self._stencil_widenings = stencil.widenings
         self.pair_slave_facets = stencil.slave_facets
         self.pair_multipliers = self.node_multipliers[stencil.slave_nodes]
         slave_blocks = self._node_blocks[stencil.slave_nodes]
@@ -582,11 +556,6 @@ class MortarInterface:
         stencil = self.stencil
         return self._node_blocks[stencil.nodes[:, np.concatenate([stencil.slave_slots,
                                                                    stencil.master_slots])]]
-
-    @property
-    def pair_nodes(self) -> np.ndarray:
-        """(n, width) node-table indices of each pair's stencil (2D: p, a, b, q, c, d)."""
-        return self.stencil.nodes
 
     @property
     def pair_slave_nodes(self) -> np.ndarray:
@@ -638,16 +607,6 @@ class MortarInterface:
 
     # -- PETSc objects -----------------------------------------------------
 
-    def _coo_matrix(self, name: str, rows, cols, values, row_sizes, col_sizes) -> PETSc.Mat:
-        """A matrix whose pattern is rebuilt only after a new search."""
-        version, matrix = self._matrices.get(name, (-1, None))
-        if version != self._pattern_version:
-            if matrix is not None:
-                matrix.destroy()
-            matrix = CooMatrix(self.comm, rows, cols, row_sizes, col_sizes)
-            self._matrices[name] = (self._pattern_version, matrix)
-        return matrix.assemble(values)
-
     @property
     def _multiplier_sizes(self):
         return (self.num_owned_multipliers, self.num_global_multipliers)
@@ -660,7 +619,7 @@ class MortarInterface:
     def _block_sizes(self):
         return (self.num_owned_blocks, self.num_global_blocks)
 
-    def _require(self) -> kernels.PairQuantities:
+    def _require(self) -> PairQuantities:
         if self.quantities is None:
             raise RuntimeError("call update(u) before assembling mortar quantities")
         return self.quantities
@@ -699,40 +658,79 @@ class MortarInterface:
             self._pair_block_sides[name] = (self._pattern_version, side)
         return side
 
-    def _rows(self, q: kernels.PairQuantities) -> np.ndarray:
-        """The pairs whose quantities may be nonzero (the others are skipped in assembly)."""
-        rows = _contributing_rows(q)
-        return np.arange(q.D.shape[0]) if rows is None else rows
+    # -- the pairs' contributions, as the solver assembles them ---------------------------
 
-    def _combined_gradients(self, q: kernels.PairQuantities, rows: np.ndarray, terms) -> np.ndarray:
-        """(len(terms), width * gdim, len(rows)): per row of ``terms``, the sum of
-        weight * d output / d x over the pair's stencil (:mod:`stencils` numbers the
-        outputs); a weight is a number or one per row."""
-        return self.stencil.combined_gradients(q, rows, terms)
+    def contributing_pairs(self) -> np.ndarray:
+        """The candidate pairs whose quantities may be nonzero at the last update (sorted);
+        every assembly skips the others."""
+        return self._require().rows
 
-    def _assemble_gradients(self, matrix: CooMatrix, q, rows: np.ndarray, terms) -> PETSc.Mat:
+    @property
+    def pair_force_dofs(self) -> np.ndarray:
+        """(n, (ns + nm) * gdim) displacement dofs of each pair's slave and master facet
+        nodes: the rows of its force terms (-1: absent)."""
+        stencil = self.stencil
+        slots = np.concatenate([stencil.slave_slots, stencil.master_slots])
+        return self.pair_dofs.reshape(-1, stencil.width, self.gdim)[:, slots, :].reshape(
+            stencil.num_pairs, slots.size * self.gdim)
+
+    def force_coefficients(self, rows: np.ndarray) -> np.ndarray:
+        """(rows, j, ns + nm nodes, gdim): B's entries of the pairs ``rows``, -Dn on the slave
+        nodes and +Mn on the master nodes (the contact force is -B^T z)."""
+        q = self._require()
+        return np.concatenate([-q.Dn.value[rows], q.Mn.value[rows]], axis=2)
+
+    def combined_gradients(self, rows: np.ndarray, terms) -> np.ndarray:
+        """(len(terms), width * gdim, len(rows)): per row of ``terms`` (a list of (output,
+        weight)), the sum of weight * d output / d x over the stencils of the pairs ``rows``
+        (:mod:`stencils` numbers the outputs; a weight is a number or one per row)."""
+        return self.stencil.combined_gradients(self._require(), rows, terms)
+
+    def force_jacobian_terms(self, z_pair: np.ndarray) -> list:
+        """The :meth:`combined_gradients` terms of d(-B^T z)/du at fixed z, one per force
+        row (slave nodes, then master nodes, gdim components each); z_pair (rows, ns): the
+        multipliers at the pairs' slave nodes."""
+        stencil, gdim, js = self.stencil, self.gdim, range(self.stencil.ns)
+        # -sum_j z_j d(coefficient_jkc): +Dn for the slave nodes, -Mn for the master nodes
+        terms = [[(stencil.dn(j, k, c), z_pair[:, j]) for j in js]
+                 for k in range(stencil.ns) for c in range(gdim)]
+        terms += [[(stencil.mn(j, k, c), -z_pair[:, j]) for j in js]
+                  for k in range(stencil.nm) for c in range(gdim)]
+        return terms
+
+    def _rows(self, q: PairQuantities) -> np.ndarray:
+        """Old name of :meth:`contributing_pairs` (``q``: the last update's quantities)."""
+        return q.rows
+
+    def _force_coefficient_values(self, q: PairQuantities, rows: np.ndarray) -> np.ndarray:
+        """Old name of :meth:`force_coefficients` (``q``: the last update's quantities)."""
+        return self.force_coefficients(rows)
+
+    def _assemble_gradients(self, matrix: CooMatrix, rows: np.ndarray, terms) -> PETSc.Mat:
         """``matrix`` assembled from the combined gradients of ``terms`` (a row of the
-        matrix block per term, :meth:`_combined_gradients`), ``assembly_chunk`` pairs at a
-        time: in 3D their values on the stencil are ~1.2e4 numbers a pair for K."""
+        matrix block per term), ``assembly_chunk`` pairs at a time: in 3D their values on
+        the stencil are ~1.2e4 numbers a pair for K."""
         if self.assembly_chunk is None:
-            return matrix.assemble_groups(self._combined_gradients(q, rows, terms), rows)
+            return matrix.assemble_groups(self.combined_gradients(rows, terms), rows)
 
         def values(start: int, stop: int) -> np.ndarray:
             if (start, stop) == (0, rows.size):
-                return self._combined_gradients(q, rows, terms)
+                return self.combined_gradients(rows, terms)
             part = [[(o, w if np.ndim(w) == 0 else w[start:stop]) for o, w in row]
                     for row in terms]
-            return self._combined_gradients(q, rows[start:stop], part)
+            return self.combined_gradients(rows[start:stop], part)
 
         return matrix.assemble_groups(values, rows, chunk=self.assembly_chunk)
 
     def mortar_matrices(self) -> tuple[PETSc.Mat, PETSc.Mat]:
         """D (multipliers x slave nodes) and M (multipliers x master nodes).
 
-        Columns are global dof blocks of the displacement space (one per node).
+        Columns are global dof blocks of the displacement space (one per node). The
+        matrices are the interface's: the next assembly overwrites them and a new search
+        destroys them.
         """
         q = self._require()
-        rows = self._rows(q)
+        rows = q.rows
         sizes = (self._multiplier_sizes, self._block_sizes)
         D = self._block_matrix("D", "multipliers", "slave", (1, 1), *sizes)
         M = self._block_matrix("M", "multipliers", "master", (1, 1), *sizes)
@@ -742,7 +740,7 @@ class MortarInterface:
     def weighted_gap(self, vector: PETSc.Vec | None = None) -> PETSc.Vec:
         """The weighted gaps g~_j in the multiplier layout."""
         q = self._require()
-        rows = self._rows(q)
+        rows = q.rows
         if vector is None:
             vector = self.create_multiplier_vector()
         vector.zeroEntries()
@@ -754,64 +752,46 @@ class MortarInterface:
         vector.assemble()
         return vector
 
+    # -- the same contributions as matrices of their own, for checks and benchmarks -------
+
     def gap_jacobian(self) -> PETSc.Mat:
-        """d g~ / d u (multipliers x displacement dofs), exact."""
-        q = self._require()
-        rows = self._rows(q)
-        gap = self.stencil.GAP
-        terms = [[(gap + j, 1.0)] for j in range(self.stencil.ns)]
+        """G = d g~ / d u (multipliers x displacement dofs), exact: the solver's gap terms
+        (:meth:`combined_gradients`) as a matrix of its own (overwritten by the next call,
+        destroyed by a new search)."""
+        rows = self.contributing_pairs()
+        terms = [[(self.stencil.GAP + j, 1.0)] for j in range(self.stencil.ns)]
         matrix = self._block_matrix("G", "multipliers", "stencil", (1, self.gdim),
                                     self._multiplier_sizes, self._dof_sizes)
-        return self._assemble_gradients(matrix, q, rows, terms)
-
-    def _force_columns(self) -> np.ndarray:
-        """(n, (ns + nm) * gdim) dofs of the slave and master facet nodes."""
-        stencil = self.stencil
-        slots = np.concatenate([stencil.slave_slots, stencil.master_slots])
-        return self.pair_dofs.reshape(-1, stencil.width, self.gdim)[:, slots, :].reshape(
-            stencil.num_pairs, slots.size * self.gdim)
-
-    @staticmethod
-    def _force_coefficient_values(q: kernels.PairQuantities, rows: np.ndarray) -> np.ndarray:
-        """(rows, j, ns + nm nodes, gdim): -Dn for slave nodes, +Mn for master nodes."""
-        return np.concatenate([-q.Dn.value[rows], q.Mn.value[rows]], axis=2)
+        return self._assemble_gradients(matrix, rows, terms)
 
     def constraint_matrix(self) -> PETSc.Mat:
-        """B with B_j,(k,c) = -Dn_jk[c] (slave), +Mn_jl[c] (master).
+        """B with B_j,(k,c) = -Dn_jk[c] (slave), +Mn_jl[c] (master) (:meth:`force_coefficients`
+        as a matrix of its own).
 
         The contact force is -B^T z: slave nodes are pushed along -n by the
         pressure z >= 0, master nodes along +n (paper, eq. 1).
         """
-        q = self._require()
-        rows = self._rows(q)
-        values = self._force_coefficient_values(q, rows).transpose(1, 2, 3, 0)  # (j, k, c, n)
+        rows = self.contributing_pairs()
+        values = self.force_coefficients(rows).transpose(1, 2, 3, 0)  # (j, k, c, n)
         matrix = self._block_matrix("B", "multipliers", "force", (1, self.gdim),
                                     self._multiplier_sizes, self._dof_sizes)
         return matrix.assemble_groups(values, rows)
 
     def force_jacobian(self, z: PETSc.Vec) -> PETSc.Mat:
-        """d(-B(u)^T z)/du at fixed z (displacement dofs x displacement dofs)."""
-        q = self._require()
-        rows = self._rows(q)
-        stencil, gdim = self.stencil, self.gdim
-        z_pair = self.node_values(z)[stencil.slave_nodes[rows]]  # (n, ns)
-        # -sum_j z_j d(coefficient_jkc): +Dn for the slave nodes, -Mn for the master nodes
-        js = range(stencil.ns)
-        terms = [[(stencil.dn(j, k, c), z_pair[:, j]) for j in js]
-                 for k in range(stencil.ns) for c in range(gdim)]
-        terms += [[(stencil.mn(j, k, c), -z_pair[:, j]) for j in js]
-                  for k in range(stencil.nm) for c in range(gdim)]
-        matrix = self._block_matrix("K", "force", "stencil", (gdim, gdim),
+        """d(-B(u)^T z)/du at fixed z (displacement dofs x displacement dofs): the solver's
+        :meth:`force_jacobian_terms` as a matrix of its own."""
+        rows = self.contributing_pairs()
+        z_pair = self.node_values(z)[self.stencil.slave_nodes[rows]]  # (n, ns)
+        matrix = self._block_matrix("K", "force", "stencil", (self.gdim, self.gdim),
                                     self._dof_sizes, self._dof_sizes)
-        return self._assemble_gradients(matrix, q, rows, terms)
+        return self._assemble_gradients(matrix, rows, self.force_jacobian_terms(z_pair))
 
     def contact_force(self, z: PETSc.Vec, vector: PETSc.Vec) -> PETSc.Vec:
         """Add -B^T z to ``vector`` (displacement layout), without forming B."""
-        q = self._require()
-        rows = self._rows(q)
+        rows = self.contributing_pairs()
         z_pair = self.node_values(z)[self.pair_slave_nodes[rows]]
-        force = -np.einsum("nj,njkc->nkc", z_pair, self._force_coefficient_values(q, rows))
-        vector.setValues(self._force_columns()[rows].reshape(-1).astype(PETSc.IntType),
+        force = -np.einsum("nj,njkc->nkc", z_pair, self.force_coefficients(rows))
+        vector.setValues(self.pair_force_dofs[rows].reshape(-1).astype(PETSc.IntType),
                          force.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
         vector.assemble()
         return vector

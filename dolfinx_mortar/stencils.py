@@ -10,6 +10,12 @@ first, then master facet nodes, then whatever else enters (the nodes of the
 slave normals). Everything above sees ``slots`` and ``width``, never
 "six nodes p, a, b, q, c, d".
 
+Every stencil calls its kernel through the one contract of
+:mod:`dolfinx_mortar.kernels` (:class:`~dolfinx_mortar.kernels.MortarKernel`: a
+:class:`~dolfinx_mortar.kernels.PairGeometry` in, a
+:class:`~dolfinx_mortar.kernels.PairQuantities` out); what differs per dimension
+lives in one class each, chosen once by :data:`STENCILS`:
+
 - :class:`Line2Stencil`: 2D, the stencil ``p, a, b, q, c, d`` of
   :mod:`~dolfinx_mortar.kernels.line2`, whose gradients are already on it.
 - :class:`Surface3Stencil`: 3D, slave facet nodes, master facet nodes and, per
@@ -18,18 +24,28 @@ slave normals). Everything above sees ``slots`` and ``width``, never
   nodal normals, which are chained here with the normals' own derivatives
   (:mod:`~dolfinx_mortar.normals`).
 
-Outputs of a pair are numbered as in 2D: ``Dn`` (j, k, c) first, then
-``Mn`` (j, l, c), ``area`` (j), ``gap`` (j); in 3D, when the kernel kept them
-(friction), ``D`` (j, k), ``M`` (j, l) and the slave nodal normals (j, c)
-follow (:meth:`PairStencil.dn` and its siblings).
+Outputs of a pair are numbered alike in both dimensions: ``Dn`` (j, k, c) first,
+then ``Mn`` (j, l, c), ``area`` (j), ``gap`` (j); ``D`` (j, k) and ``M`` (j, l) when
+the kernel kept their gradients (in 2D the factorized gradients always hold D's),
+then the slave nodal normals (j, c), kernel variables in 3D
+(:meth:`PairStencil.dn` and its siblings).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from . import kernels
+from . import normals as normals_module
 from .dual import RowSubsetDual
+from .kernels import (
+    NUM_PAIR_VARIABLES,
+    KernelOptions,
+    Line2Kernel,
+    MortarKernel,
+    PairGeometry,
+    PairQuantities,
+    Surface3Kernel,
+)
 
 
 def lookup(keys: np.ndarray, values: np.ndarray, queries: np.ndarray):
@@ -62,23 +78,10 @@ def _rows_of(array: np.ndarray, kept: np.ndarray, rows: np.ndarray) -> np.ndarra
     return result
 
 
-def _gradient_rows(item, rows: np.ndarray) -> np.ndarray:
-    """The gradients of ``rows`` of a Dual; of a :class:`RowSubsetDual` without building
-    its full gradient."""
-    if not isinstance(item, RowSubsetDual):
-        return item.grad[rows]
+def _gradient_rows(item: RowSubsetDual, rows: np.ndarray) -> np.ndarray:
+    """The gradients of ``rows`` of a :class:`RowSubsetDual`, without building its full
+    gradient."""
     return _rows_of(item.grad_rows, item.rows, rows)
-
-
-def _affine_factors(q):
-    """The factorized gradients of Dn, Mn and the areas, if the kernel kept them so
-    (:class:`~dolfinx_mortar.kernels.surface3.AffineFactors`)."""
-    factors = getattr(q.Dn, "factors", None)
-    if not hasattr(factors, "chain"):
-        return None
-    if not all(getattr(item, "factors", None) is factors for item in (q.Mn, q.area)):
-        return None
-    return factors
 
 
 class PairStencil:
@@ -92,16 +95,45 @@ class PairStencil:
         present: (n, width) whether the slot is a real node (columns of the
             Jacobians skip the others).
         slave_facets: (n,) local slave facet of each pair.
+        widenings: how often the pattern was widened since the search (only the covered
+            dual basis widens it, :class:`~dolfinx_mortar.covered.CoveredStencil`).
     """
 
     gdim: int
     ns: int
     nm: int
+    kernel: MortarKernel
+    widenings: int = 0
+    search_margin: float
+    """The default search margin in mean slave edge lengths (3D: the number of candidate
+    pairs grows with its square)."""
+    search_depth: float
+    """How far behind each facet (into its body) its search box reaches, in margins."""
+    assembly_chunk: int | None
+    """Pairs whose gradient blocks are formed at once in an assembly (None: all)."""
 
     def __init__(self, nodes: np.ndarray, present: np.ndarray, slave_facets: np.ndarray):
         self.nodes = nodes
         self.present = present
         self.slave_facets = slave_facets
+
+    @classmethod
+    def build(cls, node_blocks: np.ndarray, node_x: np.ndarray, all_slave_facets: np.ndarray,
+              local_slave_facets: np.ndarray, all_master_facets: np.ndarray, pairs: np.ndarray,
+              *, normals: str = "averaged", nodal_frames: bool = False) -> PairStencil:
+        """Stencils of ``pairs`` (local slave facet, index into ``all_master_facets``).
+
+        Args:
+            node_blocks, node_x: global dof block and coordinates of each node-table row.
+            all_slave_facets: the slave facets known here (this rank's, then those other
+                ranks sent), as node-table rows; local_slave_facets: this rank's.
+            all_master_facets: the master facets known here.
+            pairs: (n, 2) candidate pairs.
+            normals: the normal option (3D: the averaged normals' stars enter the stencil).
+            nodal_frames: 3D: the stars also with the ``slave`` and ``master`` options
+                (friction's tangent frames are built on the averaged normals).
+        """
+        raise NotImplementedError
 
     @property
     def num_pairs(self) -> int:
@@ -174,7 +206,7 @@ class PairStencil:
         variable: its gradient is one on that variable)."""
         return self.NORMAL + j * self.gdim + c
 
-    def _normal_variable(self, q, index: int) -> int | None:
+    def _normal_variable(self, q: PairQuantities, index: int) -> int | None:
         """The kernel variable of nodal normal component ``index`` (j gdim + c), None where
         the normals are not variables."""
         return None
@@ -184,42 +216,28 @@ class PairStencil:
     master_variables: np.ndarray
     num_variables: int
 
-    def evaluate(self, node_x: np.ndarray, **options):
+    def evaluate(self, node_x: np.ndarray, options: KernelOptions,
+                 crosspoint: np.ndarray | None = None) -> PairQuantities:
+        """Every pair's quantities at the node-table coordinates ``node_x`` (crosspoint:
+        (n, ns) slave nodes without a multiplier)."""
         raise NotImplementedError
 
-    def _kernel_gradients(self, q, rows: np.ndarray, terms) -> np.ndarray:
+    def _kernel_gradients(self, q: PairQuantities, rows: np.ndarray, terms) -> np.ndarray:
         """(len(terms), num_variables, len(rows)) on the kernel's own variables."""
         return np.ascontiguousarray(self._row_gradients(q, rows, terms).transpose(0, 2, 1))
 
-    def _row_gradients(self, q, rows: np.ndarray, terms) -> np.ndarray:
+    def _row_gradients(self, q: PairQuantities, rows: np.ndarray, terms) -> np.ndarray:
         """(len(terms), len(rows), num_variables): per row of ``terms``, the weighted sum of
         the outputs' gradients over the kernel's own variables, without first copying
         every output's gradient into one array (in 3D they are ~1,600 numbers a pair)."""
         nv = self.num_variables
-        parts, starts = [], []
-        start = 0
-        items = [q.Dn, q.Mn, q.area, q.gap]
-        if getattr(q, "D_dual", None) is not None:
-            items += [q.D_dual, q.M_dual]
-        affine = _affine_factors(q)
-        for item in items:
-            size = int(np.prod(item.value.shape[1:]))
-            if affine is not None and item.factors is affine:
-                parts.append(None)
-            else:
-                parts.append(_gradient_rows(item, rows).reshape(rows.size, size, nv))
-            starts.append(start)
-            start += size
+        outputs = q.outputs()
+        sizes = [int(np.prod(item.value.shape[1:])) for item in outputs]
+        starts = np.cumsum([0] + sizes[:-1])
+        end = int(starts[-1]) + sizes[-1]
+        gradients: dict[int, np.ndarray] = {}
         result = np.zeros((len(terms), rows.size, nv))
-        if affine is not None:
-            # the terms summed over the plane coordinates first, chained once at the end
-            kept = q.Dn.rows
-            local = _rows_of(affine.local.transpose(1, 0, 2), kept, rows)  # (rows, 57, 12)
-            weights = {"Dn": _rows_of(affine.slave_weights, kept, rows),
-                       "Mn": _rows_of(affine.master_weights, kept, rows)}
-            local_sum = np.zeros((len(terms), rows.size, local.shape[-1]))
-            offsets = affine.offsets
-            first = nv - 3 * self.ns
+        factorized = self._factorized_sums(q, rows, len(terms))
         for p, row in enumerate(terms):
             for o, weight in row:
                 if o >= self.NORMAL:
@@ -227,26 +245,27 @@ class PairStencil:
                     if variable is not None:
                         result[p, :, variable] += weight
                     continue
-                if o >= start:
+                if o >= end:
                     raise ValueError(f"output {o} was not kept by the kernel")
                 part = int(np.searchsorted(starts, o, side="right")) - 1
-                index = o - starts[part]
+                index = o - int(starts[part])
                 weight = np.reshape(weight, (-1, 1))
-                if parts[part] is None:
-                    name = ("Dn", "Mn", "area")[part]
-                    local_sum[p] += local[:, offsets[name] + index] * weight
-                    if name != "area":
-                        jl, c = divmod(index, 3)
-                        j, node = divmod(jl, self.ns if name == "Dn" else self.nm)
-                        result[p][:, first + c::3] += weights[name][:, j, node] * weight
+                if factorized is not None and factorized.add(p, part, index, weight, result):
                     continue
-                result[p] += parts[part][:, index, :] * weight
-        if affine is not None:
-            result += (local_sum.transpose(1, 0, 2) @ _rows_of(affine.chain, kept, rows)
-                       ).transpose(1, 0, 2)
+                if part not in gradients:
+                    gradients[part] = _gradient_rows(outputs[part], rows).reshape(
+                        rows.size, sizes[part], nv)
+                result[p] += gradients[part][:, index, :] * weight
+        if factorized is not None:
+            factorized.finish(result)
         return result
 
-    def combined_gradients(self, q, rows: np.ndarray, terms) -> np.ndarray:
+    def _factorized_sums(self, q: PairQuantities, rows: np.ndarray, num_terms: int):
+        """An accumulator of the terms on outputs whose gradients the kernel kept
+        factorized (None: none kept so; :class:`_AffineSums` in 3D)."""
+        return None
+
+    def combined_gradients(self, q: PairQuantities, rows: np.ndarray, terms) -> np.ndarray:
         """(len(terms), width * gdim, len(rows)): per row of ``terms``, the sum of
         weight * d output / d x over the stencil (a weight is a number or one per row)."""
         raise NotImplementedError
@@ -261,9 +280,11 @@ class Line2Stencil(PairStencil):
     """
 
     gdim, ns, nm = 2, 2, 2
+    kernel = Line2Kernel()
+    search_margin, search_depth, assembly_chunk = 2.0, 0.0, None
     slave_variables = np.arange(2, 6)
     master_variables = np.arange(8, 12)
-    num_variables = kernels.NUM_PAIR_VARIABLES
+    num_variables = NUM_PAIR_VARIABLES
 
     def __init__(self, nodes, has_neighbour, slave_facets):
         present = np.ones(nodes.shape, dtype=bool)
@@ -271,15 +292,13 @@ class Line2Stencil(PairStencil):
         present[:, 3] = has_neighbour[:, 1]
         super().__init__(nodes, present, slave_facets)
         self.has_neighbour = has_neighbour
-        self._nodes_T = np.ascontiguousarray(nodes.T)
 
     @classmethod
-    def build(cls, node_blocks, all_slave_facets, local_slave_facets, all_master_facets, pairs):
-        """Stencils of ``pairs`` (slave facet, index into ``all_master_facets``).
-
-        The neighbours p, q are matched by global block among all slave facets
-        known here (this rank's and those other ranks sent).
-        """
+    def build(cls, node_blocks, node_x, all_slave_facets, local_slave_facets, all_master_facets,
+              pairs, *, normals="averaged", nodal_frames=False):
+        """The neighbours p, q are matched by global block among all slave facets known
+        here (this rank's and those other ranks sent); they enter the stencil whatever
+        the normal option."""
         starts = node_blocks[all_slave_facets[:, 0]]
         ends = node_blocks[all_slave_facets[:, 1]]
         facet_a, facet_b = local_slave_facets[:, 0], local_slave_facets[:, 1]
@@ -302,22 +321,18 @@ class Line2Stencil(PairStencil):
     def master_slots(self) -> np.ndarray:
         return np.array([4, 5])
 
-    def evaluate(self, node_x: np.ndarray, *, normals, integration, basis, num_gauss_points,
-                 crosspoint):
-        # the pairs' coordinates (12, n), variable-major: x of p, y of p, x of a, ...
-        X = np.empty((kernels.NUM_PAIR_VARIABLES, self.num_pairs))
-        for component in range(2):
-            X[component::2] = np.ascontiguousarray(node_x[:, component])[self._nodes_T]
-        return kernels._pair_quantities(
-            X, self.has_neighbour, normals=normals, integration=integration, basis=basis,
-            num_gauss_points=num_gauss_points, crosspoint=crosspoint,
-            slave_facet=self.slave_facets)
+    def evaluate(self, node_x: np.ndarray, options: KernelOptions,
+                 crosspoint: np.ndarray | None = None) -> PairQuantities:
+        nodes = self.nodes
+        geometry = PairGeometry(
+            slave_x=node_x[nodes[:, 1:3]], master_x=node_x[nodes[:, 4:6]],
+            neighbour_x=node_x[nodes[:, [0, 3]]], has_neighbour=self.has_neighbour)
+        return self.kernel.evaluate(geometry, options, crosspoint=crosspoint,
+                                    slave_facet=self.slave_facets)
 
-    def combined_gradients(self, q, rows, terms) -> np.ndarray:
-        factors = [getattr(item, "factors", None) for item in (q.Dn, q.Mn, q.area, q.gap)]
-        gradients = factors[0][0] if factors[0] is not None else None
-        if (gradients is not None and all(f is not None and f[0] is gradients for f in factors)
-                and q.gap.rows is rows and gradients.num_pairs == rows.size):
+    def combined_gradients(self, q: PairQuantities, rows, terms) -> np.ndarray:
+        gradients = q.segment_gradients
+        if gradients is not None and q.rows is rows and gradients.num_pairs == rows.size:
             return gradients.combine(terms)
         return self._kernel_gradients(q, rows, terms)
 
@@ -336,6 +351,8 @@ class Surface3Stencil(PairStencil):
     """
 
     gdim = 3
+    kernel = Surface3Kernel()
+    search_margin, search_depth, assembly_chunk = 0.5, 2.0, 2048
 
     def __init__(self, nodes, present, slave_facets, ns, nm, max_star, star_table,
                  pair_star_rows):
@@ -351,9 +368,7 @@ class Surface3Stencil(PairStencil):
 
     @classmethod
     def build(cls, node_blocks, node_x, all_slave_facets, local_slave_facets, all_master_facets,
-              pairs, normals: str, nodal_frames: bool = False):
-        from . import normals as normals_module
-
+              pairs, *, normals="averaged", nodal_frames=False):
         ns = local_slave_facets.shape[1]
         nm = all_master_facets.shape[1]
         facet = pairs[:, 0]
@@ -398,18 +413,22 @@ class Surface3Stencil(PairStencil):
             raise ValueError("no nodal normals: the stencil was built without normal stars")
         return self._nodal_normals[self._pair_star_rows[rows]]
 
-    def _normal_variable(self, q, index: int) -> int | None:
-        if self._nodal_normals is None or not getattr(q, "normals_vary", True):
+    def _normal_variable(self, q: PairQuantities, index: int) -> int | None:
+        if self._nodal_normals is None or not q.normals_vary:
             return None
         return 3 * (self.ns + self.nm) + index
 
-    def evaluate(self, node_x: np.ndarray, *, normals, integration, basis, num_gauss_points,
-                 crosspoint, scalar_gradients=False):
-        from . import normals as normals_module
-        from .kernels import surface3
+    def _factorized_sums(self, q: PairQuantities, rows: np.ndarray, num_terms: int):
+        if q.affine_factors is None:
+            return None
+        return _AffineSums(q.affine_factors, q.rows, rows, num_terms, self.ns, self.nm,
+                           self.num_variables)
 
+    def evaluate(self, node_x: np.ndarray, options: KernelOptions,
+                 crosspoint: np.ndarray | None = None) -> PairQuantities:
         slave_x = node_x[self.slave_nodes]
         master_x = node_x[self.master_nodes]
+        slave_normals = None
         if self._star_table is not None:
             table_rows, star_facets = self._star_table
             nodal = normals_module.averaged_nodal_normals(node_x[table_rows], star_facets)
@@ -419,15 +438,13 @@ class Surface3Stencil(PairStencil):
             self._normal_jacobian = nodal.jacobian  # (nodes, 3, s, 3)
             self._nodal_normals = nodal.normals
         else:
-            slave_normals = np.zeros_like(slave_x)
             self._normal_jacobian = None
             self._nodal_normals = None
-        return surface3.pair_quantities(
-            slave_x, master_x, slave_normals, normals=normals, integration=integration,
-            basis=basis, num_gauss_points=num_gauss_points, crosspoint=crosspoint,
-            slave_facet=self.slave_facets, scalar_gradients=scalar_gradients)
+        geometry = PairGeometry(slave_x=slave_x, master_x=master_x, slave_normals=slave_normals)
+        return self.kernel.evaluate(geometry, options, crosspoint=crosspoint,
+                                    slave_facet=self.slave_facets)
 
-    def combined_gradients(self, q, rows, terms) -> np.ndarray:
+    def combined_gradients(self, q: PairQuantities, rows, terms) -> np.ndarray:
         kernel = self._row_gradients(q, rows, terms)  # (T, rows, nv)
         direct = 3 * (self.ns + self.nm)
         chain = bool(self.max_star) and self._normal_jacobian is not None
@@ -446,3 +463,44 @@ class Surface3Stencil(PairStencil):
                 result[:, direct + j * width:direct + (j + 1) * width, block] = chained.transpose(
                     1, 2, 0)
         return result
+
+
+class _AffineSums:
+    """The terms of :meth:`PairStencil._row_gradients` on the outputs the 3D kernel kept
+    as :class:`~dolfinx_mortar.kernels.AffineFactors` (Dn, Mn, area): summed over the 12
+    plane coordinates first, chained once to the pair's variables at the end."""
+
+    NAMES = ("Dn", "Mn", "area")  # the outputs 0, 1, 2 of PairQuantities.outputs
+
+    def __init__(self, factors, kept: np.ndarray, rows: np.ndarray, num_terms: int, ns: int,
+                 nm: int, num_variables: int):
+        self.factors, self.kept, self.rows = factors, kept, rows
+        self.ns, self.nm = ns, nm
+        self.local = _rows_of(factors.local.transpose(1, 0, 2), kept, rows)  # (rows, 57, 12)
+        self.weights = {"Dn": _rows_of(factors.slave_weights, kept, rows),
+                        "Mn": _rows_of(factors.master_weights, kept, rows)}
+        self.local_sum = np.zeros((num_terms, rows.size, self.local.shape[-1]))
+        self.first = num_variables - 3 * ns
+
+    def add(self, p: int, part: int, index: int, weight: np.ndarray,
+            result: np.ndarray) -> bool:
+        """Take term (output ``index`` of output family ``part``, weight) of row p if it is
+        factorized (the normal part straight into ``result``); False if it is not."""
+        if part >= len(self.NAMES):
+            return False
+        name = self.NAMES[part]
+        self.local_sum[p] += self.local[:, self.factors.offsets[name] + index] * weight
+        if name != "area":
+            jl, c = divmod(index, 3)
+            j, node = divmod(jl, self.ns if name == "Dn" else self.nm)
+            result[p][:, self.first + c::3] += self.weights[name][:, j, node] * weight
+        return True
+
+    def finish(self, result: np.ndarray) -> None:
+        """Chain the plane-coordinate sums to the pair's variables, into ``result``."""
+        chain = _rows_of(self.factors.chain, self.kept, self.rows)
+        result += (self.local_sum.transpose(1, 0, 2) @ chain).transpose(1, 0, 2)
+
+
+STENCILS: dict[int, type[PairStencil]] = {2: Line2Stencil, 3: Surface3Stencil}
+"""The stencil of each geometric dimension."""

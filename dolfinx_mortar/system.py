@@ -24,6 +24,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from . import compat
+from .friction import coefficient_names
 from .layout import BlockLayout, MonolithicMatrix
 
 if typing.TYPE_CHECKING:
@@ -33,11 +34,11 @@ if typing.TYPE_CHECKING:
 
 class Tangential(typing.NamedTuple):
     """What the matrix needs of friction: a callable k -> :class:`~dolfinx_mortar.friction.
-    TangentialRows`, du = u - u_start at each pair's node table, and callables
-    k -> y^a at the node table (collective) and (k, rows) -> the pairs'
-    :class:`~dolfinx_mortar.friction.PairTangents`."""
+    TangentialRows` (the tangential conditions of pair k's owned slave nodes), du =
+    u - u_start at each pair's node table, and callables k -> y^a at the node table
+    (collective) and (k, pairs) -> those pairs' :class:`~dolfinx_mortar.friction.PairTangents`."""
 
-    rows: typing.Callable
+    conditions: typing.Callable
     increments: list
     node_multipliers: typing.Callable
     tangents: typing.Callable
@@ -85,6 +86,12 @@ class ContactSystem:
         fixed = fixed[(fixed >= first) & (fixed < first + layout.num_u[self.comm.rank])]
         self.fixed_rows = fixed
         self._fixed_all = np.unique(np.concatenate(self.comm.allgather(fixed)))
+        # per pair, ghosted multiplier-layout vectors that carry the row coefficients of the
+        # owned slave nodes to the ghost slave nodes (collective)
+        names = ("gap_coefficient", "area_coefficient") + coefficient_names(
+            tangential_components)
+        self._coefficient_vectors = [{name: i.create_multiplier_vector() for name in names}
+                                     for i in interfaces]
 
     @property
     def mat(self) -> PETSc.Mat:
@@ -94,18 +101,18 @@ class ContactSystem:
         """The layout field of pair k's tangential multipliers y^a."""
         return len(self.interfaces) + 1 + k * self.components + a
 
-    def assemble(self, multipliers: list[PETSc.Vec], coefficient_vectors: list[dict],
-                 rows: typing.Callable[[int], Rows],
+    def assemble(self, multipliers: list[PETSc.Vec], coefficient_vectors: list[dict] | None,
+                 enforcement_rows: typing.Callable[[int], Rows],
                  tangential: Tangential | None = None) -> tuple[bool, float, float]:
         """Assemble the matrix at the current contact state.
 
         Args:
             multipliers: the multiplier vectors, one per pair.
-            coefficient_vectors: per pair, ghosted multiplier vectors "gap" and "area"
-                (and those of :func:`~dolfinx_mortar.friction.coefficient_names` with
-                friction) to scatter the row coefficients to ghost slave nodes.
-            rows: pair k -> the enforcement's rows (residual, alpha, beta, delta).
-            tangential: with friction, the tangential rows, slip increments,
+            coefficient_vectors: unused (the system scatters the row coefficients through
+                vectors of its own); kept for the callers of the old signature.
+            enforcement_rows: pair k -> the enforcement's multiplier rows (residual,
+                alpha, beta, delta).
+            tangential: with friction, the tangential conditions, slip increments,
                 multipliers and coefficients (:class:`Tangential`).
 
         Returns:
@@ -118,15 +125,14 @@ class ContactSystem:
         zeroing = time.perf_counter() - zeroing
         group_values, groups = [], []
         offset = 0
-        row_values = [rows(k) for k in range(len(self.interfaces))]
-        friction_rows = ([tangential.rows(k) for k in range(len(self.interfaces))]
-                         if self.friction else None)
+        normal_conditions = [enforcement_rows(k) for k in range(len(self.interfaces))]
+        conditions = ([tangential.conditions(k) for k in range(len(self.interfaces))]
+                      if self.friction else None)
         for k in range(len(self.interfaces)):
             friction = None
             if self.friction:
-                friction = (tangential, friction_rows[k])
-            blocks = self._contact_blocks(k, multipliers[k], coefficient_vectors[k],
-                                          row_values[k], friction)
+                friction = (tangential, conditions[k])
+            blocks = self._contact_blocks(k, multipliers[k], normal_conditions[k], friction)
             if blocks is not None:
                 values = blocks[0]
                 if values.shape[:2] != self._block_shape:
@@ -143,13 +149,13 @@ class ContactSystem:
             group_values = np.zeros(self._block_shape + (0,))
             groups = np.zeros(0, dtype=np.int64)
         diagonal = [np.full(self.fixed_rows.size, self.dirichlet_scale)] + [
-            r[3] for r in row_values]
+            r[3] for r in normal_conditions]
         if self.friction:
             # (the order of _update_pattern's diagonal rows and point entries)
             m = self.components
-            diagonal += [r.own[:, a, a] for r in friction_rows for a in range(m)]
-            diagonal += [r.normal[:, a] for r in friction_rows for a in range(m)]
-            diagonal += [r.own[:, a, b] for r in friction_rows for a in range(m)
+            diagonal += [r.own[:, a, a] for r in conditions for a in range(m)]
+            diagonal += [r.normal[:, a] for r in conditions for a in range(m)]
+            diagonal += [r.own[:, a, b] for r in conditions for a in range(m)
                          for b in range(m) if a != b]
         diagonal = np.concatenate(diagonal)
         matrix = self.matrix.mat
@@ -168,15 +174,15 @@ class ContactSystem:
         if interface.quantities is None:
             return np.zeros((0, 0), dtype=np.int64), np.zeros((0, 0), dtype=np.int64)
         layout = self.layout
-        force_dofs = layout.u(interface._force_columns())
+        force_dofs = layout.u(interface.pair_force_dofs)
         force_dofs[np.isin(force_dofs, self._fixed_all)] = -1
         pair_z = layout.z(interface.pair_multipliers, k + 1)
         multipliers = [pair_z]
         multipliers += [layout.z(interface.pair_multipliers, self.tangential_field(k, a))
                         for a in range(self.components)]
-        rows = np.concatenate([force_dofs] + multipliers, axis=1)
-        cols = np.concatenate([layout.u(interface.pair_dofs)] + multipliers, axis=1)
-        return rows, cols
+        row_indices = np.concatenate([force_dofs] + multipliers, axis=1)
+        column_indices = np.concatenate([layout.u(interface.pair_dofs)] + multipliers, axis=1)
+        return row_indices, column_indices
 
     def _update_pattern(self) -> bool:
         """(Re)build the matrix when the pairs' pattern changed; True if it was rebuilt."""
@@ -198,65 +204,65 @@ class ContactSystem:
             return False  # a search found the same pairs (or none again): keep the matrix
         owned = [i.multiplier_offset + np.arange(i.num_owned_multipliers)
                  for i in self.interfaces]
-        normal_rows = [layout.z(o, k + 1) for k, o in enumerate(owned)]
-        diagonal_rows = [self.fixed_rows] + normal_rows
+        normal_indices = [layout.z(o, k + 1) for k, o in enumerate(owned)]
+        diagonal_indices = [self.fixed_rows] + normal_indices
         point_entries = None
         if self.friction:
             m = self.components
-            tangential_rows = [[layout.z(o, self.tangential_field(k, a)) for a in range(m)]
-                               for k, o in enumerate(owned)]
-            diagonal_rows += [t for rows in tangential_rows for t in rows]
+            tangential_indices = [[layout.z(o, self.tangential_field(k, a)) for a in range(m)]
+                                  for k, o in enumerate(owned)]
+            diagonal_indices += [t for pair in tangential_indices for t in pair]
             # each tangential row on its node's normal multiplier, then on its other ones
-            others = [(rows[a], rows[b]) for rows in tangential_rows for a in range(m)
+            others = [(pair[a], pair[b]) for pair in tangential_indices for a in range(m)
                       for b in range(m) if a != b]
             point_entries = (
-                np.concatenate([t for rows in tangential_rows for t in rows]
+                np.concatenate([t for pair in tangential_indices for t in pair]
                                + [r for r, _ in others]),
-                np.concatenate([normal_rows[k] for k, rows in enumerate(tangential_rows)
-                                for _ in rows] + [c for _, c in others]))
+                np.concatenate([normal_indices[k] for k, pair in enumerate(tangential_indices)
+                                for _ in pair] + [c for _, c in others]))
         if self.matrix is not None:
             self.matrix.destroy()
         bulk_pattern, local_to_global = self._bulk
         self.matrix = MonolithicMatrix(
             self.comm, (layout.num_owned, layout.num_global), local_to_global, bulk_pattern,
             np.concatenate(pattern[0]), np.concatenate(pattern[1]),
-            np.concatenate(diagonal_rows), point_entries)
+            np.concatenate(diagonal_indices), point_entries)
         self._pattern = pattern
         return True
 
-    def _contact_blocks(self, k: int, z: PETSc.Vec, vectors: dict, rows: Rows, friction=None):
+    def _contact_blocks(self, k: int, z: PETSc.Vec, normal_condition: Rows, friction=None):
         """Pair k's dense blocks and which candidate pairs they belong to (m,).
 
         d(-B^T z)/du, d(-B^T z)/dz = -B^T, d C/du (2D: 8 x 12, 8 x 2, 2 x 12); with
-        friction also d(-T^T y)/du, -T^T and the tangential rows' d C_t/du
+        friction also d(-T^T y)/du, -T^T and the tangential conditions' d C_t/du
         (:class:`~dolfinx_mortar.friction.PairTangents`). Only the
         pairs that contribute, from the factorized gradients (no full dual numbers).
         None before the first evaluation (no pairs yet).
         """
         interface = self.interfaces[k]
-        q = interface.quantities
-        if q is None:
+        if interface.quantities is None:
             return None
-        contributing = interface._rows(q)
+        contributing = interface.contributing_pairs()
         z_nodes = interface.node_values(z)
-        _, alpha, beta, _ = rows
-        vectors["gap"].getArray()[:] = alpha
-        vectors["area"].getArray()[:] = beta
-        alpha_nodes = interface.node_values(vectors["gap"])
-        beta_nodes = interface.node_values(vectors["area"])
+        vectors = self._coefficient_vectors[k]
+        _, alpha, beta, _ = normal_condition
+        vectors["gap_coefficient"].getArray()[:] = alpha
+        vectors["area_coefficient"].getArray()[:] = beta
+        alpha_nodes = interface.node_values(vectors["gap_coefficient"])
+        beta_nodes = interface.node_values(vectors["area_coefficient"])
         if friction is not None:
-            tangential, tangential_rows = friction
+            tangential, conditions = friction
             m = self.components
             names = {}
             for a in range(m):
                 for b in range(m):
-                    names[f"slip_{a}{b}"] = tangential_rows.slip[:, a, b]
-                names[f"slip_gap_{a}"] = tangential_rows.gap[:, a]
-                names[f"slip_area_{a}"] = tangential_rows.area[:, a]
-            row_nodes = {}
+                    names[f"slip_{a}{b}"] = conditions.slip[:, a, b]
+                names[f"slip_gap_{a}"] = conditions.gap[:, a]
+                names[f"slip_area_{a}"] = conditions.area[:, a]
+            coefficient_nodes = {}
             for name, owned_values in names.items():
                 vectors[name].getArray()[:] = owned_values
-                row_nodes[name] = interface.node_values(vectors[name])
+                coefficient_nodes[name] = interface.node_values(vectors[name])
             y_nodes = tangential.node_multipliers(k)  # (collective: before any early return)
         if contributing.size == 0:
             return None
@@ -266,39 +272,35 @@ class ContactSystem:
         z_pair, alpha_pair, beta_pair = (
             v[slave_nodes] for v in (z_nodes, alpha_nodes, beta_nodes))
         js = range(ns)
-        # -sum_j z_j d(coefficient_jkc)/dx: +Dn for the slave nodes, -Mn for the master nodes
-        slave_terms = [[(stencil.dn(j, a, c), z_pair[:, j]) for j in js]
-                       for a in range(ns) for c in range(gdim)]
-        master_terms = [[(stencil.mn(j, a, c), -z_pair[:, j]) for j in js]
-                        for a in range(nm) for c in range(gdim)]
-        multiplier_rows = [[(stencil.GAP + j, alpha_pair[:, j]),
-                            (stencil.AREA + j, beta_pair[:, j])] for j in js]
+        force_terms = interface.force_jacobian_terms(z_pair)  # slave nodes, then master nodes
+        multiplier_terms = [[(stencil.GAP + j, alpha_pair[:, j]),
+                             (stencil.AREA + j, beta_pair[:, j])] for j in js]
         num_multipliers = ns
         if friction is not None:
             tangents = tangential.tangents(k, contributing)
             y_pair = np.stack([y[slave_nodes] for y in y_nodes], axis=1)  # (pairs, a, j)
             slave_extra, master_extra = tangents.force_terms(y_pair)
-            for row, extra in zip(slave_terms + master_terms, slave_extra + master_extra,
-                                  strict=True):
+            for row, extra in zip(force_terms, slave_extra + master_extra, strict=True):
                 row += extra
-            coefficient = {name: values[slave_nodes] for name, values in row_nodes.items()}
+            coefficient = {name: values[slave_nodes]
+                           for name, values in coefficient_nodes.items()}
             du_table = tangential.increments[k]
             du_slave = du_table[slave_nodes]
             du_master = du_table[stencil.master_nodes[contributing]]
             # row (a, j): sum_b dC^a/du~^b du~^b_j + dC^a/dg~ dg~_j + dC^a/dA dA_j
-            multiplier_rows += [
+            multiplier_terms += [
                 [term for b in range(m) for term in tangents.slip_terms(
                     j, b, du_slave, du_master, coefficient[f"slip_{a}{b}"][:, j])]
                 + [(stencil.GAP + j, coefficient[f"slip_gap_{a}"][:, j]),
                    (stencil.AREA + j, coefficient[f"slip_area_{a}"][:, j])]
                 for a in range(m) for j in js]
             num_multipliers = (1 + m) * ns
-        terms = slave_terms + master_terms + multiplier_rows
+        terms = force_terms + multiplier_terms
         forces, columns = (ns + nm) * gdim, stencil.width * gdim
         values = np.zeros((forces + num_multipliers, columns + num_multipliers,
                            contributing.size))
-        values[:, :columns] = interface._combined_gradients(q, contributing, terms)
-        coefficients = interface._force_coefficient_values(q, contributing)  # (m, j, k, c)
+        values[:, :columns] = interface.combined_gradients(contributing, terms)
+        coefficients = interface.force_coefficients(contributing)  # (m, j, k, c)
         values[:forces, columns:columns + ns] = -coefficients.reshape(
             contributing.size, ns, forces).transpose(2, 1, 0)
         if friction is not None:
@@ -321,6 +323,10 @@ class ContactSystem:
         if self.matrix is not None:
             self.matrix.destroy()
             self.matrix = None
+        for vectors in self._coefficient_vectors:
+            for vector in vectors.values():
+                vector.destroy()
+        self._coefficient_vectors = []
 
 
 def _pad(indices: np.ndarray, width: int) -> np.ndarray:

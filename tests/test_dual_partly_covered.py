@@ -11,6 +11,7 @@ import pytest
 from mpi4py import MPI
 
 from dolfinx_mortar import covered, meshes, stencils
+from dolfinx_mortar.kernels import KernelOptions
 from dolfinx_mortar.mortar import MortarInterface
 
 # -- pairs on a node table (no mesh) --------------------------------------------------------
@@ -20,19 +21,15 @@ def covered_stencil(node_x, slave_facets, master_facets, pairs, normals="average
     blocks = np.arange(node_x.shape[0])
     slave_facets, master_facets = np.asarray(slave_facets), np.asarray(master_facets)
     pairs = np.asarray(pairs)
-    if node_x.shape[1] == 2:
-        base = stencils.Line2Stencil.build(blocks, slave_facets, slave_facets, master_facets,
-                                           pairs)
-    else:
-        base = stencils.Surface3Stencil.build(blocks, node_x, slave_facets, slave_facets,
-                                              master_facets, pairs, normals)
+    base = stencils.STENCILS[node_x.shape[1]].build(
+        blocks, node_x, slave_facets, slave_facets, master_facets, pairs, normals=normals)
     return covered.CoveredStencil(base)
 
 
 def evaluate(stencil, node_x, normals="averaged", crosspoint=None):
-    return stencil.evaluate(node_x, normals=normals, integration="segment", basis="dual",
-                            num_gauss_points=3 if stencil.gdim == 2 else 7,
-                            crosspoint=crosspoint)
+    options = KernelOptions(normals=normals, integration="segment", basis="dual",
+                            num_gauss_points=3 if stencil.gdim == 2 else 7)
+    return stencil.evaluate(node_x, options, crosspoint=crosspoint)
 
 
 def assembled(stencil, q, node_x, z):
@@ -167,8 +164,8 @@ def test_gap_in_the_slave_space_gives_its_nodal_values_2d():
     np.testing.assert_allclose(values["gap"][:2] / weights, offset + slope * node_x[:2, 0],
                                rtol=1e-12)
     # the whole-facet dual basis Phi_b = 2 - 3 x gave g~_b = int_0.32^1 (2 - 3 x) g(x) < 0
-    whole = stencil.base.evaluate(node_x, normals="slave", integration="segment",
-                                  basis="dual", num_gauss_points=3, crosspoint=None)
+    whole = stencil.base.evaluate(node_x, KernelOptions(normals="slave", basis="dual",
+                                                        num_gauss_points=3))
     expected = offset * 0.0136 + slope * -(0.32**2 - 0.32**3)
     assert whole.gap.value[:, 1].sum() == pytest.approx(expected, rel=1e-12)
     assert expected < 0.0
@@ -323,11 +320,11 @@ def test_fully_covered_facet_keeps_the_whole_facet_dual_basis():
     node_x, slave_facets, master_facets, pairs = pairs_3d(SLAVE_TRIANGLE, [-0.5, 0.4, 1.5],
                                                           -0.1)
     q = evaluate(covered_stencil(node_x, slave_facets, master_facets, pairs), node_x)
-    _, coefficients, _ = q.covered
+    coefficients = q.coefficients
     np.testing.assert_allclose(coefficients.A[0], 4 * np.eye(3) - 1, atol=1e-12)
     node_x, slave, master, pairs = issue_example_2d(0.05, start=-0.2)
     q = evaluate(covered_stencil(node_x, slave, master, pairs), node_x)
-    np.testing.assert_allclose(q.covered[1].A[0], [[2, -1], [-1, 2]], atol=1e-12)
+    np.testing.assert_allclose(q.coefficients.A[0], [[2, -1], [-1, 2]], atol=1e-12)
 
 
 # -- Taylor tests on partly covered configurations ------------------------------------------

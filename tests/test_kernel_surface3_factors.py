@@ -1,11 +1,10 @@
 """The 3D kernel keeps the gradients of Dn, Mn and the areas of triangle pairs factorized
-(kernels/surface3.AffineFactors: over the plane coordinates, a chain, the normals' weights).
+(kernels.AffineFactors, the result's ``affine_factors``: over the plane coordinates, a
+chain, the normals' weights).
 Expanded they must be the unfactorized kernel's gradients bit for bit, and the stencil's
 combined gradients (contracted before the chain) those of the expanded gradients."""
 
 from __future__ import annotations
-
-import dataclasses
 
 import numpy as np
 import pytest
@@ -13,7 +12,7 @@ from test_kernel_surface3_speedpath import random_pairs
 from test_mortar3d import bent_displacement, interface, two_blocks
 
 from dolfinx_mortar.dual import RowSubsetDual
-from dolfinx_mortar.kernels import surface3
+from dolfinx_mortar.kernels import AffineFactors, surface3
 
 
 @pytest.mark.parametrize("crosspoints", [False, True])
@@ -23,8 +22,8 @@ def test_expanded_factors_are_the_kernel_gradients(crosspoints):
     factorized = surface3.pair_quantities(slave, master, nodal, factorized=True, **args)
     full = surface3.pair_quantities(slave, master, nodal, factorized=False, **args)
     assert factorized.valid.sum() > 100
-    assert isinstance(factorized.Dn.factors, surface3.AffineFactors)
-    assert full.Dn.factors is None
+    assert isinstance(factorized.affine_factors, AffineFactors)
+    assert full.affine_factors is None
     for name in ("Dn", "Mn", "area", "gap", "D", "M"):
         a, b = getattr(factorized, name), getattr(full, name)
         np.testing.assert_array_equal(getattr(a, "value", a), getattr(b, "value", b))
@@ -38,7 +37,7 @@ def _unfactorized(q):
     def plain(item):
         return RowSubsetDual(item.value, item.rows, item.grad_rows)
 
-    return dataclasses.replace(q, Dn=plain(q.Dn), Mn=plain(q.Mn), area=plain(q.area))
+    return q.replaced(Dn=plain(q.Dn), Mn=plain(q.Mn), area=plain(q.area))
 
 
 def test_combined_gradients_of_the_factors():
@@ -47,7 +46,7 @@ def test_combined_gradients_of_the_factors():
     tagged = two_blocks("tetrahedron", 3, 4)
     mortar = interface(tagged, bent_displacement(tagged))
     q, stencil = mortar.quantities, mortar.stencil
-    assert q.Dn.factors is not None
+    assert q.affine_factors is not None
     rng = np.random.default_rng(2)
     rows = np.sort(rng.choice(stencil.num_pairs, 60, replace=False))
     rows = np.union1d(rows, q.gap.rows[::3])

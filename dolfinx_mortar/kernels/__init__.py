@@ -1,55 +1,66 @@
 """Mortar kernels, one module per facet dimension behind one contract.
 
-A kernel is a plain numpy function of the coordinates of a batch of
+A kernel is a plain numpy computation over the coordinates of a batch of
 (slave facet, master facet) pairs: no MPI, no PETSc, no dolfinx. It returns
 the pairs' contributions to D, M, Dn, Mn, the weighted gaps and the nodal
 areas with their exact derivatives with respect to the pair's variables.
 
-- :mod:`.line2`: 2D, two-node facets (projection and interval clipping);
-  its variables are the six nodes ``p, a, b, q, c, d`` of a pair.
-- :mod:`.surface3`: 3D, triangle and quadrilateral facets (auxiliary plane,
-  polygon clipping, triangulated integration cells); its variables are the
-  slave facet nodes, the master facet nodes and the slave nodal normals,
-  whose own derivatives come from :mod:`dolfinx_mortar.normals`.
+- :mod:`.contract`: what every kernel takes and returns
+  (:class:`MortarKernel`, :class:`PairGeometry`, :class:`KernelOptions`,
+  :class:`PairQuantities`); :mod:`.factors`: the kernels' factorized gradients.
+- :mod:`.line2` (:class:`Line2Kernel`): 2D, two-node facets (projection and
+  interval clipping); its variables are the six nodes ``p, a, b, q, c, d`` of a pair.
+- :mod:`.surface3` (:class:`Surface3Kernel`): 3D, triangle and quadrilateral
+  facets (auxiliary plane, polygon clipping, triangulated integration cells);
+  its variables are the slave facet nodes, the master facet nodes and the slave
+  nodal normals, whose own derivatives come from :mod:`dolfinx_mortar.normals`.
 
-The names of :mod:`.line2` are re-exported here: ``kernels.pair_quantities``
-is the 2D kernel.
+``pair_quantities`` here is the 2D kernel's function of one coordinate array per
+pair (:func:`.line2.pair_quantities`), kept for the tests and scripts that call it so.
 """
 
-from .line2 import (
+from . import line2, surface3
+from .contract import (
     BASIS_OPTIONS,
     INTEGRATION_OPTIONS,
-    NODE_ORDER,
     NORMAL_OPTIONS,
-    NUM_PAIR_VARIABLES,
     BasisOption,
     IntegrationOption,
+    KernelOptions,
+    MortarKernel,
     NormalOption,
-    PairGradients,
+    PairGeometry,
     PairQuantities,
-    _pair_quantities,
+)
+from .factors import AffineFactors, PairGradients
+from .line2 import (
+    NUM_PAIR_VARIABLES,
+    Line2Kernel,
     dual_basis_coefficients,
-    element_normal,
     gauss_legendre,
-    nodal_normals,
     pair_quantities,
 )
+from .surface3 import Surface3Kernel
 
 __all__ = [
     "BASIS_OPTIONS",
     "INTEGRATION_OPTIONS",
-    "NODE_ORDER",
     "NORMAL_OPTIONS",
     "NUM_PAIR_VARIABLES",
+    "AffineFactors",
     "BasisOption",
     "IntegrationOption",
+    "KernelOptions",
+    "Line2Kernel",
+    "MortarKernel",
     "NormalOption",
+    "PairGeometry",
     "PairGradients",
     "PairQuantities",
-    "_pair_quantities",
+    "Surface3Kernel",
     "dual_basis_coefficients",
-    "element_normal",
     "gauss_legendre",
-    "nodal_normals",
+    "line2",
     "pair_quantities",
+    "surface3",
 ]

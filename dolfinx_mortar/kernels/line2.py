@@ -26,48 +26,27 @@ nodal normals), ``c -> d`` the master facet. Facets are oriented so that
 
 from __future__ import annotations
 
-import dataclasses
-import typing
-
 import numpy as np
 
-from .. import dual
-from ..dual import Dual, RowSubsetDual
+from ..dual import RowSubsetDual
+from .contract import (
+    BASIS_OPTIONS,
+    INTEGRATION_OPTIONS,
+    NORMAL_OPTIONS,
+    BasisOption,
+    IntegrationOption,
+    KernelOptions,
+    NormalOption,
+    PairGeometry,
+    PairQuantities,
+)
+from .factors import PairGradients
 
-NODE_ORDER = ("p", "a", "b", "q", "c", "d")
 NUM_PAIR_VARIABLES = 12
-
-NormalOption = typing.Literal["averaged", "slave", "master"]
-IntegrationOption = typing.Literal["segment", "element"]
-BasisOption = typing.Literal["standard", "dual"]
-
-NORMAL_OPTIONS = ("averaged", "slave", "master")
-INTEGRATION_OPTIONS = ("segment", "element")
-BASIS_OPTIONS = ("standard", "dual")
+DEFAULT_GAUSS_POINTS = {"segment": 3, "element": 4}
 
 _FACING_TOLERANCE = 1e-8
 _PARALLEL_TOLERANCE = 1e-10
-
-
-@dataclasses.dataclass
-class PairQuantities:
-    """Mortar contributions of a batch of pairs (arrays lead with the pair axis).
-
-    ``D``, ``M``: (n, 2, 2) values; ``Dn``, ``Mn``: (n, 2, 2, 2) Duals
-    (slave node j, node k or l, component); ``gap``: (n, 2) Dual;
-    ``area``: (n, 2) Dual, int Phi_j over the overlap (= sum_k D_jk);
-    ``valid``: (n,) pairs that face each other and overlap;
-    ``overlap``: (n,) length of the overlap in the slave parameter (0 to 2).
-    """
-
-    D: np.ndarray
-    M: np.ndarray
-    Dn: Dual
-    Mn: Dual
-    gap: Dual
-    area: Dual
-    valid: np.ndarray
-    overlap: np.ndarray
 
 
 def gauss_legendre(num_points: int) -> tuple[np.ndarray, np.ndarray]:
@@ -75,49 +54,6 @@ def gauss_legendre(num_points: int) -> tuple[np.ndarray, np.ndarray]:
     if num_points < 1:
         raise ValueError(f"number of Gauss points must be >= 1, got {num_points}")
     return np.polynomial.legendre.leggauss(num_points)
-
-
-def element_normal(start, end):
-    """Unit normal (t_y, -t_x)/|t| of the segment start -> end (Dual or array)."""
-    tangent = end - start
-    if isinstance(tangent, Dual):
-        length = dual.sqrt(dual.dot(tangent, tangent))
-        rotated = dual.stack([tangent[..., 1], -tangent[..., 0]], axis=-1)
-        return rotated / length[..., None]
-    length = np.linalg.norm(tangent, axis=-1, keepdims=True)
-    return np.stack([tangent[..., 1], -tangent[..., 0]], axis=-1) / length
-
-
-def _normalize(vector: Dual) -> Dual:
-    return vector / dual.sqrt(dual.dot(vector, vector))[..., None]
-
-
-def nodal_normals(x: Dual, has_neighbour: np.ndarray, normals: NormalOption) -> tuple[Dual, Dual]:
-    """Normals of the slave normal field at the slave nodes a and b of each pair.
-
-    ``averaged``: the normalized arithmetic mean of the unit normals of the
-    two slave facets meeting at the node (paper, section 3); a node at the end
-    of the surface keeps its one facet's normal. ``slave``: the slave facet's
-    normal at both nodes. ``master``: minus the master facet's normal.
-    """
-    xp, xa, xb, xq, xc, xd = (x[:, 2 * i : 2 * i + 2] for i in range(6))
-    if normals == "master":
-        normal = -element_normal(xc, xd)
-        return normal, normal
-    normal_ab = element_normal(xa, xb)
-    if normals == "slave":
-        return normal_ab, normal_ab
-    if normals != "averaged":
-        raise ValueError(f"unknown normal option {normals!r}; expected one of {NORMAL_OPTIONS}")
-    left = has_neighbour[:, 0]
-    right = has_neighbour[:, 1]
-    # an absent neighbour is given the coordinates of a neighbour-less facet;
-    # it is multiplied by zero, and its variables get zero derivatives
-    normal_pa = element_normal(dual.where(left[:, None], xp, xa - (xb - xa)), xa)
-    normal_bq = element_normal(xb, dual.where(right[:, None], xq, xb + (xb - xa)))
-    normal_a = _normalize(normal_ab + normal_pa * left[:, None].astype(float))
-    normal_b = _normalize(normal_ab + normal_bq * right[:, None].astype(float))
-    return normal_a, normal_b
 
 
 # -- the batched kernel --------------------------------------------------------------------
@@ -510,72 +446,6 @@ def _integrate(X, has_neighbour, normals, integration, basis, points, weights, c
     }
 
 
-class PairGradients:
-    """Derivatives of the 24 outputs of each contributing pair, factorized.
-
-    Outputs: ``Dn`` (0-7, index 4 j + 2 k + c), ``Mn`` (8-15, 8 + 4 j + 2 l + c),
-    ``area`` (16, 17), ``gap`` (18, 19), ``D`` (20-23, 20 + 2 j + k: the covered dual
-    basis of :mod:`dolfinx_mortar.covered` needs it). The derivative of output o with
-    respect to the 12 pair variables is
-
-        sum_k coefficients[o, k] directions[k] + direct[o] on (x_a, x_b, x_c, x_d)
-
-    where the directions are the gradients (12, n) of a few pair-level
-    quantities (segment limits, facet Jacobian, nodal normals), each nonzero
-    only on the variable rows ``direction_rows[k]``; only ``Mn`` and ``gap``
-    have direct terms. :meth:`combine` forms any linear combination of
-    outputs before expanding it to 12 variables, so a consumer that needs,
-    say, sum_j z_j Dn_j pays for 8 gradients, not 16. The pairs come in the
-    batches they were integrated in: ``parts`` is a list of (start, stop,
-    coefficients (24, directions, batch), directions (list of (12, batch)),
-    direct (10, 8, batch): Mn then gap).
-    """
-
-    DN, MN, AREA, GAP = 0, 8, 16, 18
-
-    def __init__(self, num_pairs: int, direction_rows, parts):
-        self.num_pairs = num_pairs
-        self.direction_rows = direction_rows
-        self.parts = parts
-
-    @staticmethod
-    def _direct_row(o: int) -> int | None:
-        if 8 <= o < 16:
-            return o - 8
-        return o - 10 if 18 <= o < 20 else None
-
-    def combine(self, terms) -> np.ndarray:
-        """(len(terms), 12, n): row p sums weight * d output / dx over (output, weight) in terms[p].
-
-        A weight is a number or an (n,) array.
-        """
-        result = np.empty((len(terms), 12, self.num_pairs))
-        for start, stop, coefficients, directions, direct in self.parts:
-            scratch = np.empty((12, stop - start))
-            for p, row in enumerate(terms):
-                weights = [w if np.ndim(w) == 0 else w[start:stop] for _, w in row]
-                outputs = [o for o, _ in row]
-                pairs = list(zip(outputs, weights, strict=True))
-                coefficient = sum(coefficients[o] * w for o, w in pairs)
-                out = result[p, :, start:stop]
-                out[...] = 0.0
-                for k, (lo, hi) in enumerate(self.direction_rows):
-                    part = scratch[lo:hi]
-                    np.multiply(directions[k][lo:hi], coefficient[k], out=part)
-                    out[lo:hi] += part
-                for o, w in pairs:
-                    d = self._direct_row(o)
-                    if d is not None:
-                        out[2:6] += direct[d, 0:4] * w
-                        out[8:12] += direct[d, 4:8] * w
-        return result
-
-    def outputs(self, start: int, stop: int) -> np.ndarray:
-        """(n, stop - start, 12): the gradients of outputs start .. stop - 1."""
-        rows = self.combine([[(o, 1.0)] for o in range(start, stop)])
-        return np.ascontiguousarray(rows.transpose(2, 0, 1))
-
-
 def pair_quantities(
     x: np.ndarray,
     has_neighbour: np.ndarray,
@@ -634,6 +504,32 @@ def pair_quantities(
     return _pair_quantities(X, has_neighbour, normals=normals, integration=integration, basis=basis,
                             num_gauss_points=num_gauss_points, crosspoint=crosspoint,
                             slave_facet=slave_facet)
+
+
+class Line2Kernel:
+    """The 2D kernel behind the contract (:class:`~.contract.MortarKernel`): the
+    neighbours p, q of :class:`~.contract.PairGeometry` (``neighbour_x``,
+    ``has_neighbour``) enter the averaged normals; no ``slave_normals``."""
+
+    gdim = 2
+    default_gauss_points = DEFAULT_GAUSS_POINTS
+
+    def evaluate(self, geometry: PairGeometry, options: KernelOptions, *,
+                 crosspoint: np.ndarray | None = None,
+                 slave_facet: np.ndarray | None = None) -> PairQuantities:
+        if geometry.neighbour_x is None or geometry.has_neighbour is None:
+            raise ValueError("the 2D kernel takes the slave facets' neighbours "
+                             "(PairGeometry.neighbour_x, has_neighbour)")
+        slave, master, neighbour = geometry.slave_x, geometry.master_x, geometry.neighbour_x
+        X = np.empty((NUM_PAIR_VARIABLES, geometry.num_pairs))
+        for node, (x, i) in enumerate([(neighbour, 0), (slave, 0), (slave, 1), (neighbour, 1),
+                                       (master, 0), (master, 1)]):
+            X[2 * node:2 * node + 2] = x[:, i].T
+        points = options.num_gauss_points or self.default_gauss_points[options.integration]
+        return _pair_quantities(
+            X, geometry.has_neighbour, normals=options.normals,
+            integration=options.integration, basis=options.basis, num_gauss_points=points,
+            crosspoint=crosspoint, slave_facet=slave_facet)
 
 
 def _facing(X) -> np.ndarray:
@@ -737,7 +633,7 @@ def _pair_quantities(X, has_neighbour, *, normals, integration, basis, num_gauss
             grads = gradients.outputs(start, stop)
             return grads.reshape((rows.size,) + shape + (NUM_PAIR_VARIABLES,))
 
-        return RowSubsetDual(result[name], rows, grad_rows, factors=(gradients, start))
+        return RowSubsetDual(result[name], rows, grad_rows)
 
     return PairQuantities(
         D=result["D"], M=result["M"],
@@ -745,7 +641,8 @@ def _pair_quantities(X, has_neighbour, *, normals, integration, basis, num_gauss
         Mn=subset_dual("Mn", PairGradients.MN, (2, 2, 2)),
         gap=subset_dual("gap", PairGradients.GAP, (2,)),
         area=subset_dual("area", PairGradients.AREA, (2,)),
-        valid=valid & overlapping, overlap=overlap,
+        valid=valid & overlapping, overlap=overlap, num_variables=NUM_PAIR_VARIABLES,
+        segment_gradients=gradients,
     )
 
 

@@ -44,16 +44,19 @@ master facet's unit normal at its centre, at every slave node.
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 
 from .. import dual
 from ..dual import Dual, RowSubsetDual
-
-NORMAL_OPTIONS = ("averaged", "slave", "master")
-INTEGRATION_OPTIONS = ("segment", "element")
-BASIS_OPTIONS = ("standard", "dual")
+from .contract import (
+    BASIS_OPTIONS,
+    INTEGRATION_OPTIONS,
+    NORMAL_OPTIONS,
+    KernelOptions,
+    PairGeometry,
+    PairQuantities,
+)
+from .factors import AffineFactors
 
 _FACING_TOLERANCE = 1e-8
 _AREA_TOLERANCE = 1e-14
@@ -76,87 +79,6 @@ _TRIANGLE_RULES[7] = (
     np.array([0.225] + [0.132394152788506] * 3 + [0.125939180544827] * 3),
 )
 DEFAULT_GAUSS_POINTS = 7
-
-
-@dataclasses.dataclass
-class PairQuantities3:
-    """Mortar contributions of a batch of 3D pairs (arrays lead with the pair axis).
-
-    As :class:`~dolfinx_mortar.kernels.line2.PairQuantities`: ``D`` (n, ns, ns),
-    ``M`` (n, ns, nm) values; ``Dn`` (n, ns, ns, 3), ``Mn`` (n, ns, nm, 3),
-    ``gap`` (n, ns), ``area`` (n, ns) Duals over ``num_variables`` variables;
-    ``valid`` (n,): the pair faces and overlaps; ``overlap`` (n,): clipped area
-    over slave facet area. ``D_dual``, ``M_dual``: D and M with their gradients
-    (only when asked for, ``scalar_gradients``: friction's nodal tangent frames
-    need them); ``normals_vary``: whether the nodal normal variables follow the
-    coordinates (False for integrals frozen in the reference configuration).
-    """
-
-    D: np.ndarray
-    M: np.ndarray
-    Dn: Dual
-    Mn: Dual
-    gap: Dual
-    area: Dual
-    valid: np.ndarray
-    overlap: np.ndarray
-    num_variables: int
-    slices: dict
-    D_dual: RowSubsetDual | None = None
-    M_dual: RowSubsetDual | None = None
-    normals_vary: bool = True
-
-
-class AffineFactors:
-    """The gradients of Dn, the areas and Mn of triangle pairs with averaged normals, kept
-    as :func:`_affine_integrals` makes them: over the 12 plane coordinates of the slave and
-    master nodes (``local``, (57, r, 12), output-major so that a consumer reads one output
-    of many pairs at once: Dn (j, k, c), area (j), Mn (j, l, c)), the chain
-    of the plane coordinates to the pair's 27 variables (``chain``, (r, 12, 27)), and what
-    multiplies each nodal normal in Dn and Mn (``slave_weights`` (r, j, k, i),
-    ``master_weights`` (r, j, l, i): d Dn_jk[c] / d n_i[c]). 1,134 numbers a pair instead
-    of the 1,539 of the three gradients; rows are those of ``rows`` (the pairs kept).
-    """
-
-    def __init__(self, num_rows: int, ns: int, nm: int, nvar: int):
-        self.ns, self.nm, self.nvar = ns, nm, nvar
-        self.local = np.empty((ns * ns * 3 + ns + ns * nm * 3, num_rows, 2 * (ns + nm)))
-        self.chain = np.empty((num_rows, 2 * (ns + nm), nvar))
-        self.slave_weights = np.empty((num_rows, ns, ns, ns))
-        self.master_weights = np.empty((num_rows, ns, nm, ns))
-
-    def put(self, position, factors: dict) -> None:
-        for name, array in factors.items():
-            if name == "local":
-                self.local[:, position] = array.transpose(1, 0, 2)
-            else:
-                getattr(self, name)[position] = array
-
-    @property
-    def offsets(self) -> dict:
-        """The first row of Dn, area and Mn in ``local``."""
-        ns = self.ns
-        return {"Dn": 0, "area": 3 * ns * ns, "Mn": 3 * ns * ns + ns}
-
-    def expanded(self, name: str) -> np.ndarray:
-        """The gradient of Dn, Mn or area over the pair's variables (the kernel's product and
-        the normals' scatter, as :func:`_affine_integrals` applies them)."""
-        ns, nm, nvar = self.ns, self.nm, self.nvar
-        r = self.local.shape[1]
-        k = {"Dn": 3 * ns * ns, "area": ns, "Mn": 3 * ns * nm}[name]
-        start = self.offsets[name]
-        # the kernel's product of all rows at once (the same bits), then the rows of name
-        local = np.ascontiguousarray(self.local.transpose(1, 0, 2))
-        grad = np.ascontiguousarray((local @ self.chain)[:, start:start + k])
-        if name == "area":
-            return grad.reshape(r, ns, nvar)
-        count = ns if name == "Dn" else nm
-        grad = grad.reshape(r, ns, count, 3, nvar)
-        weights = self.slave_weights if name == "Dn" else self.master_weights
-        first = nvar - 3 * ns
-        for c in range(3):
-            grad[..., c, first + c::3] += weights
-        return grad
 
 
 # -- dual helpers ------------------------------------------------------------------------
@@ -413,7 +335,7 @@ def pair_quantities(
     slave_facet: np.ndarray | None = None,
     scalar_gradients: bool = False,
     factorized: bool = True,
-) -> PairQuantities3:
+) -> PairQuantities:
     """Mortar contributions of every pair, with derivatives (see the module docstring).
 
     Args:
@@ -435,8 +357,8 @@ def pair_quantities(
             gives each of its Gauss points to one master facet (default: every
             pair a facet of its own). Unused by segment-based integration.
         factorized: triangle pairs with averaged normals and the standard basis keep the
-            gradients of Dn, Mn and the areas factorized (:class:`AffineFactors`, the
-            ``factors`` of those outputs; their ``grad`` is expanded on first use).
+            gradients of Dn, Mn and the areas factorized (:class:`~.factors.AffineFactors`,
+            ``affine_factors`` of the result; their ``grad`` is expanded on first use).
     """
     if normals not in NORMAL_OPTIONS:
         raise ValueError(f"unknown normal option {normals!r}; expected one of {NORMAL_OPTIONS}")
@@ -454,8 +376,6 @@ def pair_quantities(
     n, ns, _ = slave_x.shape
     nm = master_x.shape[1]
     nvar = 3 * (2 * ns + nm)
-    slices = {"slave": slice(0, 3 * ns), "master": slice(3 * ns, 3 * (ns + nm)),
-              "normals": slice(3 * (ns + nm), nvar)}
     if crosspoint is None:
         crosspoint = np.zeros((n, ns), dtype=bool)
     crosspoint = np.asarray(crosspoint, dtype=bool).reshape(n, ns)
@@ -495,14 +415,35 @@ def pair_quantities(
 
     def subset(name: str) -> RowSubsetDual:
         if factors is not None and name in ("Dn", "Mn", "area"):
-            return RowSubsetDual(values[name], rows, lambda: factors.expanded(name), factors)
+            return RowSubsetDual(values[name], rows, lambda: factors.expanded(name))
         return RowSubsetDual(values[name], rows, grads[name])
 
-    return PairQuantities3(
+    return PairQuantities(
         D=values["D"], M=values["M"], Dn=subset("Dn"), Mn=subset("Mn"), gap=subset("gap"),
-        area=subset("area"), valid=valid, overlap=overlap, num_variables=nvar, slices=slices,
+        area=subset("area"), valid=valid, overlap=overlap, num_variables=nvar,
         D_dual=subset("D") if scalar_gradients else None,
-        M_dual=subset("M") if scalar_gradients else None)
+        M_dual=subset("M") if scalar_gradients else None, affine_factors=factors)
+
+
+class Surface3Kernel:
+    """The 3D kernel behind the contract (:class:`~.contract.MortarKernel`): takes the
+    slave nodal normals of :class:`~.contract.PairGeometry` as variables (zeros will do
+    for the ``slave`` and ``master`` normal options); no neighbours."""
+
+    gdim = 3
+    default_gauss_points = {"segment": DEFAULT_GAUSS_POINTS, "element": DEFAULT_GAUSS_POINTS}
+
+    def evaluate(self, geometry: PairGeometry, options: KernelOptions, *,
+                 crosspoint: np.ndarray | None = None,
+                 slave_facet: np.ndarray | None = None) -> PairQuantities:
+        slave_normals = geometry.slave_normals
+        if slave_normals is None:
+            slave_normals = np.zeros_like(geometry.slave_x)
+        return pair_quantities(
+            geometry.slave_x, geometry.master_x, slave_normals, normals=options.normals,
+            integration=options.integration, basis=options.basis,
+            num_gauss_points=options.num_gauss_points, crosspoint=crosspoint,
+            slave_facet=slave_facet, scalar_gradients=options.scalar_gradients)
 
 
 def _normal_field(xs: Dual, xm: Dual, nodal: Dual, normals: str, ns: int, nm: int) -> Dual:

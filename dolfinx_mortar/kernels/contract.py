@@ -1,0 +1,176 @@
+"""The kernel contract: what every mortar kernel takes and returns, in both dimensions.
+
+A kernel (:class:`MortarKernel`) is a plain numpy computation over a batch of
+(slave facet, master facet) pairs. It takes the pairs' coordinates
+(:class:`PairGeometry`) and the options (:class:`KernelOptions`) and returns one
+:class:`PairQuantities`: D, M, Dn, Mn, the weighted gaps and the nodal areas, with the
+derivatives of Dn, Mn, gap and area over the pair's *kernel variables* (2D: the six
+nodes p, a, b, q, c, d; 3D: the slave nodes, the master nodes and the slave nodal
+normals). The stencils (:mod:`dolfinx_mortar.stencils`) are the only callers; above
+them nothing knows the dimension.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+
+import numpy as np
+
+from ..dual import RowSubsetDual
+from .factors import AffineFactors, PairGradients
+
+NormalOption = typing.Literal["averaged", "slave", "master"]
+IntegrationOption = typing.Literal["segment", "element"]
+BasisOption = typing.Literal["standard", "dual"]
+
+NORMAL_OPTIONS: tuple[str, ...] = typing.get_args(NormalOption)
+INTEGRATION_OPTIONS: tuple[str, ...] = typing.get_args(IntegrationOption)
+BASIS_OPTIONS: tuple[str, ...] = typing.get_args(BasisOption)
+
+
+@dataclasses.dataclass(frozen=True)
+class KernelOptions:
+    """How a kernel integrates.
+
+    Attributes:
+        normals: the normal field (averaged nodal, the slave facet's, the master facet's).
+        integration: ``segment`` (over the overlaps, exact) or ``element`` (the slave
+            facet's Gauss points that land on the master).
+        basis: the multiplier basis of the kernel itself (the interface's covered dual
+            basis runs the kernels with the standard one, :mod:`dolfinx_mortar.covered`).
+        num_gauss_points: per segment or integration cell; None: the kernel's default.
+        scalar_gradients: also keep the gradients of D and M (``D_dual``, ``M_dual``;
+            friction's 3D tangent frames and the covered dual basis need them). The 2D
+            kernel's factorized gradients always hold those of D and ignore it.
+    """
+
+    normals: NormalOption = "averaged"
+    integration: IntegrationOption = "segment"
+    basis: BasisOption = "standard"
+    num_gauss_points: int | None = None
+    scalar_gradients: bool = False
+
+    def __post_init__(self):
+        for value, allowed, what in ((self.normals, NORMAL_OPTIONS, "normal option"),
+                                     (self.integration, INTEGRATION_OPTIONS, "integration"),
+                                     (self.basis, BASIS_OPTIONS, "multiplier basis")):
+            if value not in allowed:
+                raise ValueError(f"unknown {what} {value!r}; expected one of {allowed}")
+
+
+@dataclasses.dataclass(frozen=True)
+class PairGeometry:
+    """The coordinates of a batch of n pairs, as a kernel takes them.
+
+    Attributes:
+        slave_x: (n, ns, gdim) slave facet nodes (oriented outward, module docstrings of
+            the kernels).
+        master_x: (n, nm, gdim) master facet nodes.
+        slave_normals: (n, ns, gdim) unit nodal normals at the slave nodes, given as
+            kernel variables (3D: their own derivatives over the nodes' stars are chained
+            by the stencil); None for a kernel that builds them from ``neighbour_x``.
+        neighbour_x: (n, ns, gdim) per slave node, the other end of the slave facet
+            adjacent there (2D: p and q, variables of the averaged normals); None in 3D.
+        has_neighbour: (n, ns) whether that neighbour exists (absent: any coordinates).
+    """
+
+    slave_x: np.ndarray
+    master_x: np.ndarray
+    slave_normals: np.ndarray | None = None
+    neighbour_x: np.ndarray | None = None
+    has_neighbour: np.ndarray | None = None
+
+    @property
+    def num_pairs(self) -> int:
+        return self.slave_x.shape[0]
+
+
+@dataclasses.dataclass
+class PairQuantities:
+    """The mortar contributions of a batch of pairs (arrays lead with the pair axis).
+
+    Attributes:
+        D, M: (n, ns, ns) and (n, ns, nm) values.
+        Dn, Mn: (n, ns, ns, gdim) and (n, ns, nm, gdim), slave node j, node k or l,
+            component.
+        gap: (n, ns) weighted gaps; area: (n, ns) int Phi_j over the overlap.
+            The four are dual numbers over ``num_variables`` kernel variables, zero
+            outside the pairs that contribute (``rows``), whose gradients alone are kept.
+        valid: (n,) the pair faces and overlaps.
+        overlap: (n,) the overlap's length in the slave parameter (2D, 0 to 2) or the
+            clipped area over the slave facet's area (3D).
+        num_variables: kernel variables per pair.
+        D_dual, M_dual: D and M with their gradients, when the options asked for them
+            (:attr:`KernelOptions.scalar_gradients`); else None.
+        normals_vary: whether the nodal normal variables follow the coordinates (False
+            for integrals frozen in the reference configuration).
+        segment_gradients: the 2D kernel's factorized gradients of Dn, Mn, area, gap and
+            D (:class:`~.factors.PairGradients`), over the pairs ``rows``; None once an
+            output was replaced (:meth:`replaced`).
+        affine_factors: the 3D kernel's factorized gradients of Dn, Mn and the areas of
+            triangle pairs (:class:`~.factors.AffineFactors`), when it kept them so; their
+            ``grad`` is then expanded only on first use.
+    """
+
+    D: np.ndarray
+    M: np.ndarray
+    Dn: RowSubsetDual
+    Mn: RowSubsetDual
+    gap: RowSubsetDual
+    area: RowSubsetDual
+    valid: np.ndarray
+    overlap: np.ndarray
+    num_variables: int
+    D_dual: RowSubsetDual | None = None
+    M_dual: RowSubsetDual | None = None
+    normals_vary: bool = True
+    segment_gradients: PairGradients | None = None
+    affine_factors: AffineFactors | None = None
+
+    @property
+    def rows(self) -> np.ndarray:
+        """The pairs outside which every output is zero (sorted)."""
+        return self.gap.rows
+
+    def outputs(self) -> list[RowSubsetDual]:
+        """The outputs with gradients, in the stencils' numbering: Dn, Mn, area, gap, then D
+        and M where kept."""
+        kept = [self.Dn, self.Mn, self.area, self.gap]
+        if self.D_dual is not None:
+            kept += [self.D_dual, self.M_dual]
+        return kept
+
+    def replaced(self, **changes) -> PairQuantities:
+        """A plain copy with some fields replaced; the factorized gradients, which describe
+        the kernel's own outputs, are dropped unless given."""
+        fields = {field.name: getattr(self, field.name)
+                  for field in dataclasses.fields(PairQuantities)}
+        fields.update(segment_gradients=None, affine_factors=None)
+        fields.update(changes)
+        return PairQuantities(**fields)
+
+
+class MortarKernel(typing.Protocol):
+    """A mortar kernel of one facet dimension (:class:`~.line2.Line2Kernel`,
+    :class:`~.surface3.Surface3Kernel`)."""
+
+    gdim: int
+    default_gauss_points: dict[str, int]
+    """Per integration option, the Gauss points an interface takes by default."""
+
+    def evaluate(self, geometry: PairGeometry, options: KernelOptions, *,
+                 crosspoint: np.ndarray | None = None,
+                 slave_facet: np.ndarray | None = None) -> PairQuantities:
+        """The mortar contributions of every pair of ``geometry``.
+
+        Args:
+            geometry: the pairs' coordinates.
+            options: how to integrate.
+            crosspoint: (n, ns) slave nodes without a multiplier: their basis function
+                is shared by the facet's other nodes.
+            slave_facet: (n,) the slave facet of each pair: element-based integration
+                gives each of its Gauss points to one master facet (default: every pair
+                a facet of its own).
+        """
+        ...
