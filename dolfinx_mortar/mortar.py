@@ -158,13 +158,7 @@ class MortarInterface:
         self.num_gauss_points = (num_gauss_points
                                  or self._stencil_type.kernel.default_gauss_points[integration])
         if search_margin is None:
-            corners = self.slave.reference_coordinates[self.slave.facets]
-            if corners.shape[1] == 2:
-                lengths = np.linalg.norm(corners[:, 1] - corners[:, 0], axis=1)
-            else:
-                lengths = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2).ravel()
-            total = self.comm.allreduce(np.array([lengths.sum(), lengths.size]), op=MPI.SUM)
-            search_margin = self._stencil_type.search_margin * total[0] / total[1]
+            search_margin = self._stencil_type.search_margin * self.mean_slave_edge_length()
         if not search_margin > 0.0:
             raise ValueError(f"search_margin must be positive, got {search_margin}")
         self.reuse = search.SearchReuse(margin=float(search_margin))
@@ -192,6 +186,17 @@ class MortarInterface:
         self.assembly_chunk: int | None = self._stencil_type.assembly_chunk
         """Pairs whose gradient blocks (G, K) are formed at once in an assembly (None:
         all, summed as one array; 2D's factorized gradients combine all pairs in one go)."""
+
+    def mean_slave_edge_length(self) -> float:
+        """h: the mean length of the undeformed slave facets' edges, over all ranks (every
+        edge of every facet; a 2D facet is its one edge). Collective."""
+        corners = self.slave.reference_coordinates[self.slave.facets]
+        if corners.shape[1] == 2:
+            lengths = np.linalg.norm(corners[:, 1] - corners[:, 0], axis=1)
+        else:
+            lengths = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2).ravel()
+        total = self.comm.allreduce(np.array([lengths.sum(), lengths.size]), op=MPI.SUM)
+        return total[0] / total[1]
 
     # -- multipliers -------------------------------------------------------
 
