@@ -137,6 +137,9 @@ def tangential_rows(law: FrictionLaw | None, weight: float, c_t: float, c_n: flo
     mu max(0, z_j - c_n g^_j), the normal complementarity quantity (equal to mu z_j once
     the gap is closed), as in Hueber, Stadler and Wohlmuth and Gitterle et al.; None
     (penalty): mu max(0, z_j).
+
+    One function for the stick, slip, turning and held cases: they overwrite the rows
+    of their nodes in turn from the same bound, direction and slip arrays.
     """
     n, m = y.shape
     identity = np.eye(m)

@@ -522,9 +522,16 @@ class MortarInterface:
             self._node_x, slave.facets, self._node_x, all_master_facets, self.reuse.margin,
             slave_previous=node_origin, master_previous=node_origin, depth=self.search_depth,
         )
+        self._set_pairs(pairs, all_slave_facets, all_master_facets)
+
+    def _set_pairs(self, pairs: np.ndarray, all_slave_facets: np.ndarray,
+                   all_master_facets: np.ndarray) -> None:
+        """The stencils of a search's candidate ``pairs`` and what the assembly reads of
+        them (their multipliers, crosspoints; a new pattern version)."""
         stencil = self._stencil_type.build(
-            self._node_blocks, self._node_x, all_slave_facets, slave.facets.astype(np.int64),
-            all_master_facets, pairs, normals=self.normals, nodal_frames=self.scalar_gradients)
+            self._node_blocks, self._node_x, all_slave_facets,
+            self.slave.facets.astype(np.int64), all_master_facets, pairs,
+            normals=self.normals, nodal_frames=self.scalar_gradients)
         if self.basis == "dual":
             stencil = covered.CoveredStencil(
                 stencil, coupled=self.configuration != "reference",
@@ -540,7 +547,6 @@ class MortarInterface:
         else:
             self.pair_crosspoint = np.zeros(slave_blocks.shape, dtype=bool)
         self._pair_dofs = None
-        self._num_remote = (nrm, nrs)
         self._pattern_version += 1
         self.statistics.pairs = int(pairs.shape[0])
 

@@ -244,25 +244,13 @@ class ContactSystem:
             return None
         contributing = interface.contributing_pairs()
         z_nodes = interface.node_values(z)
-        vectors = self._coefficient_vectors[k]
         _, alpha, beta, _ = normal_condition
-        vectors["gap_coefficient"].getArray()[:] = alpha
-        vectors["area_coefficient"].getArray()[:] = beta
-        alpha_nodes = interface.node_values(vectors["gap_coefficient"])
-        beta_nodes = interface.node_values(vectors["area_coefficient"])
+        alpha_nodes, beta_nodes = self._at_nodes(
+            k, {"gap_coefficient": alpha, "area_coefficient": beta}).values()
         if friction is not None:
             tangential, conditions = friction
             m = self.components
-            names = {}
-            for a in range(m):
-                for b in range(m):
-                    names[f"slip_{a}{b}"] = conditions.slip[:, a, b]
-                names[f"slip_gap_{a}"] = conditions.gap[:, a]
-                names[f"slip_area_{a}"] = conditions.area[:, a]
-            coefficient_nodes = {}
-            for name, owned_values in names.items():
-                vectors[name].getArray()[:] = owned_values
-                coefficient_nodes[name] = interface.node_values(vectors[name])
+            coefficient_nodes = self._at_nodes(k, _slip_coefficients(conditions, m))
             y_nodes = tangential.node_multipliers(k)  # (collective: before any early return)
         if contributing.size == 0:
             return None
@@ -304,20 +292,18 @@ class ContactSystem:
         values[:forces, columns:columns + ns] = -coefficients.reshape(
             contributing.size, ns, forces).transpose(2, 1, 0)
         if friction is not None:
-            T = tangents.coefficients  # (pairs, a, j, nodes, c)
-            slots = np.concatenate([stencil.slave_slots, stencil.master_slots])
-            force_columns = (slots[:, None] * gdim + np.arange(gdim)).reshape(-1)
-            for a in range(m):
-                tangent = T[:, a].reshape(contributing.size, ns, forces)
-                block = columns + (1 + a) * ns
-                values[:forces, block:block + ns] = -tangent.transpose(2, 1, 0)
-                # u~^a_j = -T^a_j du: its direct derivative -T^a_j on the facet nodes' columns
-                for b in range(m):
-                    weight = coefficient[f"slip_{b}{a}"]  # dC^b/du~^a, (pairs, j)
-                    direct = -tangent * weight[:, :, None]
-                    row = forces + (1 + b) * ns
-                    values[row:row + ns, force_columns] += direct.transpose(1, 2, 0)
+            _add_tangential_columns(values, tangents.coefficients, coefficient, stencil)
         return values, contributing
+
+    def _at_nodes(self, k: int, owned: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Per name, owned slave-node values of pair k at its node table, through the
+        system's ghosted vector of that name (collective)."""
+        interface, vectors = self.interfaces[k], self._coefficient_vectors[k]
+        result = {}
+        for name, values in owned.items():
+            vectors[name].getArray()[:] = values
+            result[name] = interface.node_values(vectors[name])
+        return result
 
     def destroy(self) -> None:
         if self.matrix is not None:
@@ -327,6 +313,40 @@ class ContactSystem:
             for vector in vectors.values():
                 vector.destroy()
         self._coefficient_vectors = []
+
+
+def _slip_coefficients(conditions, m: int) -> dict[str, np.ndarray]:
+    """The owned coefficients of the tangential conditions that the pairs' blocks need at
+    the slave nodes, by the names of :func:`~dolfinx_mortar.friction.coefficient_names`."""
+    names = {}
+    for a in range(m):
+        for b in range(m):
+            names[f"slip_{a}{b}"] = conditions.slip[:, a, b]
+        names[f"slip_gap_{a}"] = conditions.gap[:, a]
+        names[f"slip_area_{a}"] = conditions.area[:, a]
+    return names
+
+
+def _add_tangential_columns(values: np.ndarray, T: np.ndarray, coefficient: dict,
+                            stencil) -> None:
+    """Into the pairs' blocks ``values``: -T^T (the force rows on the tangential
+    multipliers' columns) and the slip's direct derivative -T^a_j on the facet nodes'
+    columns of the tangential rows. T (pairs, m, j, nodes, gdim)."""
+    pairs, m, ns = T.shape[0], T.shape[1], stencil.ns
+    gdim = T.shape[-1]
+    forces, columns = (ns + stencil.nm) * gdim, stencil.width * gdim
+    slots = np.concatenate([stencil.slave_slots, stencil.master_slots])
+    force_columns = (slots[:, None] * gdim + np.arange(gdim)).reshape(-1)
+    for a in range(m):
+        tangent = T[:, a].reshape(pairs, ns, forces)
+        block = columns + (1 + a) * ns
+        values[:forces, block:block + ns] = -tangent.transpose(2, 1, 0)
+        # u~^a_j = -T^a_j du: its direct derivative -T^a_j on the facet nodes' columns
+        for b in range(m):
+            weight = coefficient[f"slip_{b}{a}"]  # dC^b/du~^a, (pairs, j)
+            direct = -tangent * weight[:, :, None]
+            row = forces + (1 + b) * ns
+            values[row:row + ns, force_columns] += direct.transpose(1, 2, 0)
 
 
 def _pad(indices: np.ndarray, width: int) -> np.ndarray:

@@ -85,7 +85,13 @@ class MeshTying:
         self.layout = BlockLayout(
             comm, interface.num_owned_dofs, bs * interface.num_owned_multipliers
         )
+        self.A = self._assemble_saddle_point(fixed)
+        self.solver = self._create_solver(petsc_options, petsc_options_prefix)
 
+    def _assemble_saddle_point(self, fixed: np.ndarray) -> PETSc.Mat:
+        """[[K, B^T], [B, 0]] with B = [D, -M] per displacement component; identity rows
+        for the crosspoints' multipliers and the prescribed dofs (``fixed``)."""
+        interface, bs, bcs = self.interface, self.V.dofmap.index_map_bs, self.bcs
         D_mat, M_mat = interface.mortar_matrices()
         constraint = []
         for matrix in (D_mat, M_mat):
@@ -111,13 +117,16 @@ class MeshTying:
         all_cols = np.concatenate([mono.u(k_cols), mono.u(u_cols), mono.z(z_rows), fixed_z])
         all_values = np.concatenate([k_values, b_values, b_values, np.ones(fixed_z.size)])
         self._system = mono.create_matrix(all_rows, all_cols)
-        self.A = self._system.assemble(all_values)
+        A = self._system.assemble(all_values)
         # rows of prescribed dofs stay identity rows: no multiplier force there
-        self.A.zeroRows(mono.u(fixed).astype(PETSc.IntType), diag=1.0)
+        A.zeroRows(mono.u(fixed).astype(PETSc.IntType), diag=1.0)
+        return A
 
-        self.solver = PETSc.KSP().create(comm)
-        self.solver.setOperators(self.A)
-        self.solver.setOptionsPrefix(petsc_options_prefix)
+    def _create_solver(self, petsc_options: dict | None, petsc_options_prefix: str) -> PETSc.KSP:
+        """The KSP of :attr:`A`, set up with the options (inserted for the set-up only)."""
+        solver = PETSc.KSP().create(self.V.mesh.comm)
+        solver.setOperators(self.A)
+        solver.setOptionsPrefix(petsc_options_prefix)
         options = {
             "ksp_type": "preonly",
             "pc_type": "lu",
@@ -131,13 +140,14 @@ class MeshTying:
         for key, value in options.items():
             opts[f"{petsc_options_prefix}{key}"] = value
         try:
-            self.solver.setFromOptions()
+            solver.setFromOptions()
             # the factor (and its mat_mumps_* options) exists once the KSP is set up
-            self.solver.setUp()
+            solver.setUp()
         finally:
             # also when the set-up fails: no option left for the next solver to read
             for key in options:
                 del opts[f"{petsc_options_prefix}{key}"]
+        return solver
 
     def solve(self) -> dolfinx.fem.Function:
         """Assemble the right-hand side, solve, and write the displacement into ``u``."""

@@ -30,8 +30,6 @@ import numpy as np
 
 from ..dual import RowSubsetDual
 from .contract import (
-    BASIS_OPTIONS,
-    INTEGRATION_OPTIONS,
     NORMAL_OPTIONS,
     BasisOption,
     IntegrationOption,
@@ -287,6 +285,10 @@ def _integrate(X, has_neighbour, normals, integration, basis, points, weights, c
     eta) are written out below and summed over the points; they multiply
     the gradients of a few pair-level quantities (the segment limits low and
     length, the Jacobian J = |x_b - x_a|/2, n_a and n_b).
+
+    One long function on purpose: the hand-written chain rule reuses every
+    intermediate array of the values (at each Gauss point of the batch), which
+    helpers would have to pass around by the dozen.
     """
     num = X.shape[1]
     ax, ay, bx, by = X[2], X[3], X[4], X[5]
@@ -490,14 +492,7 @@ def pair_quantities(
     :class:`~dolfinx_mortar.dual.RowSubsetDual`: zero outside the pairs that
     contribute, which are kept apart (``rows``, ``grad_rows``) for assembly.
     """
-    if integration not in INTEGRATION_OPTIONS:
-        raise ValueError(
-            f"unknown integration {integration!r}; expected one of {INTEGRATION_OPTIONS}"
-        )
-    if basis not in BASIS_OPTIONS:
-        raise ValueError(f"unknown multiplier basis {basis!r}; expected one of {BASIS_OPTIONS}")
-    if normals not in NORMAL_OPTIONS:
-        raise ValueError(f"unknown normal option {normals!r}; expected one of {NORMAL_OPTIONS}")
+    KernelOptions(normals=normals, integration=integration, basis=basis)  # (checks them)
     x = np.asarray(x, dtype=np.float64)
     num_pairs = x.shape[0]
     X = np.ascontiguousarray(x.reshape(num_pairs, NUM_PAIR_VARIABLES).T)

@@ -49,9 +49,6 @@ import numpy as np
 from .. import dual
 from ..dual import Dual, RowSubsetDual
 from .contract import (
-    BASIS_OPTIONS,
-    INTEGRATION_OPTIONS,
-    NORMAL_OPTIONS,
     KernelOptions,
     PairGeometry,
     PairQuantities,
@@ -360,13 +357,7 @@ def pair_quantities(
             gradients of Dn, Mn and the areas factorized (:class:`~.factors.AffineFactors`,
             ``affine_factors`` of the result; their ``grad`` is expanded on first use).
     """
-    if normals not in NORMAL_OPTIONS:
-        raise ValueError(f"unknown normal option {normals!r}; expected one of {NORMAL_OPTIONS}")
-    if basis not in BASIS_OPTIONS:
-        raise ValueError(f"unknown multiplier basis {basis!r}; expected one of {BASIS_OPTIONS}")
-    if integration not in INTEGRATION_OPTIONS:
-        raise ValueError(
-            f"unknown integration {integration!r}; expected one of {INTEGRATION_OPTIONS}")
+    KernelOptions(normals=normals, integration=integration, basis=basis)  # (checks them)
     rule = num_gauss_points or DEFAULT_GAUSS_POINTS
     if integration == "segment" and rule not in _TRIANGLE_RULES:
         raise ValueError(f"3D segments take 1, 3 or 7 Gauss points per cell, got {rule}")
@@ -706,6 +697,9 @@ def _affine_integrals(S: Dual, Mp: Dual, topology: tuple, node_normals: Dual, xs
     ``normals_are_variables``). Only the gradients read are chained (those of D and M only
     with ``scalar_gradients``). A multiplier basis with derivatives of its own keeps the
     pair's variables throughout.
+
+    Long on purpose: the corner values, their plane derivatives and the chain share one
+    batch's intermediate arrays, which stay in cache only while they are not passed on.
     """
     m, ns = S.shape[:2]
     nm = Mp.shape[1]
