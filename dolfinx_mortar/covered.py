@@ -356,10 +356,6 @@ class CoveredStencil:
         return getattr(self.base, name)
 
     @property
-    def num_pairs(self) -> int:
-        return self.nodes.shape[0]
-
-    @property
     def width(self) -> int:
         return self.nodes.shape[1]
 
