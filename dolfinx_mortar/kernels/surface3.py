@@ -333,7 +333,8 @@ def pair_quantities(
     scalar_gradients: bool = False,
     factorized: bool = True,
 ) -> PairQuantities:
-    """Mortar contributions of every pair, with derivatives (see the module docstring).
+    """Mortar contributions of every pair, with derivatives (see the module docstring;
+    most of this function's length is the documentation of its arguments).
 
     Args:
         slave_x: (n, ns, 3) slave facet nodes (cyclic, counter-clockwise seen from
