@@ -528,7 +528,7 @@ class Line2Kernel:
 
 
 def _facing(X) -> np.ndarray:
-    """n_ab . n_cd of the slave and master facets' unit normals (as element_normal and einsum)."""
+    """n_ab . n_cd of the slave and master facets' unit normals, (t_y, -t_x)/|t| each."""
     ax, ay, bx, by, cx, cy, dx, dy = X[2], X[3], X[4], X[5], X[8], X[9], X[10], X[11]
     tx, ty = bx - ax, by - ay
     length = np.sqrt(tx * tx + ty * ty)
