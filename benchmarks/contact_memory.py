@@ -80,7 +80,7 @@ def main() -> None:
     args = parser.parse_args()
     demo_args = args.demo_args[1:] if args.demo_args[:1] == ["--"] else args.demo_args
     if args.whole_facet_dual:
-        covered.CoveredStencil = lambda stencil: stencil
+        covered.CoveredStencil = lambda stencil, **options: stencil
     if args.search_margin is not None:
         original = problem.ContactProblem.__init__
 

@@ -35,7 +35,9 @@ from dolfinx_mortar.mortar import MortarInterface
 
 _CASE = ["covered"]
 _WRAPPER = covered.CoveredStencil
-covered.CoveredStencil = lambda stencil: stencil if _CASE[0] == "whole facet" else _WRAPPER(stencil)
+covered.CoveredStencil = (
+    lambda stencil, **options: stencil if _CASE[0] == "whole facet"
+    else _WRAPPER(stencil, **options))
 
 
 def build(dim: int, size: int, whole_facet: bool):
