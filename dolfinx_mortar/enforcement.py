@@ -3,9 +3,9 @@
 A strategy decides, per pair and owned slave node j, the active set and the
 multiplier row C_j with its coefficients (alpha on the weighted gap g~_j, beta
 on the nodal weight A_j, delta on z_j), and runs a solve: one Newton solve in
-SNES, or an outer loop of them. :class:`~dolfinx_mortar.problem.ContactProblem`
-owns the state (u, multipliers, gaps) and the SNES; a strategy only knows the
-scales and the rules.
+SNES, or an outer loop of them, through the :class:`NewtonSolver` protocol. The
+problem owns the state (u, multipliers, gaps) and its solver the SNES; a strategy only
+knows the scales and the rules.
 
 * :class:`SemismoothLagrange`: C_j = z_j - max(0, z_j - c_n g^_j), g^_j = g~_j / A_j;
   the active set is decided in every Newton iteration.
@@ -64,25 +64,24 @@ class Scales:
         return self.row * self.length
 
 
-class Solver(typing.Protocol):
-    """What a strategy uses of the problem it solves (a ContactProblem)."""
+class NewtonSolver(typing.Protocol):
+    """What a strategy drives: the Newton solver of a contact problem
+    (:class:`~dolfinx_mortar.newton.ContactNewton` implements it)."""
 
     comm: MPI.Intracomm
     interfaces: list
+    """The pairs' mortar interfaces."""
     multipliers: list
-    x: typing.Any
+    """The pairs' normal multiplier vectors z (owned slave nodes)."""
 
-    def _newton(self) -> SolveReport:
-        """One SNES solve from the state in x."""
+    def newton(self) -> SolveReport:
+        """One Newton solve from the current iterate, into the state. Collective."""
 
-    def _nodal_gaps(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """(covered, g^) of pair k's owned slave nodes."""
+    def nodal_gaps(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """(covered, g^) of pair k's owned slave nodes at the last contact update."""
 
-    def _update_contact(self) -> None:
-        """Gaps, areas and active sets at the current state."""
-
-    def _write_x_into_state(self, x) -> None:
-        """u and the multipliers from x."""
+    def update_contact(self) -> None:
+        """The state from the current iterate, then gaps, areas and active sets at it."""
 
 
 Rows = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
@@ -107,8 +106,8 @@ class Enforcement:
              area: np.ndarray) -> Rows:
         raise NotImplementedError
 
-    def solve(self, problem: Solver) -> SolveReport:
-        return problem._newton()
+    def solve(self, solver: NewtonSolver) -> SolveReport:
+        return solver.newton()
 
     def save_state(self) -> list[np.ndarray]:
         return []
@@ -163,18 +162,17 @@ class FixedPointLagrange(SemismoothLagrange):
             return super().decide_active(k, z, covered, gap)
         return self.frozen[k] & covered
 
-    def solve(self, problem: Solver) -> SolveReport:
+    def solve(self, solver: NewtonSolver) -> SolveReport:
         self.frozen = None
-        problem._write_x_into_state(problem.x)
-        problem._update_contact()
+        solver.update_contact()
         self.frozen = []
-        for k, z in enumerate(problem.multipliers):
-            covered, gap = problem._nodal_gaps(k)
+        for k, z in enumerate(solver.multipliers):
+            covered, gap = solver.nodal_gaps(k)
             self.frozen.append(covered & ((z.getArray(readonly=True) > 0) | (gap <= 0)))
-        return outer_loop(problem, lambda: self._update(problem), self.max_outer_iterations,
+        return outer_loop(solver, lambda: self._update(solver), self.max_outer_iterations,
                           diagnostics.FIXED_POINT_NOT_SETTLED)
 
-    def _update(self, problem: Solver) -> bool:
+    def _update(self, solver: NewtonSolver) -> bool:
         """One fixed-point update; True when no node changed on any rank.
 
         A node leaves the set when its averaged pressure is negative beyond
@@ -182,13 +180,13 @@ class FixedPointLagrange(SemismoothLagrange):
         negative beyond rounding: a node at zero pressure and zero gap must not
         flip in and out forever.
         """
-        comm = problem.comm
+        comm = solver.comm
         changed = 0
         new_sets = []
-        for k in range(len(problem.interfaces)):
-            pressure = averaged_pressure(problem.interfaces[k], problem.multipliers[k])
+        for k in range(len(solver.interfaces)):
+            pressure = averaged_pressure(solver.interfaces[k], solver.multipliers[k])
             largest = comm.allreduce(float(np.max(np.abs(pressure), initial=0.0)), op=MPI.MAX)
-            covered, gap = problem._nodal_gaps(k)
+            covered, gap = solver.nodal_gaps(k)
             frozen = self.frozen[k]
             active = frozen.copy()
             active[frozen & (pressure < -1e-10 * largest)] = False
@@ -227,9 +225,9 @@ class Penalty(Enforcement):
         beta[active] = (-weight * eps * gap / safe_area**2)[active]
         return residual, alpha, beta, delta
 
-    def solve(self, problem: Solver) -> SolveReport:
+    def solve(self, solver: NewtonSolver) -> SolveReport:
         self.lam = [np.zeros(n) for n in self.num_multipliers]
-        return problem._newton()
+        return solver.newton()
 
     def save_state(self) -> list[np.ndarray]:
         return [lam.copy() for lam in self.lam]
@@ -251,22 +249,39 @@ class AugmentedLagrange(Penalty):
         self.tolerance = tolerance
         self.max_outer_iterations = max_outer_iterations
 
-    def solve(self, problem: Solver) -> SolveReport:
-        return outer_loop(problem, lambda: self._update(problem), self.max_outer_iterations,
+    def solve(self, solver: NewtonSolver) -> SolveReport:
+        return outer_loop(solver, lambda: self._update(solver), self.max_outer_iterations,
                           diagnostics.UZAWA_NOT_SETTLED)
 
-    def _update(self, problem: Solver) -> bool:
+    def _update(self, solver: NewtonSolver) -> bool:
         change, size = 0.0, 0.0
-        for k, z in enumerate(problem.multipliers):
+        for k, z in enumerate(solver.multipliers):
             new = z.getArray(readonly=True).copy()
             change = max(change, float(np.max(np.abs(new - self.lam[k]), initial=0.0)))
             size = max(size, float(np.max(np.abs(new), initial=0.0)))
             self.lam[k] = new
-        change = problem.comm.allreduce(change, op=MPI.MAX)
-        size = problem.comm.allreduce(size, op=MPI.MAX)
+        change = solver.comm.allreduce(change, op=MPI.MAX)
+        size = solver.comm.allreduce(size, op=MPI.MAX)
         # floor: pressures of 1e-4 E are "zero" for the relative test, so
         # rounding noise in z at zero load does not keep Uzawa going forever
         return change <= self.tolerance * max(size, 1e-4 * self.scales.pressure)
+
+
+def default_parameters(method: str, scales: Scales, master_scale: float, c_n: float | None,
+                       penalty: float | None, c_t: float | None) -> tuple[float, float, float]:
+    """(c_n, eps, c_t): the user's, or the defaults from the slave's (``scales``) and the
+    master's stiffness scales."""
+    if c_n is None:
+        # the two sides in series: the compliance of the contact, so that a stiff
+        # slave on a soft master (ironing's die) does not get an overly stiff c_n
+        c_n = 1.0 / (1.0 / scales.row + 1.0 / master_scale)
+    if penalty is None:
+        # Uzawa contracts like 1 / (1 + eps * contact compliance): a stiffer
+        # eps makes augmented Lagrange converge in far fewer updates
+        penalty = scales.row * (10.0 if method == "augmented" else 1.0)
+    if c_t is None:
+        c_t = penalty if method == "penalty" else c_n
+    return float(c_n), float(penalty), float(c_t)
 
 
 def create(method: str, active_set: str, scales: Scales, num_multipliers, *, c_n: float,
@@ -282,12 +297,12 @@ def create(method: str, active_set: str, scales: Scales, num_multipliers, *, c_n
                              max_outer_iterations)
 
 
-def outer_loop(problem: Solver, settled: typing.Callable[[], bool],
+def outer_loop(solver: NewtonSolver, settled: typing.Callable[[], bool],
                max_outer_iterations: int, failure_reason: int) -> SolveReport:
     """Newton solves until ``settled()`` (called after each converged one) says so."""
     total_iterations, residuals, linear_iterations = 0, [], 0
     for outer in range(1, max_outer_iterations + 1):
-        report = problem._newton()
+        report = solver.newton()
         total_iterations += report.iterations
         residuals += report.residuals
         linear_iterations += report.linear_iterations

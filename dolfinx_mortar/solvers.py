@@ -15,16 +15,15 @@ built anew).
 ``petsc_options`` given to the problem override the defaults, and the user's options
 database under the problem's prefix overrides both.
 
-Defaults are put into the options database only for ``setFromOptions`` and
-removed again (also when the set-up fails), except the factorization ones
-(``mat_*``): PETSc reads those at every symbolic factorization, so they stay until
-the problem is destroyed (or garbage collected) and no other live problem with the
-same prefix keeps them. A database entry that a problem put there is not taken for
-the user's own by the next problem with the same prefix.
+Our defaults and ``petsc_options`` are in the global options database only while a
+problem sets its solver up and while it solves (:func:`inserted_options`: PETSc reads the
+factorization options at every symbolic factorization), and removed after either, also
+when it fails: a problem leaves no option behind, alive, destroyed or collected.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import typing
 
@@ -157,13 +156,6 @@ class SolveReport:
 
 
 
-_OPTIONS_SET_BY_PROBLEMS: dict[str, int] = {}
-"""Options-database names holding a problem's defaults (not the user's), each with the
-number of live problems that keep it: the name leaves the database with the last one (a
-problem destroyed or collected while another with the same prefix still factorizes
-must not take the other's options)."""
-
-
 def default_options(condensation: bool, linear_solver: str = "direct") -> dict:
     """Our defaults (see :data:`DEFAULT_OPTIONS`), for the monolithic or the condensed solve."""
     defaults = dict(DEFAULT_OPTIONS)
@@ -184,6 +176,26 @@ def default_options(condensation: bool, linear_solver: str = "direct") -> dict:
     return defaults
 
 
+@contextlib.contextmanager
+def inserted_options(prefix: str, values: dict) -> typing.Iterator[None]:
+    """``values`` (names without ``prefix``) in the global options database for the block,
+    each under ``prefix`` unless the database already has that name (the user's own wins);
+    the names put there are removed after the block, also when it raises, so that no
+    problem leaves an option behind for the next one to take for the user's."""
+    options = PETSc.Options()
+    added = []
+    try:
+        for key, value in values.items():
+            name = f"{prefix}{key}"
+            if not options.hasName(name):
+                options[name] = value
+                added.append(name)
+        yield
+    finally:
+        for name in added:
+            options.delValue(name)
+
+
 def configure_snes(
     snes: PETSc.SNES,
     prefix: str,
@@ -193,7 +205,7 @@ def configure_snes(
     before_options: typing.Callable[[], None],
     after_options: typing.Callable[[PETSc.KSP], None],
     linear_solver: str = "direct",
-) -> list[str]:
+) -> dict:
     """Set ``snes`` up from our defaults, ``petsc_options`` and the options database.
 
     ``before_options`` runs with the options in the database and before
@@ -203,63 +215,22 @@ def configure_snes(
     tolerance is ``default_atol`` unless the user gave one.
 
     Returns:
-        The database names left set (the factorization options); pass them to
-        :func:`release_options` when the problem is destroyed.
+        The options (our defaults and ``petsc_options``) to put into the database again
+        for each solve (:func:`inserted_options`): PETSc reads the factorization ones
+        (``mat_*``) at every symbolic factorization.
     """
     snes.setOptionsPrefix(prefix)
-    defaults = default_options(condensation, linear_solver)
-    defaults.update(petsc_options)
-    options = PETSc.Options()
-    added = []
-    replaced = {}  # another problem's values of the names we set
-    for key, value in defaults.items():
-        name = f"{prefix}{key}"
-        if not options.hasName(name) or name in _OPTIONS_SET_BY_PROBLEMS:
-            if options.hasName(name):
-                replaced[name] = options.getString(name)
-            options[name] = value
-            added.append(name)
-    user_atol = "snes_atol" in petsc_options or (
-        options.hasName(f"{prefix}snes_atol")
-        and f"{prefix}snes_atol" not in _OPTIONS_SET_BY_PROBLEMS
-    )
-    try:
+    values = default_options(condensation, linear_solver)
+    values.update(petsc_options)
+    user_atol = "snes_atol" in petsc_options or PETSc.Options().hasName(f"{prefix}snes_atol")
+    with inserted_options(prefix, values):
         before_options()
         snes.setFromOptions()
         snes.getKSP().setFromOptions()
         if not user_atol:
             snes.setTolerances(atol=default_atol)
         after_options(snes.getKSP())
-    except BaseException:
-        # a failed set-up (e.g. an unknown solver type) leaves the database as it was:
-        # otherwise the next problem with this prefix would read these as the user's
-        for name in added:
-            if name in replaced:
-                options[name] = replaced[name]
-            else:
-                options.delValue(name)
-        raise
-    kept = [name for name in added
-            if name[len(prefix):].removeprefix("condensed_").startswith("mat_")]
-    for name in added:
-        if name not in kept:
-            options.delValue(name)
-    for name in kept:
-        _OPTIONS_SET_BY_PROBLEMS[name] = _OPTIONS_SET_BY_PROBLEMS.get(name, 0) + 1
-    return kept
-
-
-def release_options(names: list[str]) -> None:
-    """Remove the factorization options a problem left in the database (once per
-    problem), those that no other live problem keeps."""
-    options = PETSc.Options()
-    for name in names:
-        count = _OPTIONS_SET_BY_PROBLEMS.get(name, 0)
-        if count > 1:
-            _OPTIONS_SET_BY_PROBLEMS[name] = count - 1
-        elif count == 1:
-            options.delValue(name)
-            del _OPTIONS_SET_BY_PROBLEMS[name]
+    return values
 
 
 def rigid_body_modes(V) -> list[np.ndarray]:

@@ -243,7 +243,7 @@ def penetrating_blocks(normals: str, method: str = "lagrange", material: str = "
     compat.set_bc_values(u, bcs)
     for z in problem.multipliers:
         z.setArray(rng.uniform(0.5, 1.5, z.getLocalSize()))
-    problem._read_state_into_x()
+    problem.equations.read_state(problem.x)
     return problem
 
 
@@ -263,10 +263,10 @@ def assert_taylor_second_order(problem: ContactProblem, seed: int) -> None:
     snes = problem.snes
     x0 = problem.x.copy()
     r0 = problem.b.duplicate()
-    problem._residual(snes, x0, r0)
+    problem.equations.residual(snes, x0, r0)
     active = [a.copy() for a in problem.active]
     assert problem.num_active() > 0
-    J = problem._assemble_system()
+    J = problem.equations.assemble_system()
     h = random_direction(problem, x0, seed=seed)
     Jh = h.duplicate()
     J.mult(h, Jh)
@@ -276,7 +276,7 @@ def assert_taylor_second_order(problem: ContactProblem, seed: int) -> None:
         x = x0.copy()
         x.axpy(eps, h)
         r = r0.duplicate()
-        problem._residual(snes, x, r)
+        problem.equations.residual(snes, x, r)
         same = all(np.array_equal(a, b) for a, b in zip(active, problem.active, strict=True))
         assert problem.comm.allreduce(same, op=MPI.LAND)
         r.axpy(-1.0, r0)
@@ -329,13 +329,13 @@ def test_patch_test_jacobian_is_exact_in_the_reference_configuration():
     snes = problem.snes
     x0 = problem.x.copy()
     r0 = problem.b.duplicate()
-    problem._residual(snes, x0, r0)
+    problem.equations.residual(snes, x0, r0)
     assert problem.interfaces[0].configuration == "reference"
     # u = 0, z = 0: every covered node is a tie; keep that active set at the perturbed states
     active = [a.copy() for a in problem.active]
     assert all(a.all() for a in active) and problem.num_active() > 0
-    problem._decide_active = lambda k: active[k]
-    J = problem._assemble_system()
+    problem.equations.decide_active = lambda k: active[k]
+    J = problem.equations.assemble_system()
     d = random_direction(problem, x0, seed=5)
     Jd = d.duplicate()
     J.mult(d, Jd)
@@ -344,7 +344,7 @@ def test_patch_test_jacobian_is_exact_in_the_reference_configuration():
         for sign, r in ((1.0, plus), (-1.0, minus)):
             x = x0.copy()
             x.axpy(sign * eps, d)
-            problem._residual(snes, x, r)
+            problem.equations.residual(snes, x, r)
         plus.axpy(-1.0, minus)
         plus.scale(1.0 / (2.0 * eps))
         plus.axpy(-1.0, Jd)

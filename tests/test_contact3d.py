@@ -283,7 +283,7 @@ def penetrating_punch(curvature: float, **options) -> ContactProblem:
     compat.set_bc_values(u, problem.bcs)
     for z in problem.multipliers:
         z.setArray(rng.uniform(0.5, 1.5, z.getLocalSize()))
-    problem._read_state_into_x()
+    problem.equations.read_state(problem.x)
     return problem
 
 

@@ -129,7 +129,7 @@ def with_random_tangential_multipliers(problem, seed: int):
     for y in problem.tangential:
         size = y.getLocalSize()
         y.setArray(rng.choice([-1.0, 1.0], size) * rng.uniform(1.0, 2.0, size))
-    problem._read_state_into_x()
+    problem.equations.read_state(problem.x)
     return problem
 
 
@@ -139,7 +139,7 @@ def put_every_active_node_in(problem, state: str, method: str) -> None:
     (penalty: mu z_j) against |v_j| (module docstring of friction); checks it."""
     from dolfinx_mortar.friction import FrictionLaw
 
-    problem._residual(problem.snes, problem.x, problem.b)
+    problem.equations.residual(problem.snes, problem.x, problem.b)
     active = problem.active[0]
     z = problem.multipliers[0].getArray(readonly=True)[active]
     if method == "lagrange":
@@ -157,7 +157,7 @@ def put_every_active_node_in(problem, state: str, method: str) -> None:
         mu = 2.0 * comm.allreduce(float(np.max(v, initial=0.0)), op=MPI.MAX) / \
             comm.allreduce(float(np.min(z, initial=np.inf)), op=MPI.MIN)
     problem.friction.laws[0] = FrictionLaw("coulomb", mu)
-    problem._residual(problem.snes, problem.x, problem.b)
+    problem.equations.residual(problem.snes, problem.x, problem.b)
     friction = problem.friction_state()
     counts = comm.allreduce(
         np.array([int(active.sum()), int(friction[state][active].sum())]), op=MPI.SUM)

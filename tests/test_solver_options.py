@@ -1,6 +1,7 @@
-"""configure_snes leaves the global options database as it found it when the set-up
-fails (an option left there would be read by the next problem with that prefix as the
-user's own), and keeps only the factorization options when it succeeds."""
+"""Our PETSc options are in the global options database only while a solver is set up
+(configure_snes) or solves (inserted_options): after either, also when it fails, the
+database is as it was, so that no option of ours is taken for the user's by the next
+problem with that prefix; and the user's own options are neither overwritten nor removed."""
 
 from __future__ import annotations
 
@@ -15,6 +16,10 @@ PREFIX = "test_solver_options_"
 def configure(snes, petsc_options=None, before=lambda: None, after=lambda ksp: None):
     return solvers.configure_snes(snes, PREFIX, petsc_options or {}, False, 1e-10, before,
                                   after)
+
+
+def ours() -> list[str]:
+    return sorted(name for name in PETSc.Options().getAll() if name.startswith(PREFIX))
 
 
 def test_failed_setup_leaves_no_option():
@@ -36,45 +41,47 @@ def test_failed_setup_leaves_no_option():
     assert dict(options.getAll()) == before
 
 
-def test_failed_setup_restores_another_problems_factor_options():
-    """A live problem's factorization option that a failed set-up overwrote comes back."""
-    first = PETSc.SNES().create(PETSc.COMM_SELF)
-    kept = configure(first, {"mat_mumps_icntl_14": 50})
-    assert f"{PREFIX}mat_mumps_icntl_14" in kept
-    second = PETSc.SNES().create(PETSc.COMM_SELF)
-    with pytest.raises(PETSc.Error):
-        configure(second, {"mat_mumps_icntl_14": 80, "ksp_type": "no_such_type"})
-    assert PETSc.Options().getInt(f"{PREFIX}mat_mumps_icntl_14") == 50
-    solvers.release_options(kept)
-    assert not [name for name in PETSc.Options().getAll() if name.startswith(PREFIX)]
-    first.destroy()
-    second.destroy()
-
-
-def test_successful_setup_keeps_only_factor_options_until_released():
+def test_successful_setup_leaves_no_option_and_returns_the_solve_options():
+    """The factorization options, which PETSc reads at every symbolic factorization, come
+    back for each solve instead of staying in the database."""
     snes = PETSc.SNES().create(PETSc.COMM_SELF)
-    kept = configure(snes)
-    left = sorted(name for name in PETSc.Options().getAll() if name.startswith(PREFIX))
-    assert left == sorted(kept)
-    assert left and all(name.startswith(f"{PREFIX}mat_mumps_") for name in left)
-    solvers.release_options(kept)
-    assert not [name for name in PETSc.Options().getAll() if name.startswith(PREFIX)]
+    values = configure(snes, {"mat_mumps_icntl_14": 50})
+    assert ours() == []
+    assert values["mat_mumps_icntl_24"] == 1 and values["mat_mumps_icntl_14"] == 50
+    with solvers.inserted_options(PREFIX, values):
+        assert PETSc.Options().getInt(f"{PREFIX}mat_mumps_icntl_14") == 50
+        assert f"{PREFIX}mat_mumps_icntl_24" in ours()
+    assert ours() == []
     snes.destroy()
 
 
-def test_releasing_one_problem_keeps_the_factor_options_of_another():
-    """Two problems with one prefix hold the same factorization options: the first one
-    destroyed or garbage collected (at any moment, while the other still solves) must
-    not take them from the other, whose next symbolic factorization reads them."""
-    first, second = PETSc.SNES().create(PETSc.COMM_SELF), PETSc.SNES().create(PETSc.COMM_SELF)
-    kept_first = configure(first)
-    kept_second = configure(second)
-    assert sorted(kept_first) == sorted(kept_second)
-    solvers.release_options(kept_first)
-    left = sorted(name for name in PETSc.Options().getAll() if name.startswith(PREFIX))
-    assert left == sorted(kept_second)
-    assert PETSc.Options().getInt(f"{PREFIX}mat_mumps_icntl_24") == 1
-    solvers.release_options(kept_second)
-    assert not [name for name in PETSc.Options().getAll() if name.startswith(PREFIX)]
-    first.destroy()
-    second.destroy()
+def test_inserted_options_keep_the_users_and_leave_after_an_exception():
+    options = PETSc.Options()
+    options[f"{PREFIX}mat_mumps_icntl_14"] = 80
+    try:
+        with pytest.raises(RuntimeError, match="solve failed"):
+            with solvers.inserted_options(PREFIX, {"mat_mumps_icntl_14": 50,
+                                                   "mat_mumps_icntl_24": 1}):
+                assert options.getInt(f"{PREFIX}mat_mumps_icntl_14") == 80
+                assert options.getInt(f"{PREFIX}mat_mumps_icntl_24") == 1
+                raise RuntimeError("solve failed")
+        assert ours() == [f"{PREFIX}mat_mumps_icntl_14"]
+        assert options.getInt(f"{PREFIX}mat_mumps_icntl_14") == 80
+    finally:
+        options.delValue(f"{PREFIX}mat_mumps_icntl_14")
+
+
+def test_a_users_atol_in_the_database_wins():
+    options = PETSc.Options()
+    options[f"{PREFIX}snes_atol"] = 1e-3
+    snes = PETSc.SNES().create(PETSc.COMM_SELF)
+    try:
+        configure(snes)
+        assert snes.getTolerances()[1] == pytest.approx(1e-3)
+    finally:
+        options.delValue(f"{PREFIX}snes_atol")
+        snes.destroy()
+    snes = PETSc.SNES().create(PETSc.COMM_SELF)
+    configure(snes)
+    assert snes.getTolerances()[1] == pytest.approx(1e-10)
+    snes.destroy()

@@ -1,0 +1,149 @@
+"""The Newton solver of a contact problem: PETSc SNES on its equations.
+
+:class:`ContactNewton` owns the SNES, its linear solver (with condensation its python
+preconditioner) and the iterate x; the SNES calls the residual and Jacobian of a
+:class:`~dolfinx_mortar.equations.ContactEquations`, which knows neither the solver nor
+the problem: no reference cycle through the SNES. It is what the enforcement strategies
+drive (:class:`~dolfinx_mortar.enforcement.NewtonSolver`). Our PETSc options are in the
+global options database only while the solver is set up and while it solves
+(:func:`~dolfinx_mortar.solvers.inserted_options`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from petsc4py import PETSc
+
+from . import diagnostics, solvers
+from .equations import ContactEquations
+from .solvers import SolveReport
+
+
+class ContactNewton:
+    """SNES with our defaults (:mod:`dolfinx_mortar.solvers`) on ``equations``.
+
+    Args:
+        equations: the contact equations (state, residual, Jacobian).
+        x, b: the iterate and the residual vector of the [u | z] layout.
+        prefix: the options prefix.
+        petsc_options: the user's options; they and then the options database win over
+            our defaults.
+        linear_solver: ``direct`` or ``iterative`` (not ``auto``: chosen by the problem).
+        condensation: whether the multipliers are condensed.
+        default_atol: SNES' absolute tolerance unless the user gave one.
+        automatic: whether ``linear_solver="auto"`` chose the linear solver (then a
+            failed iterative solve reports no advice: the direct solver takes over).
+    """
+
+    def __init__(self, equations: ContactEquations, x: PETSc.Vec, b: PETSc.Vec, prefix: str,
+                 petsc_options: dict, linear_solver: str, condensation: bool,
+                 default_atol: float, automatic: bool = False):
+        self.equations = equations
+        self.comm = equations.layout.comm
+        self.interfaces = equations.interfaces
+        self.multipliers = equations.multipliers
+        self.x, self.b = x, b
+        self.prefix = prefix
+        self.petsc_options = dict(petsc_options)
+        self.linear_solver = linear_solver
+        self.condensation = condensation
+        self.default_atol = default_atol
+        self.automatic = automatic
+        self.condenser = None
+        self.snes: PETSc.SNES | None = None
+        self.setup()
+
+    def setup(self) -> None:
+        """Create and set up the SNES (and with condensation its preconditioner)."""
+        snes = PETSc.SNES().create(self.comm)
+        equations = self.equations
+
+        def callbacks() -> None:
+            snes.setFunction(equations.residual, self.b)
+            equations.assemble_system()  # creates the matrix with its pattern
+            snes.setJacobian(equations.jacobian, equations.system.mat)
+            snes.setMonitor(equations.monitor)
+
+        def condensation(ksp: PETSc.KSP) -> None:
+            if self.condensation:
+                V = equations.V
+                near_nullspace = (solvers.rigid_body_modes(V)
+                                  if self.linear_solver == "iterative" else None)
+                self.condenser = solvers.condensed_preconditioner(
+                    ksp, equations.layout, self.interfaces, V.dofmap.index_map_bs,
+                    self.prefix, near_nullspace)
+
+        self.snes = snes
+        self.solve_options = solvers.configure_snes(
+            snes, self.prefix, self.petsc_options, self.condensation, self.default_atol,
+            callbacks, condensation, self.linear_solver)
+
+    def fall_back_to_direct(self, condensation: bool, failure: str, warn) -> None:
+        """Replace the iterative linear solver that ``auto`` chose, which failed a linear
+        solve (``failure``), by MUMPS LU (of the condensed system with ``condensation``)
+        for the rest of the run; ``warn(cause, message)`` says why. Collective.
+
+        ``auto`` promises a solver that works where the direct one would: the direct one
+        is the more robust, and a problem whose iterative solve failed once (a contrast
+        or a geometry its preconditioner does not handle) would likely fail again."""
+        warn(
+            ("linear solver fallback",),
+            "linear_solver='auto' chose the iterative solver (GMRES + AMG on the condensed "
+            f"system) for this problem, and a linear solve failed: {failure}. The direct "
+            "solver (MUMPS LU) solves this load step again and every later one. Pass "
+            "linear_solver='direct' to skip the iterative attempt, or "
+            "linear_solver='iterative' to keep it (the load stepping then cuts the step "
+            "back).",
+        )
+        self.destroy()
+        self.linear_solver = "direct"
+        self.condensation = condensation
+        self.setup()
+
+    def newton(self) -> SolveReport:
+        """One SNES solve from the state in x, into the state. Collective."""
+        equations = self.equations
+        equations.residual_history.clear()
+        equations.last_inversion = diagnostics.Inversion()
+        if self.condenser is not None:
+            self.condenser.inner_failure = ""
+        with solvers.inserted_options(self.prefix, self.solve_options):
+            self.snes.solve(None, self.x)
+        reason = self.snes.getConvergedReason()
+        equations.write_state(self.x)
+        report = SolveReport(
+            converged=reason > 0, reason=reason, iterations=self.snes.getIterationNumber(),
+            residuals=list(equations.residual_history), active=0,
+            linear_iterations=self.snes.getLinearSolveIterations())
+        if reason <= 0:
+            report.inversion = equations.last_inversion
+        if reason == PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE:
+            # SNES stops before the step is applied (a NaN step included): x is the last
+            # iterate, and the load stepping cuts the step back
+            ksp = self.snes.getKSP()
+            if self.linear_solver == "iterative":
+                # with ``auto`` the direct solver takes over: no advice
+                report.linear_solver_failure = diagnostics.describe_iterative_failure(
+                    ksp, self.prefix, self.condenser.inner_failure, advice=not self.automatic)
+            else:
+                report.linear_solver_failure = diagnostics.describe_ksp_failure(ksp)
+        return report
+
+    def update_contact(self) -> None:
+        """u and the multipliers from the iterate x, then the gaps, areas and active sets
+        there. Collective."""
+        self.equations.write_state(self.x)
+        self.equations.update_contact()
+
+    def nodal_gaps(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """(covered, g^) of pair k's owned slave nodes at the last contact update."""
+        return self.equations.nodal_gaps(k)
+
+    def destroy(self) -> None:
+        """Free the SNES and the condensation's preconditioner. Collective."""
+        if self.snes is not None:
+            self.snes.destroy()
+            self.snes = None
+        if self.condenser is not None:
+            self.condenser.destroy()
+            self.condenser = None
