@@ -41,10 +41,14 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-from dolfinx_mortar import meshes
-from dolfinx_mortar.loading import ContactOutput
-from dolfinx_mortar.materials import Material, internal_work
-from dolfinx_mortar.problem import ContactPair, ContactProblem
+from dolfinx_mortar import (
+    ContactOutput,
+    ContactPair,
+    ContactProblem,
+    Material,
+    internal_work,
+    meshes,
+)
 
 DEMOS = pathlib.Path(__file__).resolve().parent
 if str(DEMOS) not in sys.path:  # loaded from its path (tests, benchmarks): find demos/cli.py

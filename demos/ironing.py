@@ -63,10 +63,16 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-from dolfinx_mortar import meshes
-from dolfinx_mortar.loading import ContactOutput, configure_logging, solve_load_steps
-from dolfinx_mortar.materials import Material, internal_work
-from dolfinx_mortar.problem import ContactPair, ContactProblem
+from dolfinx_mortar import (
+    ContactOutput,
+    ContactPair,
+    ContactProblem,
+    Material,
+    configure_logging,
+    internal_work,
+    meshes,
+    solve_load_steps,
+)
 
 DEMOS = pathlib.Path(__file__).resolve().parent
 if str(DEMOS) not in sys.path:  # loaded from its path (tests, benchmarks): find demos/cli.py

@@ -37,9 +37,7 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-from dolfinx_mortar import compat, meshes
-from dolfinx_mortar.bodies import merge_meshes
-from dolfinx_mortar.tying import MeshTying
+from dolfinx_mortar import MeshTying, compat, merge_meshes, meshes
 
 DEMOS = pathlib.Path(__file__).resolve().parent
 if str(DEMOS) not in sys.path:  # loaded from its path (tests, benchmarks): find demos/cli.py

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import os
 import sys
 import warnings
@@ -27,3 +28,20 @@ def stacklevel_outside() -> int:
 def warn_deprecated(message: str) -> None:
     """A :class:`DeprecationWarning` attributed to the first caller outside this package."""
     warnings.warn(message, DeprecationWarning, stacklevel=stacklevel_outside())
+
+
+def moved(module: str, names: dict[str, str]):
+    """A module ``__getattr__`` for names that moved or were renamed: ``names`` maps each
+    old name to its new dotted path; the old one keeps working for one release, with a
+    DeprecationWarning that says where the name is now."""
+
+    def __getattr__(name: str):
+        if name not in names:
+            raise AttributeError(f"module {module!r} has no attribute {name!r}")
+        where, _, new = names[name].rpartition(".")
+        warn_deprecated(f"{module}.{name} is deprecated; use {names[name]}"
+                        + (" (from dolfinx_mortar import " + new + ")"
+                           if where == "dolfinx_mortar" else ""))
+        return getattr(importlib.import_module(where), new)
+
+    return __getattr__

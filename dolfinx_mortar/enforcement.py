@@ -31,10 +31,12 @@ import numpy as np
 from mpi4py import MPI
 
 from . import diagnostics
+from .deprecation import moved
+from .options import ActiveSet, Method
 from .solvers import SolveReport
 
-METHODS = ("lagrange", "penalty", "augmented")
-ACTIVE_SET_STRATEGIES = ("semismooth", "fixed-point")
+METHODS = typing.get_args(Method)
+ACTIVE_SET_STRATEGIES = typing.get_args(ActiveSet)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -83,6 +85,8 @@ class NewtonSolver(typing.Protocol):
     def update_contact(self) -> None:
         """The state from the current iterate, then gaps, areas and active sets at it."""
 
+
+__getattr__ = moved(__name__, {"Solver": "dolfinx_mortar.enforcement.NewtonSolver"})
 
 Rows = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 """(residual C_j, alpha, beta, delta) of the owned multiplier rows of one pair."""

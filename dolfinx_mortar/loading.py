@@ -27,7 +27,8 @@ import dolfinx
 import dolfinx.io
 from mpi4py import MPI
 
-from .problem import ContactProblem, SolveReport
+from .problem import ContactProblem
+from .solvers import SolveReport
 
 logger = logging.getLogger("dolfinx_mortar")
 
@@ -41,7 +42,7 @@ class LoadSteppingError(RuntimeError):
     Attributes:
         last_converged: t of the last accepted step (the state the problem is left in).
         failed: t of the step that failed last.
-        report: the :class:`~dolfinx_mortar.problem.SolveReport` of that failed solve.
+        report: the :class:`~dolfinx_mortar.solvers.SolveReport` of that failed solve.
     """
 
     def __init__(self, message: str, last_converged: float = math.nan,

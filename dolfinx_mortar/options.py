@@ -18,7 +18,7 @@ Method = typing.Literal["lagrange", "penalty", "augmented"]
 ActiveSet = typing.Literal["semismooth", "fixed-point"]
 Integration = typing.Literal["segment", "element"]
 Normals = typing.Literal["averaged", "slave", "master"]
-Multipliers = typing.Literal["dual", "standard"]
+Basis = typing.Literal["dual", "standard"]
 Configuration = typing.Literal["current", "reference"]
 LinearSolver = typing.Literal["auto", "direct", "iterative"]
 
@@ -95,7 +95,8 @@ class ContactOptions:
         num_gauss_points: of ``element`` integration (None: the kernel's default).
         normals: ``averaged`` (nodal normals of the slave), ``slave`` or ``master``.
         active_set: ``semismooth`` or ``fixed-point`` (lagrange only).
-        multipliers: ``dual`` or ``standard`` basis. Dual is the default: the
+        basis: of the multipliers, ``dual`` or ``standard`` (``multipliers=``, the old
+            name of this option, still works for one release). Dual is the default: the
             conditions decouple node by node, and on Hertz it puts the contact edge
             within one element where standard does not (docs/benchmarks.md).
         c_n: complementarity parameter (unit pressure / length); default about E/h of
@@ -142,7 +143,7 @@ class ContactOptions:
     num_gauss_points: int | None = None
     normals: Normals = "averaged"
     active_set: ActiveSet = "semismooth"
-    multipliers: Multipliers = "dual"
+    basis: Basis = "dual"
     c_n: float | None = None
     penalty: float | None = None
     augmented_tolerance: float = 1e-8
@@ -168,15 +169,16 @@ class ContactOptions:
                 raise ValueError(f"{name} must be positive, got {value}")
         if self.active_set == "fixed-point" and self.method != "lagrange":
             raise ValueError("active_set='fixed-point' applies to method='lagrange' only")
-        if self.linear_solver == "iterative" and self.multipliers != "dual":
+        if self.linear_solver == "iterative" and self.basis != "dual":
             raise ValueError(
                 "linear_solver='iterative' solves the condensed displacement system, which "
-                f"needs multipliers='dual'; got multipliers={self.multipliers!r}")
-        if self.condensation and self.multipliers != "dual":
+                "needs dual multipliers, basis='dual' (formerly multipliers='dual'); got "
+                f"basis={self.basis!r}")
+        if self.condensation and self.basis != "dual":
             raise ValueError(
-                "condensation=True needs multipliers='dual' (with the standard basis the "
-                "multipliers do not decouple node by node), got "
-                f"multipliers={self.multipliers!r}")
+                "condensation=True needs dual multipliers, basis='dual' (formerly "
+                "multipliers='dual'): with the standard basis the multipliers do not decouple "
+                f"node by node; got basis={self.basis!r}")
         friction = (tuple(friction_law(f) for f in self.friction) if _per_pair(self.friction)
                     else friction_law(self.friction))
         object.__setattr__(self, "friction", friction)
@@ -195,6 +197,23 @@ class ContactOptions:
         """Whether any pair has a friction law."""
         laws = self.friction if isinstance(self.friction, tuple) else (self.friction,)
         return any(law is not None for law in laws)
+
+
+DEPRECATED_NAMES = {"multipliers": "basis"}
+"""Old keyword names of the options, each with its new name (for one release)."""
+
+
+def contact_options(options: ContactOptions | None, keywords: dict) -> ContactOptions:
+    """``options`` (default :class:`ContactOptions`) with the fields in ``keywords``
+    replaced; an old name of :data:`DEPRECATED_NAMES` warns and stands for the new one."""
+    keywords = dict(keywords)
+    for old, new in DEPRECATED_NAMES.items():
+        if old in keywords:
+            if new in keywords:
+                raise TypeError(f"pass {new}= only ({old}= is its deprecated name)")
+            warn_deprecated(f"the option {old}= is deprecated; it is called {new}= now")
+            keywords[new] = keywords.pop(old)
+    return dataclasses.replace(options or ContactOptions(), **keywords)
 
 
 def _per_pair(friction) -> bool:

@@ -36,19 +36,24 @@ from petsc4py import PETSc
 
 from . import checks, compat, diagnostics, enforcement, solvers
 from . import friction as friction_rules
-from .checks import INITIAL_OVERLAP, STIFF_SLAVE_RATIO  # noqa: F401 (documented here)
-from .diagnostics import ContactWarning
+from .deprecation import moved
 from .equations import ContactEquations, stiffness_scales
 from .layout import BlockLayout, dirichlet_dofs
 from .mortar import MortarInterface
 from .newton import ContactNewton
-from .options import ContactOptions
+from .options import ContactOptions, contact_options
 from .results import ContactResults
-from .solvers import SolveReport
 from .surface import body_labels as surface_body_labels
 from .system import ContactSystem
 
-__all__ = ["ContactPair", "ContactProblem", "ContactWarning", "SolveReport"]
+__all__ = ["ContactPair", "ContactProblem"]
+
+__getattr__ = moved(__name__, {
+    "ContactWarning": "dolfinx_mortar.ContactWarning",
+    "SolveReport": "dolfinx_mortar.SolveReport",
+    "INITIAL_OVERLAP": "dolfinx_mortar.checks.INITIAL_OVERLAP",
+    "STIFF_SLAVE_RATIO": "dolfinx_mortar.checks.STIFF_SLAVE_RATIO",
+})
 
 MAX_TOLERANCE_FACTOR = 1e3
 """The default SNES atol (1e-11 k h, k the slave's stiffness scale) grows with the
@@ -81,14 +86,11 @@ class ContactProblem(ContactResults):
     in a ``with`` block to free its PETSc objects on every rank when the block ends, also
     by an exception; or call :meth:`destroy`.
 
-    Building it checks the set-up before any load step (:mod:`dolfinx_mortar.checks`).
-    It raises :class:`ValueError` when a pair's slave and master lie on one connected
-    mesh (the same body, or bodies that share nodes). It warns (:class:`ContactWarning`,
-    shown once by rank 0) when a slave surface looks away from its master where the two
-    are closest (a tag on the wrong face of its body), when the bodies start overlapping
-    by more than :data:`~dolfinx_mortar.checks.INITIAL_OVERLAP` facet lengths, and when
-    a body is free to move as a rigid body (no Dirichlet condition or term of the form
-    holds a translation of it, and it does not touch the other body at the start).
+    Building it checks the set-up before any load step (:mod:`dolfinx_mortar.checks`): it
+    raises :class:`ValueError` when a pair's slave and master lie on one connected mesh,
+    and warns (a ContactWarning, shown once by rank 0) when a slave surface looks away
+    from its master, when the bodies start overlapping, and when a body is free to move
+    as a rigid body.
 
     Args:
         F: bulk residual form F(u; v) (internal minus external virtual work).
@@ -110,7 +112,7 @@ class ContactProblem(ContactResults):
                  pairs: typing.Sequence[ContactPair], *, J: ufl.Form | None = None,
                  options: ContactOptions | None = None, petsc_options: dict | None = None,
                  petsc_options_prefix: str = "dolfinx_mortar_", **keywords):
-        options = dataclasses.replace(options or ContactOptions(), **keywords)
+        options = contact_options(options, keywords)
         if not pairs:
             raise ValueError("ContactProblem needs at least one ContactPair")
         self.options = options
@@ -130,7 +132,7 @@ class ContactProblem(ContactResults):
         self.interfaces = [
             MortarInterface(self.V, pair.facet_tags, pair.slave, pair.master,
                             normals=options.normals, integration=options.integration,
-                            basis=options.multipliers,
+                            basis=options.basis,
                             num_gauss_points=options.num_gauss_points,
                             search_margin=options.search_margin,
                             configuration=options.configuration)
@@ -152,7 +154,7 @@ class ContactProblem(ContactResults):
             index_map = self.V.dofmap.index_map
             linear_solver = solvers.automatic_linear_solver(
                 self.V.mesh.geometry.dim, index_map.size_global * self.V.dofmap.index_map_bs,
-                options.multipliers, self.has_friction)
+                options.basis, self.has_friction)
         self._linear_solver = linear_solver
         self._condensation = options.condensation or linear_solver == "iterative"
         if self.has_friction:
@@ -272,7 +274,7 @@ class ContactProblem(ContactResults):
 
     # -- solving -------------------------------------------------------------
 
-    def solve(self) -> SolveReport:
+    def solve(self) -> solvers.SolveReport:
         """Solve one load step from the current state (u and multipliers). Collective.
 
         Returns a report; does not raise when Newton fails (the load stepper

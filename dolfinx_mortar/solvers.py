@@ -31,6 +31,7 @@ import numpy as np
 from petsc4py import PETSc
 
 from . import diagnostics
+from .options import LinearSolver
 
 DEFAULT_OPTIONS = {
     "snes_type": "newtonls",
@@ -56,7 +57,7 @@ DEFAULT_OPTIONS = {
     "mat_mumps_cntl_3": 1e-8,
 }
 
-LINEAR_SOLVERS = ("auto", "direct", "iterative")
+LINEAR_SOLVERS = typing.get_args(LinearSolver)
 
 AUTO_ITERATIVE_MIN_DOFS = 20_000
 """``linear_solver="auto"`` takes the iterative solver from this many displacement dofs

@@ -11,10 +11,16 @@ import pytest
 import ufl
 from mpi4py import MPI
 
-from dolfinx_mortar import compat, meshes
-from dolfinx_mortar.loading import LoadSteppingError, solve_load_steps
-from dolfinx_mortar.materials import Material, internal_work
-from dolfinx_mortar.problem import ContactPair, ContactProblem
+from dolfinx_mortar import (
+    ContactPair,
+    ContactProblem,
+    LoadSteppingError,
+    Material,
+    compat,
+    internal_work,
+    meshes,
+    solve_load_steps,
+)
 from dolfinx_mortar.surface import SurfaceError
 
 DEMOS = pathlib.Path(__file__).parents[1] / "demos"
@@ -365,7 +371,7 @@ def test_bad_options_and_inputs():
         ("integration", "nodal"),
         ("normals", "up"),
         ("active_set", "smooth"),
-        ("multipliers", "mortar"),
+        ("basis", "mortar"),
     ):
         with pytest.raises(ValueError, match=f"unknown {key}"):
             ContactProblem(F, u, [], [pair], **{key: value})
@@ -373,8 +379,8 @@ def test_bad_options_and_inputs():
         ContactProblem(F, u, [], [pair], method="penalty", active_set="fixed-point")
     with pytest.raises(ValueError, match="c_n must be positive"):
         ContactProblem(F, u, [], [pair], c_n=-1.0)
-    with pytest.raises(ValueError, match="condensation=True needs multipliers='dual'"):
-        ContactProblem(F, u, [], [pair], multipliers="standard", condensation=True)
+    with pytest.raises(ValueError, match="condensation=True needs dual multipliers, basis='dual'"):
+        ContactProblem(F, u, [], [pair], basis="standard", condensation=True)
     with pytest.raises(SurfaceError, match="marks no facet"):
         ContactProblem(F, u, [], [ContactPair(tagged.facet_tags, 999, markers["contact_master"])])
     # a slave surface on the master's body: both tags on the foundation
@@ -419,7 +425,7 @@ def test_load_stepping_grows_back_onto_the_nominal_grid_after_a_cut_back():
     """A solver that fails on load jumps above 0.15: 4 nominal steps of 0.25 are cut to
     0.125, and every later step first halves, then grows back onto the grid, so each
     t = k / 4 is reached exactly and no step is smaller than needed."""
-    from dolfinx_mortar.problem import SolveReport
+    from dolfinx_mortar import SolveReport
 
     class JumpLimitedProblem:
         comm = MPI.COMM_WORLD

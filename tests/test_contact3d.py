@@ -14,10 +14,16 @@ from contact_warnings import warns_on_rank_zero
 from mpi4py import MPI
 from test_contact import assert_taylor_second_order, demo
 
-from dolfinx_mortar import compat, meshes
-from dolfinx_mortar.loading import solve_load_steps
-from dolfinx_mortar.materials import Material, internal_work
-from dolfinx_mortar.problem import ContactPair, ContactProblem, ContactWarning
+from dolfinx_mortar import (
+    ContactPair,
+    ContactProblem,
+    ContactWarning,
+    Material,
+    compat,
+    internal_work,
+    meshes,
+    solve_load_steps,
+)
 
 CELLS = ("tetrahedron", "hexahedron")
 
@@ -386,11 +392,11 @@ def test_bad_3d_input_fails_on_every_rank_with_a_message():
     markers = tagged.markers
     pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"])
     for key, value in (("method", "lagrangian"), ("integration", "nodal"), ("normals", "up"),
-                       ("multipliers", "mortar"), ("linear_solver", "cg")):
+                       ("basis", "mortar"), ("linear_solver", "cg")):
         with pytest.raises(ValueError, match=f"unknown {key}"):
             ContactProblem(F, u, [], [pair], **{key: value})
-    with pytest.raises(ValueError, match="needs multipliers='dual'"):
-        ContactProblem(F, u, [], [pair], multipliers="standard", linear_solver="iterative")
+    with pytest.raises(ValueError, match="needs dual multipliers, basis='dual'"):
+        ContactProblem(F, u, [], [pair], basis="standard", linear_solver="iterative")
     with pytest.raises(SurfaceError, match="marks no facet"):
         ContactProblem(F, u, [], [ContactPair(tagged.facet_tags, 999, markers["contact_master"])])
     wrong = ContactPair(tagged.facet_tags, markers["foundation_bottom"],

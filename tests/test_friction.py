@@ -7,8 +7,7 @@ import pytest
 from mpi4py import MPI
 from test_contact import assert_taylor_second_order, built_problem, penetrating_blocks
 
-from dolfinx_mortar import compat
-from dolfinx_mortar.problem import ContactProblem
+from dolfinx_mortar import ContactProblem, Coulomb, Tresca, compat
 
 
 def load_demo(name: str):
@@ -61,7 +60,7 @@ def test_below_the_limit_the_blocks_stick(ratio, slave):
 
 def test_tresca_bound_is_the_slip_traction():
     """Tresca with bound 1.5: full slip with y_j = 1.5 whatever the pressure."""
-    problem = sheared_blocks((3, 7), "upper", ("tresca", 1.5), top_shift=0.02, side_shear=1.5)
+    problem = sheared_blocks((3, 7), "upper", Tresca(1.5), top_shift=0.02, side_shear=1.5)
     solved(problem)
     state = problem.friction_state()
     np.testing.assert_allclose(state["traction"], 1.5, rtol=1e-10)
@@ -72,14 +71,14 @@ def test_penalty_friction_sticks_with_an_elastic_slip():
     """Penalty friction (regularized stick): y = eps_t s while it sticks, so the nodes
     creep by shear / eps_t; full slip still gives mu p exactly."""
     eps = 1e4
-    problem = sheared_blocks((3, 7), "upper", ("coulomb", 0.5), top_shift=0.0078,
+    problem = sheared_blocks((3, 7), "upper", Coulomb(0.5), top_shift=0.0078,
                              side_shear=0.0078 * SHEAR_MODULUS, method="penalty",
                              penalty=1e5, c_t=eps)
     solved(problem)
     state = problem.friction_state()
     assert state["sticking"].all()
     np.testing.assert_allclose(state["traction"], eps * state["slip"], rtol=1e-10)
-    problem = sheared_blocks((3, 7), "upper", ("coulomb", 0.2), top_shift=0.02,
+    problem = sheared_blocks((3, 7), "upper", Coulomb(0.2), top_shift=0.02,
                              side_shear=2.0, method="penalty", penalty=1e5, c_t=eps)
     solved(problem)
     z = problem.multipliers[0].getArray(readonly=True)
@@ -113,7 +112,7 @@ def frictional_blocks(mu: float, method: str = "lagrange"):
 
     class Frictional(original):
         def __init__(self, *args, **kwargs):
-            super().__init__(*args, friction=("coulomb", mu), **kwargs)
+            super().__init__(*args, friction=Coulomb(mu), **kwargs)
 
     test_contact.ContactProblem = Frictional
     try:
@@ -180,21 +179,23 @@ def test_frictional_jacobian_taylor(state, method):
 def test_bad_friction_input():
     """Unknown laws, negative coefficients, wrong counts, unsupported options: clear errors."""
     args = ((3, 7), "upper")
+    for law, value in ((Coulomb, -0.1), (Tresca, -1.0)):
+        with pytest.raises(ValueError, match="must be >= 0"):
+            law(value)
     for friction, message in [(("viscous", 0.1), "unknown friction law"),
-                              (("coulomb", -0.1), "must be >= 0"),
                               (0.3, "friction must be None"),
-                              ([("coulomb", 0.1)] * 2, "2 laws for 1 contact pairs")]:
+                              ([Coulomb(0.1)] * 2, "2 laws for 1 contact pairs")]:
         with pytest.raises(ValueError, match=message):
             sheared_blocks(*args, friction, 0.0, 0.0)
     for options, message in [({"method": "augmented"}, "method='lagrange' or 'penalty'"),
                              ({"active_set": "fixed-point"}, "active_set='semismooth'"),
                              ({"linear_solver": "iterative"}, "linear_solver='direct'")]:
         with pytest.raises(ValueError, match=message):
-            sheared_blocks(*args, ("coulomb", 0.1), 0.0, 0.0, **options)
+            sheared_blocks(*args, Coulomb(0.1), 0.0, 0.0, **options)
 
 
 def test_state_is_saved_and_restored_with_the_tangential_multipliers():
-    problem = sheared_blocks((3, 7), "upper", ("coulomb", 0.2), top_shift=0.02, side_shear=2.0)
+    problem = sheared_blocks((3, 7), "upper", Coulomb(0.2), top_shift=0.02, side_shear=2.0)
     saved = problem.save_state()
     solved(problem)
     y = problem.tangential[0].getArray(readonly=True).copy()
@@ -254,7 +255,7 @@ def test_a_predicted_start_measures_slips_from_the_converged_state(shear_ratio):
     to the solved state, because slips are measured from the last converged state and
     not from the guess."""
     limit = 0.5 * PATCH.PRESSURE
-    problem = sheared_blocks((3, 7), "upper", ("coulomb", 0.5),
+    problem = sheared_blocks((3, 7), "upper", Coulomb(0.5),
                              shear_ratio * limit / PATCH.SHEAR_MODULUS,
                              min(shear_ratio, 1.0) * limit)
     start = problem.save_state()
@@ -347,7 +348,7 @@ def test_friction_per_pair():
     1.2e-10 of mu p with the partition (serial, 2 and 3 ranks, trixie and sid), so it is
     held to 1e-8."""
     mu, shift = 0.2, 3 * 0.2 * PRESSURE / SHEAR_MODULUS
-    law = ("coulomb", mu)
+    law = Coulomb(mu)
     both = sheared_blocks((3, 7), "upper", [law, law], shift, mu * PRESSURE, split_at=0.5)
     solved(both)
     comm = both.comm

@@ -8,6 +8,7 @@ from test_contact import assert_taylor_second_order
 from test_contact3d import curved_punch, penetrating_punch
 from test_friction import load_demo, put_every_active_node_in, with_random_tangential_multipliers
 
+from dolfinx_mortar import Coulomb, Tresca
 from dolfinx_mortar.friction import FrictionLaw, tangent_frames
 
 
@@ -38,7 +39,7 @@ def frictional_punch(method: str, mu: float = 1.0, normals: str = "averaged"):
     """The 3D contact Taylor test's state (test_contact3d.penetrating_punch, curvature
     0.02: every slave node 0.03 to 0.04 deep) with Coulomb friction, slips from the
     undeformed state and random tangential multipliers 1 <= |y^a_j| <= 2."""
-    problem = penetrating_punch(0.02, method=method, friction=("coulomb", mu),
+    problem = penetrating_punch(0.02, method=method, friction=Coulomb(mu),
                                 normals=normals)
     return with_random_tangential_multipliers(problem, seed=5)
 
@@ -65,8 +66,8 @@ def test_frictional_jacobian_taylor_3d(state, method, normals):
 def test_frictional_jacobian_taylor_3d_integration_and_basis(integration, basis):
     """The 3D frictional Taylor test (slip, Lagrange) with element-based integration and
     the dual basis: D and M keep their exact gradients on every kernel path."""
-    problem = penetrating_punch(0.02, method="lagrange", friction=("coulomb", 1.0),
-                                integration=integration, multipliers=basis)
+    problem = penetrating_punch(0.02, method="lagrange", friction=Coulomb(1.0),
+                                integration=integration, basis=basis)
     with_random_tangential_multipliers(problem, seed=5)
     put_every_active_node_in(problem, "slipping", "lagrange")
     assert_taylor_second_order(problem, seed=11)
@@ -98,7 +99,7 @@ def test_friction_patch_test_3d(shear_ratio, cell, slave):
 def test_tresca_and_penalty_friction_in_3d():
     """Tresca with bound 1.5: full slip with |y_j| = 1.5 along the slip; penalty Coulomb
     while sticking: y = eps_t s as vectors."""
-    problem = PATCH.sheared_blocks_3d((3, 7), "upper", ("tresca", 1.5), 0.02, 1.5)
+    problem = PATCH.sheared_blocks_3d((3, 7), "upper", Tresca(1.5), 0.02, 1.5)
     assert problem.solve().converged
     state = problem.friction_state()
     assert state["slipping"].all()
@@ -107,7 +108,7 @@ def test_tresca_and_penalty_friction_in_3d():
     problem.destroy()
     eps = 1e4
     shift = 0.0078
-    problem = PATCH.sheared_blocks_3d((3, 7), "upper", ("coulomb", 0.5), shift,
+    problem = PATCH.sheared_blocks_3d((3, 7), "upper", Coulomb(0.5), shift,
                                       shift * PATCH.SHEAR_MODULUS, method="penalty",
                                       penalty=1e5, c_t=eps)
     assert problem.solve().converged
@@ -123,7 +124,7 @@ def test_zero_friction_is_the_frictionless_problem_3d():
     from test_contact3d import solve_curved_punch
 
     frictionless = solve_curved_punch(MPI.COMM_SELF, steps=2)
-    frictional = solve_curved_punch(MPI.COMM_SELF, steps=2, friction=("coulomb", 0.0))
+    frictional = solve_curved_punch(MPI.COMM_SELF, steps=2, friction=Coulomb(0.0))
     assert frictional["iterations"] == frictionless["iterations"]
     np.testing.assert_allclose(frictional["pressure"], frictionless["pressure"], rtol=1e-10,
                                atol=1e-12 * np.max(frictionless["pressure"]))
@@ -180,7 +181,7 @@ def sheared_punch(comm, steps: int = 4) -> dict:
     from dolfinx_mortar.loading import solve_load_steps
 
     problem, press = curved_punch(comm, cell="hexahedron", ratio=(6, 5), curvature=0.1,
-                                  friction=("coulomb", 0.3))
+                                  friction=Coulomb(0.3))
     drive = problem.bcs[0].g.x.array.reshape(-1, 3)
 
     def apply_load(t):

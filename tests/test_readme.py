@@ -58,7 +58,7 @@ def test_readme_has_the_examples():
     sources = [source for _, source in BLOCKS]
     assert any("meshes.hertz(" in s and "traction" in s for s in sources)
     assert any("merge_meshes(" in s and "top_displacement" in s for s in sources)
-    assert any("create_box(" in s and "reaction_force(" in s and "coulomb" in s for s in sources)
+    assert any("create_box(" in s and "reaction_force(" in s and "Coulomb(" in s for s in sources)
     fences = re.findall(r"^```(\w*)\s*$", README.read_text(), flags=re.MULTILINE)
     openings = fences[0::2]
     assert all(lang in ("python", "sh", "text") for lang in openings), (
@@ -96,7 +96,7 @@ def run_block(line: int, source: str, directory: pathlib.Path) -> dict:
 
 
 def contact_problems(namespace: dict) -> list:
-    from dolfinx_mortar.problem import ContactProblem
+    from dolfinx_mortar import ContactProblem
 
     return [value for value in namespace.values() if isinstance(value, ContactProblem)]
 

@@ -16,11 +16,17 @@ import ufl
 from contact_warnings import warns_on_rank_zero
 from mpi4py import MPI
 
-from dolfinx_mortar import compat
-from dolfinx_mortar.bodies import merge_meshes
-from dolfinx_mortar.loading import LoadSteppingError, solve_load_steps
-from dolfinx_mortar.materials import Material, internal_work
-from dolfinx_mortar.problem import ContactPair, ContactProblem, ContactWarning
+from dolfinx_mortar import (
+    ContactPair,
+    ContactProblem,
+    ContactWarning,
+    LoadSteppingError,
+    Material,
+    compat,
+    internal_work,
+    merge_meshes,
+    solve_load_steps,
+)
 from dolfinx_mortar.surface import SurfaceError
 
 

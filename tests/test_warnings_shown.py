@@ -30,9 +30,8 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-from dolfinx_mortar.bodies import merge_meshes
-from dolfinx_mortar.materials import Material, internal_work
-from dolfinx_mortar.problem import ContactPair, ContactProblem, ContactWarning
+from dolfinx_mortar import (ContactPair, ContactProblem, ContactWarning, Material,
+                            internal_work, merge_meshes)
 
 mode = sys.argv[1]
 if mode in ("captured", "logging"):
