@@ -268,9 +268,11 @@ class ContactEquations:
         return self.system.mat
 
     def destroy(self) -> None:
-        """Free the PETSc objects this holds. Collective."""
+        """Free the PETSc objects this holds (the multiplier vectors too). Collective."""
         self.system.destroy()
         self.b_u.destroy()
+        for vector in self.multipliers + [v for c in self.row_coefficients for v in c.values()]:
+            vector.destroy()
         if self.friction is not None:
             self.friction.destroy()
 

@@ -51,7 +51,11 @@ class ContactNewton:
         self.automatic = automatic
         self.condenser = None
         self.snes: PETSc.SNES | None = None
-        self.setup()
+        try:
+            self.setup()
+        except BaseException:
+            self.destroy()  # the SNES holds the equations' callbacks
+            raise
 
     def setup(self) -> None:
         """Create and set up the SNES (and with condensation its preconditioner)."""
