@@ -193,91 +193,124 @@ def solve_load_steps(
         raise ValueError(f"num_steps must be >= 1, got {num_steps}")
     if predictor not in PREDICTORS:
         raise ValueError(f"predictor must be one of {PREDICTORS}, got {predictor!r}")
-    records: list[StepRecord] = []
     nominal = (end - start) / num_steps
-    if min_increment is None:
-        min_increment = 1e-6 * abs(nominal)
-    increment = nominal
-    t = start
-    cutbacks = 0
-    step = 0
+    steps = _Steps(problem, apply_load, start, end, nominal, max_cutbacks,
+                   1e-6 * abs(nominal) if min_increment is None else min_increment)
     penetration_check = getattr(problem, "check_penetration", None) if check_penetration else None
-    inverting: tuple[float, object] | None = None  # (t, Inversion) of the last inverting attempt
-    previous: tuple[float, dict] | None = None  # (t, state) of the accepted state before t
-    while t < end - 1e-12 * abs(end - start):
-        # never step over a point of the nominal grid, so cut-back steps grow back onto it
-        next_grid = start + math.ceil((t - start) / nominal * (1.0 + 1e-12) + 1e-9) * nominal
-        target = min(end, t + increment, next_grid)
+    while steps.t < end - 1e-12 * abs(end - start):
+        target = steps.next_target()
         saved = problem.save_state()
         apply_load(target)
-        if predictor == "extrapolate" and previous is not None:
-            problem.predict(previous[1], (target - t) / (t - previous[0]))
+        if predictor == "extrapolate" and steps.previous is not None:
+            before, state = steps.previous
+            problem.predict(state, (target - steps.t) / (steps.t - before))
         begin = time.perf_counter()
         report = problem.solve()
         elapsed = problem.comm.allreduce(time.perf_counter() - begin, op=MPI.MAX)
         if not report.converged:
-            problem.restore_state(saved)
-            cause = report.cause()
-            if report.inversion.count:
-                inverting = (target, report.inversion)
-            if cutbacks + 1 > max_cutbacks or 0.5 * increment < min_increment:
-                apply_load(t)
-                limit = (
-                    f"after {cutbacks} cut-backs"
-                    if cutbacks + 1 > max_cutbacks
-                    else f"with the increment down to {increment:.3g}: half of it would be "
-                    f"below min_increment = {min_increment:.3g}"
-                )
-                t_text, target_text = _distinct(t, target)
-                raise LoadSteppingError(
-                    f"no convergence from t = {t_text} to {target_text} {limit} "
-                    f"(last SNES reason {cause.removeprefix('SNES reason ')}). The last "
-                    f"converged step ended at t = {t_text}; the step to t = {target_text} "
-                    f"failed after {report.iterations} Newton iterations."
-                    + _diagnosis(problem, report, inverting, t - abs(nominal)),
-                    last_converged=t,
-                    failed=target,
-                    report=report,
-                )
-            cutbacks += 1
-            increment *= 0.5
-            _log(
-                problem,
-                f"step {step + 1}: t = {target:.6g} failed: {cause}; "
-                f"cut back to increment {increment:.4g}",
-            )
+            steps.cut_back(target, saved, report)
             continue
-        step += 1
-        if step > 1:  # saved is a converged state (the first step starts from a guess)
-            previous = (t, saved)
-        t = target
+        record = steps.accept(target, saved, report, elapsed)
+        if penetration_check is not None:
+            penetration_check()
+        if output is not None:
+            output.write(steps.t)
+        if on_step is not None:
+            on_step(record)
+        steps.grow_back()
+    return steps.records
+
+
+class _Steps:
+    """The state of :func:`solve_load_steps`: where t is, the increment, the cut-backs in a
+    row, the accepted steps and what a failure message needs."""
+
+    def __init__(self, problem, apply_load, start: float, end: float, nominal: float,
+                 max_cutbacks: int, min_increment: float):
+        self.problem, self.apply_load = problem, apply_load
+        self.start, self.end, self.nominal = start, end, nominal
+        self.max_cutbacks, self.min_increment = max_cutbacks, min_increment
+        self.t, self.increment, self.cutbacks, self.step = start, nominal, 0, 0
+        self.records: list[StepRecord] = []
+        self.inverting: tuple[float, object] | None = None
+        """(t, Inversion) of the last attempt that inverted elements."""
+        self.previous: tuple[float, dict] | None = None
+        """(t, state) of the accepted state before t."""
+
+    def next_target(self) -> float:
+        """The next t: one increment on, but never over a point of the nominal grid, so
+        that cut-back steps grow back onto it."""
+        start, nominal = self.start, self.nominal
+        next_grid = start + math.ceil((self.t - start) / nominal * (1.0 + 1e-12) + 1e-9) * nominal
+        return min(self.end, self.t + self.increment, next_grid)
+
+    def cut_back(self, target: float, saved: dict, report: SolveReport) -> None:
+        """Undo the failed step to ``target`` and halve the increment, or raise
+        :class:`LoadSteppingError` when no cut-back is left."""
+        problem, t = self.problem, self.t
+        problem.restore_state(saved)
+        cause = report.cause()
+        if report.inversion.count:
+            self.inverting = (target, report.inversion)
+        if self.cutbacks + 1 > self.max_cutbacks or 0.5 * self.increment < self.min_increment:
+            self.apply_load(t)
+            limit = (
+                f"after {self.cutbacks} cut-backs"
+                if self.cutbacks + 1 > self.max_cutbacks
+                else f"with the increment down to {self.increment:.3g}: half of it would be "
+                f"below min_increment = {self.min_increment:.3g}"
+            )
+            t_text, target_text = _distinct(t, target)
+            raise LoadSteppingError(
+                f"no convergence from t = {t_text} to {target_text} {limit} "
+                f"(last SNES reason {cause.removeprefix('SNES reason ')}). The last "
+                f"converged step ended at t = {t_text}; the step to t = {target_text} "
+                f"failed after {report.iterations} Newton iterations."
+                + _diagnosis(problem, report, self.inverting, t - abs(self.nominal)),
+                last_converged=t,
+                failed=target,
+                report=report,
+            )
+        self.cutbacks += 1
+        self.increment *= 0.5
+        _log(
+            problem,
+            f"step {self.step + 1}: t = {target:.6g} failed: {cause}; "
+            f"cut back to increment {self.increment:.4g}",
+        )
+
+    def accept(self, target: float, saved: dict, report: SolveReport,
+               elapsed: float) -> StepRecord:
+        """Move t to ``target``; the step's record, logged."""
+        self.step += 1
+        if self.step > 1:  # saved is a converged state (the first step starts from a guess)
+            self.previous = (self.t, saved)
+        self.t = target
         record = StepRecord(
-            step=step,
-            load=t,
+            step=self.step,
+            load=self.t,
             iterations=report.iterations,
             active=report.active,
             residual=report.residuals[-1] if report.residuals else float("nan"),
             wall_time=elapsed,
-            cutbacks=cutbacks,
+            cutbacks=self.cutbacks,
             report=report,
         )
-        records.append(record)
+        self.records.append(record)
         _log(
-            problem,
-            f"step {step:4d}  t = {t:.6g}  newton {report.iterations:2d}  "
+            self.problem,
+            f"step {self.step:4d}  t = {self.t:.6g}  newton {report.iterations:2d}  "
             f"active {report.active:5d}  residual {record.residual:.3e}  "
             f"time {elapsed:.3f} s",
         )
-        if penetration_check is not None:
-            penetration_check()
-        if output is not None:
-            output.write(t)
-        if on_step is not None:
-            on_step(record)
-        if increment < nominal and not cutbacks:
-            increment = min(2.0 * increment, nominal)
-        cutbacks = 0
-    return records
+        return record
+
+    def grow_back(self) -> None:
+        """After a step that converged at once, double a cut-back increment (up to the
+        nominal one); reset the cut-backs in a row."""
+        if self.increment < self.nominal and not self.cutbacks:
+            self.increment = min(2.0 * self.increment, self.nominal)
+        self.cutbacks = 0
 
 
 def _distinct(a: float, b: float) -> tuple[str, str]:
