@@ -23,14 +23,15 @@ unscaled c_n g~ row at c_n = 1e3 E/h has a rounding floor above any sensible abs
 tolerance).
 
 Its :meth:`~ContactEquations.residual` and :meth:`~ContactEquations.jacobian` are the
-SNES callbacks. It knows neither the SNES nor the
-:class:`~dolfinx_mortar.problem.ContactProblem` that owns it, so the SNES holding its
-methods makes no reference cycle.
+SNES callbacks (held by the SNES through a weak reference, :class:`SnesCallbacks`). It
+knows neither the SNES nor the :class:`~dolfinx_mortar.problem.ContactProblem` that owns
+it: no reference cycle.
 """
 
 from __future__ import annotations
 
 import time
+import weakref
 
 import dolfinx
 import dolfinx.fem.petsc
@@ -89,6 +90,7 @@ class ContactEquations:
         self.last_inversion = diagnostics.Inversion()
         """Inverted cells of the last iterate whose residual was refused (NaN)."""
         self.residual_history: list[float] = []
+        self.callbacks = SnesCallbacks(self)
 
     @property
     def tangential(self) -> list[PETSc.Vec]:
@@ -262,7 +264,7 @@ class ContactEquations:
         rebuilt, contact, bulk = self.system.assemble(
             self.multipliers, self.row_coefficients, self.multiplier_rows, tangential)
         if rebuilt and snes is not None:
-            snes.setJacobian(self.jacobian, self.system.mat)
+            snes.setJacobian(self.callbacks.jacobian, self.system.mat)
         self.timings["bulk assembly"] += bulk
         self.timings["mortar integration"] += contact
         return self.system.mat
@@ -275,6 +277,26 @@ class ContactEquations:
             vector.destroy()
         if self.friction is not None:
             self.friction.destroy()
+
+
+class SnesCallbacks:
+    """The residual, Jacobian and monitor of a :class:`ContactEquations` for an SNES,
+    through a weak reference: an SNES holds its callbacks, and petsc4py destroys a
+    parallel SNES whose wrapper was collected only at a collective clean-up
+    (``PETSc.garbage_cleanup``), so strong callbacks would keep the equations and their
+    vectors alive after the problem is gone."""
+
+    def __init__(self, equations: ContactEquations):
+        self._equations = weakref.ref(equations)
+
+    def residual(self, snes, x, b) -> None:
+        self._equations().residual(snes, x, b)
+
+    def jacobian(self, snes, x, A, P) -> None:
+        self._equations().jacobian(snes, x, A, P)
+
+    def monitor(self, snes, iteration, norm) -> None:
+        self._equations().monitor(snes, iteration, norm)
 
 
 def stiffness_scales(K: PETSc.Mat, J_form, interfaces, comm: MPI.Intracomm,

@@ -3,7 +3,8 @@
 :class:`ContactNewton` owns the SNES, its linear solver (with condensation its python
 preconditioner) and the iterate x; the SNES calls the residual and Jacobian of a
 :class:`~dolfinx_mortar.equations.ContactEquations`, which knows neither the solver nor
-the problem: no reference cycle through the SNES. It is what the enforcement strategies
+the problem, and the SNES holds it only weakly: no reference cycle through the SNES, and
+nothing kept alive by an SNES that outlives its problem. It is what the enforcement strategies
 drive (:class:`~dolfinx_mortar.enforcement.NewtonSolver`). Our PETSc options are in the
 global options database only while the solver is set up and while it solves
 (:func:`~dolfinx_mortar.solvers.inserted_options`).
@@ -63,10 +64,10 @@ class ContactNewton:
         equations = self.equations
 
         def callbacks() -> None:
-            snes.setFunction(equations.residual, self.b)
+            snes.setFunction(equations.callbacks.residual, self.b)
             equations.assemble_system()  # creates the matrix with its pattern
-            snes.setJacobian(equations.jacobian, equations.system.mat)
-            snes.setMonitor(equations.monitor)
+            snes.setJacobian(equations.callbacks.jacobian, equations.system.mat)
+            snes.setMonitor(equations.callbacks.monitor)
 
         def condensation(ksp: PETSc.KSP) -> None:
             if self.condensation:
