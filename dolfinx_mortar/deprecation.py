@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import importlib
 import os
 import sys
@@ -45,3 +46,24 @@ def moved(module: str, names: dict[str, str]):
         return getattr(importlib.import_module(where), new)
 
     return __getattr__
+
+
+def renamed_keywords(**renames: str):
+    """A decorator: keyword arguments renamed (``old="new"``) keep working for one release,
+    with a DeprecationWarning; giving both names is an error."""
+
+    def decorate(function):
+        @functools.wraps(function)
+        def wrapper(*args, **kwargs):
+            for old, new in renames.items():
+                if old in kwargs:
+                    if new in kwargs:
+                        raise TypeError(f"{function.__qualname__}: {old}= and {new}= name the "
+                                        f"same argument; pass {new}= only")
+                    warn_deprecated(f"{old}= is deprecated; use {new}=")
+                    kwargs[new] = kwargs.pop(old)
+            return function(*args, **kwargs)
+
+        return wrapper
+
+    return decorate

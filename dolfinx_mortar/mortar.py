@@ -40,6 +40,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from . import covered, kernels, search, stencils, surface
+from .deprecation import renamed_keywords
 from .dual import Dual, RowSubsetDual
 from .kernels import BasisOption, IntegrationOption, KernelOptions, NormalOption, PairQuantities
 from .layout import BlockIncidence, CooMatrix
@@ -98,7 +99,7 @@ class MortarInterface:
         V: P1 vector displacement space on a 2D (triangles, quadrilaterals) or
             3D (tetrahedra, hexahedra) mesh.
         facet_tags: facet meshtags naming the surfaces.
-        slave_marker, master_marker: tag values of the slave (non-mortar) and
+        slave, master: tag values of the slave (non-mortar) and
             master (mortar) surfaces.
         normals: ``averaged`` (default), ``slave`` or ``master`` normal field.
         integration: ``segment`` (default, exact) or ``element``.
@@ -117,12 +118,13 @@ class MortarInterface:
             to pair with linear elasticity).
     """
 
+    @renamed_keywords(slave_marker="slave", master_marker="master")
     def __init__(
         self,
         V: dolfinx.fem.FunctionSpace,
         facet_tags: dolfinx.mesh.MeshTags,
-        slave_marker: int,
-        master_marker: int,
+        slave: int,
+        master: int,
         *,
         normals: NormalOption = "averaged",
         integration: IntegrationOption = "segment",
@@ -150,8 +152,8 @@ class MortarInterface:
         self._evaluated_version = -1
         if num_gauss_points is not None and num_gauss_points < 1:
             raise ValueError("num_gauss_points must be >= 1")
-        self.slave = surface.extract_surface(V, facet_tags, slave_marker, "slave")
-        self.master = surface.extract_surface(V, facet_tags, master_marker, "master")
+        self.slave = surface.extract_surface(V, facet_tags, slave, "slave")
+        self.master = surface.extract_surface(V, facet_tags, master, "master")
         surface.check_disjoint(self.slave, self.master, self.comm)
         self.gdim = self.slave.reference_coordinates.shape[1]
         self._stencil_type = stencils.STENCILS[self.gdim]
@@ -708,14 +710,6 @@ class MortarInterface:
         terms += [[(stencil.mn(j, k, c), -z_pair[:, j]) for j in js]
                   for k in range(stencil.nm) for c in range(gdim)]
         return terms
-
-    def _rows(self, q: PairQuantities) -> np.ndarray:
-        """Old name of :meth:`contributing_pairs` (``q``: the last update's quantities)."""
-        return q.rows
-
-    def _force_coefficient_values(self, q: PairQuantities, rows: np.ndarray) -> np.ndarray:
-        """Old name of :meth:`force_coefficients` (``q``: the last update's quantities)."""
-        return self.force_coefficients(rows)
 
     def _assemble_gradients(self, matrix: CooMatrix, rows: np.ndarray, terms) -> PETSc.Mat:
         """``matrix`` assembled from the combined gradients of ``terms`` (a row of the

@@ -64,9 +64,9 @@ class ContactResults:
         q = interface.quantities
         if q is None:
             return np.zeros(interface.gdim), np.zeros(interface.gdim)
-        rows = interface._rows(q)
+        rows = interface.contributing_pairs()
         z_pair = interface.node_values(self.multipliers[k])[interface.pair_slave_nodes[rows]]
-        coefficients = interface._force_coefficient_values(q, rows)  # -Dn (slave), Mn (master)
+        coefficients = interface.force_coefficients(rows)  # -Dn (slave), Mn (master)
         ns = interface.stencil.ns
         slave = np.einsum("nj,njkc->c", z_pair, coefficients[:, :, :ns])
         master = np.einsum("nj,njlc->c", z_pair, coefficients[:, :, ns:])

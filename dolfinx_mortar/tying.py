@@ -19,6 +19,7 @@ import numpy as np
 from petsc4py import PETSc
 
 from . import compat
+from .deprecation import renamed_keywords
 from .layout import BlockLayout, csr_to_coo, dirichlet_dofs
 from .mortar import MortarInterface
 
@@ -30,7 +31,7 @@ class MeshTying:
         a, L: bilinear and linear UFL forms on the displacement space ``V``.
         u: the Function that receives the solution.
         bcs: Dirichlet conditions.
-        facet_tags, slave_marker, master_marker: the two sides of the interface.
+        facet_tags, slave, master: the two sides of the interface.
         basis: ``standard`` or ``dual`` multipliers.
         petsc_options: options for the KSP (default: direct solve with MUMPS).
         petsc_options_prefix: prefix for those options.
@@ -41,6 +42,7 @@ class MeshTying:
     holds), and its multiplier row is an identity row.
     """
 
+    @renamed_keywords(slave_marker="slave", master_marker="master")
     def __init__(
         self,
         a,
@@ -48,8 +50,8 @@ class MeshTying:
         u: dolfinx.fem.Function,
         bcs: list,
         facet_tags: dolfinx.mesh.MeshTags,
-        slave_marker: int,
-        master_marker: int,
+        slave: int,
+        master: int,
         *,
         basis: str = "standard",
         integration: str = "segment",
@@ -65,8 +67,8 @@ class MeshTying:
         self.interface = MortarInterface(
             self.V,
             facet_tags,
-            slave_marker,
-            master_marker,
+            slave,
+            master,
             normals="slave",
             integration=integration,
             basis=basis,

@@ -10,6 +10,7 @@ DeprecationWarning that names the user's line.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import os
 import pathlib
 import subprocess
@@ -116,3 +117,33 @@ def test_the_enforcement_protocol_has_a_public_name():
         assert enforcement.Solver is enforcement.NewtonSolver
     public = [name for name in dir(enforcement.NewtonSolver) if not name.startswith("_")]
     assert {"newton", "nodal_gaps", "update_contact"} <= set(public)
+
+
+def test_slave_marker_is_the_deprecated_name_of_slave(tmp_path):
+    """MortarInterface and MeshTying take ``slave=`` and ``master=`` as ContactPair does;
+    the old keywords still work with a warning at the caller's line."""
+    import dolfinx
+    import numpy as np
+    from mpi4py import MPI
+
+    from dolfinx_mortar import MeshTying, MortarInterface
+
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 2, 2)
+    fdim = mesh.topology.dim - 1
+    left = dolfinx.mesh.locate_entities_boundary(mesh, fdim, lambda x: np.isclose(x[0], 0.0))
+    right = dolfinx.mesh.locate_entities_boundary(mesh, fdim, lambda x: np.isclose(x[0], 1.0))
+    facets = np.concatenate([left, right])
+    order = np.argsort(facets)
+    values = np.concatenate([np.full(left.size, 1), np.full(right.size, 2)]).astype(np.int32)
+    tags = dolfinx.mesh.meshtags(mesh, fdim, facets[order], values[order])
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    by_name = MortarInterface(V, tags, slave=1, master=2)
+    with pytest.warns(DeprecationWarning, match="(slave|master)_marker= is deprecated") as caught:
+        old = MortarInterface(V, tags, slave_marker=1, master_marker=2)
+    assert all(w.filename == __file__ for w in caught)
+    assert np.array_equal(old.slave.facets, by_name.slave.facets)
+    assert np.array_equal(old.master.facets, by_name.master.facets)
+    with pytest.raises(TypeError, match="pass slave= only"):
+        MortarInterface(V, tags, slave=1, slave_marker=1, master=2)
+    signature = inspect.signature(MeshTying.__init__)
+    assert "slave" in signature.parameters and "slave_marker" not in signature.parameters
