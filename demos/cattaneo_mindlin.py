@@ -236,7 +236,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         "load": LOAD,
         "tangential_load": tangential_load,
         "normal_phase": args.normal_phase,
-        **cli.problem_options(args),
+        **cli.option_record(args),
         "c_n": problem.c_n,
         "c_t": problem.c_t,
         "refinement": args.refinement,

@@ -20,6 +20,8 @@ import pathlib
 from collections.abc import Mapping
 from typing import Any
 
+from dolfinx_mortar import Coulomb, Tresca
+
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
     """Keeps the module docstring's line breaks and appends "(default: ...)" to options."""
@@ -180,7 +182,7 @@ def problem_options(args: argparse.Namespace) -> dict[str, Any]:
         "integration": args.integration,
         "num_gauss_points": args.gauss_points,
         "normals": args.normals,
-        "multipliers": args.multipliers,
+        "basis": args.multipliers,
         "active_set": args.active_set,
         "c_n": args.c_n,
         "penalty": args.penalty,
@@ -192,12 +194,22 @@ def problem_options(args: argparse.Namespace) -> dict[str, Any]:
     }
 
 
-def friction_option(args: argparse.Namespace):
+def option_record(args: argparse.Namespace) -> dict[str, Any]:
+    """:func:`problem_options` as the demos' JSON summaries record them: plain values, the
+    basis under its command-line name, a friction law as [kind, value]."""
+    record = {("multipliers" if key == "basis" else key): value
+              for key, value in problem_options(args).items()}
+    law = record["friction"]
+    record["friction"] = None if law is None else [law.kind, law.value]
+    return record
+
+
+def friction_option(args: argparse.Namespace) -> Coulomb | Tresca | None:
     """ContactProblem's ``friction`` from ``--mu`` / ``--tresca`` (None: frictionless)."""
     if args.mu is not None:
-        return ("coulomb", args.mu)
+        return Coulomb(args.mu)
     if args.tresca is not None:
-        return ("tresca", args.tresca)
+        return Tresca(args.tresca)
     return None
 
 

@@ -64,7 +64,7 @@ DEMOS = pathlib.Path(__file__).resolve().parent
 if str(DEMOS) not in sys.path:  # loaded from its path (tests, benchmarks): find demos/cli.py
     sys.path.insert(0, str(DEMOS))
 import cli  # noqa: E402
-from cli import problem_options, write_summary  # noqa: E402
+from cli import option_record, problem_options, write_summary  # noqa: E402
 
 CASES = {
     # load P, E and nu of the lower body (the cylinder is always E = 200, nu = 0.3)
@@ -291,7 +291,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         "slave": args.slave,
         "material": args.material,
         "configuration": configuration,
-        **problem_options(args),
+        **option_record(args),
         "linear_solver": problem.linear_solver,
         "c_n": problem.c_n,
         "penalty_used": problem.penalty,

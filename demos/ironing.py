@@ -78,7 +78,7 @@ DEMOS = pathlib.Path(__file__).resolve().parent
 if str(DEMOS) not in sys.path:  # loaded from its path (tests, benchmarks): find demos/cli.py
     sys.path.insert(0, str(DEMOS))
 import cli  # noqa: E402
-from cli import problem_options, write_summary  # noqa: E402
+from cli import option_record, problem_options, write_summary  # noqa: E402
 
 DIE_E, BLOCK_E, NU = 6.896e9, 6.896e8, 0.32
 REFERENCE_PLATEAU = 3.38e8
@@ -267,7 +267,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     largest_force = max(np.abs(vertical).max(initial=0.0), np.abs(horizontal).max(initial=0.0))
     reached = t[-1] if t.size else 0.0
     summary = {
-        **problem_options(args),
+        **option_record(args),
         "slave": args.slave,
         "predictor": args.predictor,
         "E_die": args.E_die,

@@ -52,7 +52,7 @@ DEMOS = pathlib.Path(__file__).resolve().parent
 if str(DEMOS) not in sys.path:  # loaded from its path (tests, benchmarks): find demos/cli.py
     sys.path.insert(0, str(DEMOS))
 import cli  # noqa: E402
-from cli import problem_options, write_summary  # noqa: E402
+from cli import option_record, problem_options, write_summary  # noqa: E402
 
 E, NU, PRESSURE = 1000.0, 0.4, 10.0
 
@@ -170,7 +170,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         "material": args.material,
         "E_punch": args.E_punch,
         "E_foundation": args.E_foundation,
-        **{key: value for key, value in problem_options(args).items()},
+        **option_record(args),
         "c_n": problem.c_n,
         "penalty_used": problem.penalty,
         "num_ranks": comm.size,

@@ -63,7 +63,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-LAWS = ("coulomb", "tresca")
+from .options import FrictionLaw
 
 STICK_BAND = 1e-6
 """|v| within this fraction of the slip bound counts as slipping (see tangential_rows)."""
@@ -79,32 +79,6 @@ the plane, the star holding only the model's half of the node's facets)."""
 FRAME_DEGENERACY = 1e-3
 """3D: an active node whose normal is this close to parallel (|(I - n n^T) e|) to the
 interface's frame axis e has no usable tangent frame."""
-
-
-@dataclasses.dataclass(frozen=True)
-class FrictionLaw:
-    """``("coulomb", mu)``: slip bound mu z_j; ``("tresca", bound)``: a fixed bound (a pressure)."""
-
-    kind: str
-    value: float
-
-    @classmethod
-    def parse(cls, friction) -> FrictionLaw | None:
-        """A law from the user's ``friction`` (None, a (kind, value) pair or a FrictionLaw)."""
-        if friction is None or isinstance(friction, FrictionLaw):
-            return friction
-        try:
-            kind, value = friction
-        except (TypeError, ValueError):
-            raise ValueError(
-                f"friction must be None, ('coulomb', mu) or ('tresca', bound); got {friction!r}"
-            ) from None
-        if kind not in LAWS:
-            raise ValueError(f"unknown friction law {kind!r}; expected one of {LAWS}")
-        value = float(value)
-        if not value >= 0.0:
-            raise ValueError(f"the {kind} friction parameter must be >= 0, got {value}")
-        return cls(kind, value)
 
 
 @dataclasses.dataclass
@@ -138,7 +112,7 @@ def tangential_rows(law: FrictionLaw | None, weight: float, c_t: float, c_n: flo
     the gap is closed), as in Hueber, Stadler and Wohlmuth and Gitterle et al.; None
     (penalty): mu max(0, z_j).
 
-    One function for the stick, slip, turning and held cases: they overwrite the rows
+    It stays in one piece for the stick, slip, turning and held cases: they overwrite the rows
     of their nodes in turn from the same bound, direction and slip arrays.
     """
     n, m = y.shape
@@ -480,16 +454,6 @@ def coefficient_names(components: int) -> tuple[str, ...]:
             + tuple(f"slip_gap_{a}" for a in pairs) + tuple(f"slip_area_{a}" for a in pairs))
 
 
-def laws_per_pair(friction, num_pairs: int) -> list[FrictionLaw | None]:
-    """One law (or None) per pair from the user's ``friction``: one for all, or a list."""
-    if isinstance(friction, list):
-        if len(friction) != num_pairs:
-            raise ValueError(f"friction: got {len(friction)} laws for {num_pairs} contact pairs")
-        return [FrictionLaw.parse(f) for f in friction]
-    law = FrictionLaw.parse(friction)
-    return [law] * num_pairs
-
-
 def check_options(method: str, active_set: str, condensation: bool,
                   linear_solver: str) -> None:
     """Raise for the combinations friction does not support (yet)."""
@@ -510,7 +474,8 @@ class Friction:
     table.
 
     Args:
-        laws: one :class:`FrictionLaw` or None (frictionless) per pair.
+        laws: one law (:class:`~dolfinx_mortar.options.Coulomb` or
+            :class:`~dolfinx_mortar.options.Tresca`) or None (frictionless) per pair.
         interfaces: the pairs' mortar interfaces.
         u: the displacement; slips are measured from its value now until
             :meth:`start` is called again (at each solve).

@@ -222,8 +222,7 @@ class ContactProblem(ContactResults):
         self.friction: friction_rules.Friction | None = None
         """The frictional state (:class:`~dolfinx_mortar.friction.Friction`), if any."""
         if self.has_friction:
-            laws = [None if law is None else friction_rules.FrictionLaw(law.kind, law.value)
-                    for law in options.friction_laws(len(self.pairs))]
+            laws = options.friction_laws(len(self.pairs))
             self.friction = friction_rules.Friction(
                 laws, self.interfaces, self.u, self.c_t,
                 self.c_n if options.method == "lagrange" else None, scales.face)

@@ -269,8 +269,8 @@ def test_rigid_body_modes_are_the_kernel_of_elasticity(cell):
 
 
 def test_iterative_linear_solver_needs_dual_multipliers():
-    with pytest.raises(ValueError, match="multipliers='dual'"):
-        hertz(refinement=0, linear_solver="iterative", multipliers="standard")
+    with pytest.raises(ValueError, match="basis='dual'"):
+        hertz(refinement=0, linear_solver="iterative", basis="standard")
 
 
 @pytest.mark.parallel

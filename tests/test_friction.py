@@ -136,7 +136,6 @@ def put_every_active_node_in(problem, state: str, method: str) -> None:
     """Set pair 0's Coulomb mu so that every active node is in ``state`` ("slipping" or
     "sticking") with a margin of 2 from the kink: the bound mu (z_j - c_n g^_j)
     (penalty: mu z_j) against |v_j| (module docstring of friction); checks it."""
-    from dolfinx_mortar.friction import FrictionLaw
 
     problem.equations.residual(problem.snes, problem.x, problem.b)
     active = problem.active[0]
@@ -155,7 +154,7 @@ def put_every_active_node_in(problem, state: str, method: str) -> None:
     else:
         mu = 2.0 * comm.allreduce(float(np.max(v, initial=0.0)), op=MPI.MAX) / \
             comm.allreduce(float(np.min(z, initial=np.inf)), op=MPI.MIN)
-    problem.friction.laws[0] = FrictionLaw("coulomb", mu)
+    problem.friction.laws[0] = Coulomb(mu)
     problem.equations.residual(problem.snes, problem.x, problem.b)
     friction = problem.friction_state()
     counts = comm.allreduce(

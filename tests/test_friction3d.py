@@ -9,7 +9,7 @@ from test_contact3d import curved_punch, penetrating_punch
 from test_friction import load_demo, put_every_active_node_in, with_random_tangential_multipliers
 
 from dolfinx_mortar import Coulomb, Tresca
-from dolfinx_mortar.friction import FrictionLaw, tangent_frames
+from dolfinx_mortar.friction import tangent_frames
 
 
 def test_tangent_frames_are_orthonormal_with_exact_derivatives():
@@ -141,7 +141,7 @@ def test_disc_projection_rows_against_finite_differences():
     from dolfinx_mortar.friction import tangential_rows
 
     rng = np.random.default_rng(5)
-    law = FrictionLaw("coulomb", 0.4)
+    law = Coulomb(0.4)
     n = 40
     y = rng.standard_normal((n, 2))
     slip = 0.3 * rng.standard_normal((n, 2))

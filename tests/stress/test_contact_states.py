@@ -195,7 +195,7 @@ def test_initial_penetration(material, depth):
         ("linear", 0.5, {}),
         ("linear", 0.05, {"method": "penalty"}),
         ("linear", 0.05, {"method": "augmented"}),
-        ("linear", 0.05, {"multipliers": "standard"}),
+        ("linear", 0.05, {"basis": "standard"}),
         ("linear", 0.05, {"active_set": "fixed-point"}),
         ("neo-hookean", 0.005, {}),
         ("neo-hookean", 0.05, {"method": "penalty"}),
@@ -275,7 +275,7 @@ SEPARATION_OPTIONS = {
     "penalty": {"method": "penalty"},
     "augmented": {"method": "augmented"},
     "fixed-point": {"active_set": "fixed-point"},
-    "standard": {"multipliers": "standard"},
+    "standard": {"basis": "standard"},
     "quadrilateral": {"cell_type": "quadrilateral"},
     "slave-bottom": {"slave": "bottom"},
 }

@@ -284,7 +284,7 @@ CONFIGURATIONS = {
         2,
     ),
     "hertz-fixed-point": (common.hertz, {"active_set": "fixed-point"}, 2),
-    "hertz-standard-multipliers": (common.hertz, {"multipliers": "standard"}, 2),
+    "hertz-standard-multipliers": (common.hertz, {"basis": "standard"}, 2),
 }
 FAST_CONFIGURATIONS = ["hertz", "patch-linear", "patch-neo-hookean-punch"]
 
