@@ -46,8 +46,9 @@ def test_cleans_up():
 
 
 class _Problem:
-    """Like ContactProblem: a solver whose callback refers back to it (a reference
-    cycle), its options released by weakref.finalize when it is collected."""
+    """A user's solver whose callback refers back to it (a reference cycle: ContactProblem
+    avoids it with a weakly held callback object), its options released by
+    weakref.finalize when it is collected."""
 
     def __init__(self):
         self.snes = PETSc.SNES().create(PETSc.COMM_SELF)

@@ -286,7 +286,7 @@ def _integrate(X, has_neighbour, normals, integration, basis, points, weights, c
     the gradients of a few pair-level quantities (the segment limits low and
     length, the Jacobian J = |x_b - x_a|/2, n_a and n_b).
 
-    One long function on purpose: the hand-written chain rule reuses every
+    It stays in one piece on purpose: the hand-written chain rule reuses every
     intermediate array of the values (at each Gauss point of the batch), which
     helpers would have to pass around by the dozen.
     """

@@ -333,8 +333,7 @@ def pair_quantities(
     scalar_gradients: bool = False,
     factorized: bool = True,
 ) -> PairQuantities:
-    """Mortar contributions of every pair, with derivatives (see the module docstring;
-    most of this function's length is the documentation of its arguments).
+    """Mortar contributions of every pair, with derivatives (see the module docstring).
 
     Args:
         slave_x: (n, ns, 3) slave facet nodes (cyclic, counter-clockwise seen from
@@ -699,8 +698,9 @@ def _affine_integrals(S: Dual, Mp: Dual, topology: tuple, node_normals: Dual, xs
     with ``scalar_gradients``). A multiplier basis with derivatives of its own keeps the
     pair's variables throughout.
 
-    Long on purpose: the corner values, their plane derivatives and the chain share one
-    batch's intermediate arrays, which stay in cache only while they are not passed on.
+    It stays in one piece on purpose: the corner values, their plane derivatives and the
+    chain share one batch's intermediate arrays, which stay in cache only while they are
+    not passed on.
     """
     m, ns = S.shape[:2]
     nm = Mp.shape[1]
