@@ -192,11 +192,7 @@ class MortarInterface:
     def mean_slave_edge_length(self) -> float:
         """h: the mean length of the undeformed slave facets' edges, over all ranks (every
         edge of every facet; a 2D facet is its one edge). Collective."""
-        corners = self.slave.reference_coordinates[self.slave.facets]
-        if corners.shape[1] == 2:
-            lengths = np.linalg.norm(corners[:, 1] - corners[:, 0], axis=1)
-        else:
-            lengths = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2).ravel()
+        lengths = self.slave.edge_lengths()
         total = self.comm.allreduce(np.array([lengths.sum(), lengths.size]), op=MPI.SUM)
         return total[0] / total[1]
 

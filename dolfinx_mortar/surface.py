@@ -74,6 +74,14 @@ class ContactSurface:
         """2 (segments), 3 (triangles) or 4 (quadrilaterals)."""
         return self.facets.shape[1]
 
+    def edge_lengths(self) -> np.ndarray:
+        """The lengths of this rank's undeformed facet edges: every edge of every facet (a
+        2D facet is its one edge; an edge between two facets counts for each)."""
+        corners = self.reference_coordinates[self.facets]
+        if corners.shape[1] == 2:
+            return np.linalg.norm(corners[:, 1] - corners[:, 0], axis=1)
+        return np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2).ravel()
+
     def node_dofs(self) -> np.ndarray:
         """(num_nodes, gdim) global PETSc indices of the displacement dofs."""
         return self.node_global_blocks[:, None] * self.block_size + np.arange(self.block_size)
