@@ -30,8 +30,7 @@ from mortar_scaling import (
     two_strips,
 )
 
-from dolfinx_mortar import covered
-from dolfinx_mortar.mortar import MortarInterface
+from dolfinx_mortar import MortarInterface, covered
 
 _CASE = ["covered"]
 _WRAPPER = covered.CoveredStencil

@@ -47,8 +47,7 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_mortar import compat
-from dolfinx_mortar.materials import Material
+from dolfinx_mortar import Material, compat
 
 BLOCK_E, NU = 6.896e8, 0.32
 RADIUS, HALF_WIDTH, LOWEST, CENTRE_X = 0.75, 0.6, 4.2, 0.8

@@ -59,8 +59,7 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-from dolfinx_mortar import kernels
-from dolfinx_mortar.mortar import MortarInterface
+from dolfinx_mortar import MortarInterface, kernels
 
 DEFAULT_SIZES = (1000, 2000, 5000, 10000, 20000, 50000, 100000)
 SLAVE_TAG, MASTER_TAG = 1, 2

@@ -29,10 +29,14 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-from dolfinx_mortar.bodies import merge_meshes
-from dolfinx_mortar.loading import solve_load_steps
-from dolfinx_mortar.materials import Material, internal_work
-from dolfinx_mortar.problem import ContactPair, ContactProblem
+from dolfinx_mortar import (
+    ContactPair,
+    ContactProblem,
+    Material,
+    internal_work,
+    merge_meshes,
+    solve_load_steps,
+)
 
 VARIANTS = [
     # (label, punch cells, block cells, E punch, E block, slave)

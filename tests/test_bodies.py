@@ -10,10 +10,14 @@ import ufl
 from dolfinx.mesh import CellType, create_rectangle
 from mpi4py import MPI
 
-from dolfinx_mortar import compat
-from dolfinx_mortar.bodies import merge_meshes
-from dolfinx_mortar.materials import Material, internal_work
-from dolfinx_mortar.problem import ContactPair, ContactProblem
+from dolfinx_mortar import (
+    ContactPair,
+    ContactProblem,
+    Material,
+    compat,
+    internal_work,
+    merge_meshes,
+)
 from dolfinx_mortar.surface import SurfaceError, extract_surface
 
 PUNCH = [[-0.5, 1.0], [0.5, 1.5]]

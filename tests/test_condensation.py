@@ -16,9 +16,7 @@ import ufl
 from mpi4py import MPI
 from stress.common import gathered_displacement, hertz, patch_traction, relative_difference
 
-from dolfinx_mortar import meshes
-from dolfinx_mortar.materials import Material, internal_work
-from dolfinx_mortar.problem import ContactPair, ContactProblem
+from dolfinx_mortar import ContactPair, ContactProblem, Material, internal_work, meshes
 
 OPTIONS = {
     "semismooth": {"method": "lagrange"},
@@ -236,7 +234,7 @@ def test_rigid_body_modes_are_the_kernel_of_elasticity(cell):
     """The modes of each body are orthonormal and K m = 0 for the free elastic bodies."""
     from dolfinx.fem.petsc import assemble_matrix
 
-    from dolfinx_mortar.bodies import merge_meshes
+    from dolfinx_mortar import merge_meshes
     from dolfinx_mortar.solvers import rigid_body_modes
 
     comm = MPI.COMM_WORLD

@@ -10,9 +10,8 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from dolfinx_mortar import covered, meshes, stencils
+from dolfinx_mortar import MortarInterface, covered, meshes, stencils
 from dolfinx_mortar.kernels import KernelOptions
-from dolfinx_mortar.mortar import MortarInterface
 
 # -- pairs on a node table (no mesh) --------------------------------------------------------
 

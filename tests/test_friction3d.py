@@ -178,7 +178,7 @@ def sheared_punch(comm, steps: int = 4) -> dict:
     """The curved punch (test_contact3d) pressed 0.02 (t in [0, 1]) then its top moved
     0.02 along x (t in [1, 2]) with Coulomb mu = 0.3: a circular contact zone with a
     sticking centre and a slipping rim, then gross sliding."""
-    from dolfinx_mortar.loading import solve_load_steps
+    from dolfinx_mortar import solve_load_steps
 
     problem, press = curved_punch(comm, cell="hexahedron", ratio=(6, 5), curvature=0.1,
                                   friction=Coulomb(0.3))

@@ -19,8 +19,7 @@ from mpi4py import MPI
 from stress.common import relative_difference
 from test_contact3d import curved_punch
 
-from dolfinx_mortar import solvers
-from dolfinx_mortar.loading import LoadSteppingError, solve_load_steps
+from dolfinx_mortar import LoadSteppingError, solve_load_steps, solvers
 
 FAILING_OPTIONS = {
     "inner breakdown": {"condensed_ksp_type": "richardson",

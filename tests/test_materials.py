@@ -16,7 +16,7 @@ import pytest
 import ufl
 from mpi4py import MPI
 
-from dolfinx_mortar.materials import Material, internal_work
+from dolfinx_mortar import Material, internal_work
 
 E, NU = 6.896e8, 0.32  # the ironing block
 MU = E / (2 * (1 + NU))

@@ -7,9 +7,8 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from dolfinx_mortar import compat, meshes, search
+from dolfinx_mortar import MortarInterface, compat, meshes, search
 from dolfinx_mortar.layout import csr_to_coo
-from dolfinx_mortar.mortar import MortarInterface
 from dolfinx_mortar.surface import SurfaceError
 
 

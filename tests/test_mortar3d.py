@@ -8,9 +8,8 @@ import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from dolfinx_mortar.bodies import merge_meshes
+from dolfinx_mortar import MortarInterface, merge_meshes
 from dolfinx_mortar.layout import csr_to_coo
-from dolfinx_mortar.mortar import MortarInterface
 
 CELLS = ("tetrahedron", "hexahedron")
 GAP = 1e-3

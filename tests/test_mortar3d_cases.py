@@ -11,7 +11,7 @@ import ufl
 from mpi4py import MPI
 from test_mortar3d import GAP, interface, two_blocks
 
-from dolfinx_mortar.bodies import merge_meshes
+from dolfinx_mortar import merge_meshes
 from dolfinx_mortar.layout import csr_to_coo, dirichlet_dofs
 
 CELLS = ("tetrahedron", "hexahedron")

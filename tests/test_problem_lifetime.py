@@ -16,8 +16,15 @@ from mpi4py import MPI
 from petsc4py import PETSc
 from test_contact3d import curved_punch
 
-from dolfinx_mortar import ContactPair, ContactProblem, Coulomb, Material, meshes, solve_load_steps
-from dolfinx_mortar.materials import internal_work
+from dolfinx_mortar import (
+    ContactPair,
+    ContactProblem,
+    Coulomb,
+    Material,
+    internal_work,
+    meshes,
+    solve_load_steps,
+)
 
 CASES = [
     (2, {"linear_solver": "direct"}),

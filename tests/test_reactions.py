@@ -15,10 +15,14 @@ import numpy as np
 import pytest
 import ufl
 
-from dolfinx_mortar.bodies import merge_meshes
-from dolfinx_mortar.loading import solve_load_steps
-from dolfinx_mortar.materials import Material, internal_work
-from dolfinx_mortar.problem import ContactPair, ContactProblem
+from dolfinx_mortar import (
+    ContactPair,
+    ContactProblem,
+    Material,
+    internal_work,
+    merge_meshes,
+    solve_load_steps,
+)
 from dolfinx_mortar.reactions import reaction_force
 
 E, NU = 200.0, 0.3

@@ -11,9 +11,7 @@ import pytest
 import ufl
 from mpi4py import MPI
 
-from dolfinx_mortar import meshes
-from dolfinx_mortar.materials import Material, internal_work
-from dolfinx_mortar.problem import ContactPair, ContactProblem
+from dolfinx_mortar import ContactPair, ContactProblem, Material, internal_work, meshes
 
 CASES = [(2, "triangle"), (2, "quadrilateral"), (3, "tetrahedron"), (3, "hexahedron")]
 

@@ -10,7 +10,7 @@ import ufl
 from mpi4py import MPI
 from test_mortar3d import two_blocks
 
-from dolfinx_mortar.tying import MeshTying
+from dolfinx_mortar import MeshTying
 
 
 def linear_field(x):

@@ -117,9 +117,7 @@ def far_apart_scene(refinement: int, comm: MPI.Intracomm, lift_radii: float = 2.
     import dolfinx
     import ufl
 
-    from dolfinx_mortar import meshes
-    from dolfinx_mortar.materials import Material, internal_work
-    from dolfinx_mortar.problem import ContactPair
+    from dolfinx_mortar import ContactPair, Material, internal_work, meshes
 
     tagged = meshes.hertz(case="B", refinement=refinement, comm=comm)
     mesh, markers = tagged.mesh, tagged.markers
@@ -162,7 +160,7 @@ def far_apart_scene(refinement: int, comm: MPI.Intracomm, lift_radii: float = 2.
 
 def far_apart(refinement: int, repeats: int, steps: int = 2) -> dict:
     """ContactProblem with a pair that never comes near, against PlainNewton; interleaved."""
-    from dolfinx_mortar.problem import ContactProblem
+    from dolfinx_mortar import ContactProblem
 
     comm = MPI.COMM_WORLD
     scene = far_apart_scene(refinement, comm)

@@ -25,10 +25,17 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-from dolfinx_mortar import compat, meshes
-from dolfinx_mortar.loading import StepRecord, solve_load_steps
-from dolfinx_mortar.materials import Material, internal_work
-from dolfinx_mortar.problem import ContactPair, ContactProblem, SolveReport
+from dolfinx_mortar import (
+    ContactPair,
+    ContactProblem,
+    Material,
+    SolveReport,
+    StepRecord,
+    compat,
+    internal_work,
+    meshes,
+    solve_load_steps,
+)
 
 DEMOS = pathlib.Path(__file__).parents[2] / "demos"
 

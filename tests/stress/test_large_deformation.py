@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from dolfinx_mortar.loading import LoadSteppingError
+from dolfinx_mortar import LoadSteppingError
 
 from . import common
 from .common import record, record_outcome, relative_difference
