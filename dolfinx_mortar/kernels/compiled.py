@@ -1,0 +1,219 @@
+"""Compiled mortar kernels: C source compiled at first use through cffi, cached across processes.
+
+As FFCx compiles dolfinx's form kernels: the C source (``surface3.c`` next to this file),
+the compiler flags and the cffi and Python versions are hashed into a module name; the
+module is compiled once into a cache directory and loaded from there by every later
+process. The cache directory is ``$DOLFINX_MORTAR_CACHE_DIR`` if set, else
+``$XDG_CACHE_HOME/dolfinx_mortar``, else ``~/.cache/dolfinx_mortar``.
+
+Concurrent processes (MPI ranks starting on an empty cache) do not race: the first to take
+an exclusive ``fcntl`` lock on ``<module>.lock`` compiles into a temporary directory inside
+the cache and renames the extension module into place atomically; the others wait for the
+lock (at most ``DOLFINX_MORTAR_COMPILE_TIMEOUT`` seconds, default 600, then a RuntimeError
+naming the lock file) and find the module there. A reader never sees a half-written file.
+
+:func:`build_info` tells whether this process compiled the module (and how long it took)
+or loaded it from the cache.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import hashlib
+import importlib.machinery
+import importlib.util
+import logging
+import os
+import pathlib
+import platform
+import shutil
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+_LOG = logging.getLogger(__name__)
+_SOURCE_FILE = pathlib.Path(__file__).with_name("surface3.c")
+COMPILE_ARGS = ("-O2", "-ffp-contract=off", "-std=c99")
+_CDEF = """
+int surface3_triangles(long n, const double *xs, const double *xm, const double *nn,
+                       const unsigned char *crosspoint, int dual_basis, int rule,
+                       unsigned char *valid, double *overlap,
+                       double *D, double *M, double *Dn, double *Mn, double *gap, double *area,
+                       double *gD, double *gM, double *gDn, double *gMn, double *ggap,
+                       double *garea);
+"""
+NUM_VARIABLES = 27
+
+_module = None
+_info: dict = {}
+
+
+def cache_dir() -> pathlib.Path:
+    """Where compiled modules are kept (see the module docstring)."""
+    explicit = os.environ.get("DOLFINX_MORTAR_CACHE_DIR")
+    if explicit:
+        return pathlib.Path(explicit)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return pathlib.Path(base) / "dolfinx_mortar"
+
+
+def module_name(compile_args=COMPILE_ARGS) -> str:
+    """The module's name: a hash of everything its binary depends on."""
+    import cffi
+
+    key = "\n".join([_SOURCE_FILE.read_text(), _CDEF, " ".join(compile_args), cffi.__version__,
+                     sys.version, importlib.machinery.EXTENSION_SUFFIXES[0],
+                     platform.machine()])
+    return "_dolfinx_mortar_surface3_" + hashlib.sha256(key.encode()).hexdigest()[:24]
+
+
+def _compile(name: str, directory: pathlib.Path, compile_args) -> pathlib.Path:
+    """Compile the module into ``directory``; returns the extension file's path."""
+    import cffi
+
+    ffi = cffi.FFI()
+    ffi.cdef(_CDEF)
+    ffi.set_source(name, _SOURCE_FILE.read_text(), extra_compile_args=list(compile_args),
+                   libraries=["m"])
+    return pathlib.Path(ffi.compile(tmpdir=str(directory), verbose=False))
+
+
+def _load(name: str, path: pathlib.Path):
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _acquire(lock_file, timeout: float, path: pathlib.Path) -> None:
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            fcntl.flock(lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return
+        except BlockingIOError:
+            if time.monotonic() > deadline:
+                raise RuntimeError(
+                    f"waited {timeout:.0f} s for another process compiling the mortar kernels "
+                    f"(lock {path}); if no such process runs, remove the lock file") from None
+            time.sleep(0.05)
+
+
+def build(compile_args=COMPILE_ARGS, directory: pathlib.Path | None = None):
+    """The compiled module (``.ffi``, ``.lib``) for ``compile_args``: loaded from the cache,
+    compiled there first if absent. Returns (module, info)."""
+    directory = pathlib.Path(directory) if directory is not None else cache_dir()
+    name = module_name(compile_args)
+    target = directory / (name + importlib.machinery.EXTENSION_SUFFIXES[0])
+    start = time.perf_counter()
+    info = {"name": name, "path": str(target), "compiled": False}
+    if not target.exists():
+        directory.mkdir(parents=True, exist_ok=True)
+        timeout = float(os.environ.get("DOLFINX_MORTAR_COMPILE_TIMEOUT", "600"))
+        lock_path = directory / (name + ".lock")
+        with open(lock_path, "a") as lock_file:
+            _acquire(lock_file, timeout, lock_path)
+            try:
+                if not target.exists():  # nobody built it while we waited
+                    work = pathlib.Path(tempfile.mkdtemp(prefix=name + "-", dir=directory))
+                    try:
+                        built = _compile(name, work, compile_args)
+                        os.replace(built, target)  # atomic within one file system
+                    finally:
+                        shutil.rmtree(work, ignore_errors=True)
+                    info["compiled"] = True
+                    info["compile_seconds"] = time.perf_counter() - start
+                    _LOG.info("compiled %s in %.2f s", target, info["compile_seconds"])
+            finally:
+                fcntl.flock(lock_file, fcntl.LOCK_UN)
+    module = _load(name, target)
+    info["seconds"] = time.perf_counter() - start
+    return module, info
+
+
+def _get():
+    global _module
+    if _module is None:
+        module, info = build()
+        _info.update(info)
+        _module = module
+    return _module
+
+
+def build_info() -> dict:
+    """How this process got the module: ``compiled`` (bool), ``seconds`` (compile or load),
+    ``path``; empty before the first use."""
+    return dict(_info)
+
+
+def _pointer(ffi, array: np.ndarray | None, ctype: str):
+    if array is None:
+        return ffi.NULL
+    return ffi.cast(ctype, ffi.from_buffer(array))
+
+
+def pair_quantities_compiled(slave_x, master_x, slave_normals, *, basis: str = "standard",
+                             crosspoint=None, num_gauss_points: int | None = None,
+                             scalar_gradients: bool = False) -> dict:
+    """Segment-based mortar integrals of triangle pairs with averaged normals, compiled.
+
+    The same quantities as :func:`dolfinx_mortar.kernels.surface3.pair_quantities` with
+    ``normals="averaged"``, ``integration="segment"``, for ns = nm = 3, as plain arrays
+    (leading axis: the pair): values ``D``, ``M`` (n, 3, 3), ``Dn``, ``Mn`` (n, 3, 3, 3),
+    ``gap``, ``area`` (n, 3), ``valid`` (n,) bool, ``overlap`` (n,); full gradients over
+    the pair's 27 variables (slave xyz, master xyz, slave nodal normals) ``Dn_grad``,
+    ``Mn_grad`` (n, 3, 3, 3, 27), ``gap_grad``, ``area_grad`` (n, 3, 27), and with
+    ``scalar_gradients`` ``D_grad``, ``M_grad`` (n, 3, 3, 27). Zero where not valid.
+    """
+    if basis not in ("standard", "dual"):
+        raise ValueError(f"unknown multiplier basis {basis!r}; expected standard or dual")
+    rule = num_gauss_points or 7
+    if rule not in (1, 3, 7):
+        raise ValueError(f"3D segments take 1, 3 or 7 Gauss points per cell, got {rule}")
+    slave_x = np.ascontiguousarray(slave_x, dtype=np.float64)
+    master_x = np.ascontiguousarray(master_x, dtype=np.float64)
+    slave_normals = np.ascontiguousarray(slave_normals, dtype=np.float64)
+    n = slave_x.shape[0]
+    for name, array in (("slave_x", slave_x), ("master_x", master_x),
+                        ("slave_normals", slave_normals)):
+        if array.shape != (n, 3, 3):
+            raise ValueError(f"{name} must be (n, 3, 3) (triangles), got {array.shape}")
+    cross = None
+    if crosspoint is not None:
+        cross = np.ascontiguousarray(np.asarray(crosspoint, dtype=bool).reshape(n, 3),
+                                     dtype=np.uint8)
+    nv = NUM_VARIABLES
+    out = {
+        "valid": np.zeros(n, dtype=np.uint8), "overlap": np.empty(n),
+        "D": np.empty((n, 3, 3)), "M": np.empty((n, 3, 3)),
+        "Dn": np.empty((n, 3, 3, 3)), "Mn": np.empty((n, 3, 3, 3)),
+        "gap": np.empty((n, 3)), "area": np.empty((n, 3)),
+        "Dn_grad": np.empty((n, 3, 3, 3, nv)), "Mn_grad": np.empty((n, 3, 3, 3, nv)),
+        "gap_grad": np.empty((n, 3, nv)), "area_grad": np.empty((n, 3, nv)),
+    }
+    if scalar_gradients:
+        out["D_grad"] = np.empty((n, 3, 3, nv))
+        out["M_grad"] = np.empty((n, 3, 3, nv))
+    if n == 0:
+        out["valid"] = out["valid"].astype(bool)
+        return out
+    module = _get()
+    ffi, lib = module.ffi, module.lib
+    d = "double *"
+    status = lib.surface3_triangles(
+        n, _pointer(ffi, slave_x, d), _pointer(ffi, master_x, d),
+        _pointer(ffi, slave_normals, d), _pointer(ffi, cross, "unsigned char *"),
+        int(basis == "dual"), rule,
+        _pointer(ffi, out["valid"], "unsigned char *"), _pointer(ffi, out["overlap"], d),
+        *(_pointer(ffi, out[key], d) for key in ("D", "M", "Dn", "Mn", "gap", "area")),
+        _pointer(ffi, out.get("D_grad"), d), _pointer(ffi, out.get("M_grad"), d),
+        *(_pointer(ffi, out[key], d) for key in ("Dn_grad", "Mn_grad", "gap_grad",
+                                                  "area_grad")))
+    if status == -1:
+        raise ValueError(f"bad rule {rule}")
+    if status != 0:
+        raise RuntimeError(f"pair {-2 - status}: clip polygon with more than 8 vertices")
+    out["valid"] = out["valid"].astype(bool)
+    return out

@@ -1,0 +1,593 @@
+/* The 3D mortar kernel's hot path in C: segment-based integration of a triangle slave facet
+ * on a triangle master facet, averaged nodal normals, standard or dual multiplier basis,
+ * crosspoints, the 1, 3 or 7 point rule (dolfinx_mortar/kernels/surface3.py is the
+ * reference; its module docstring describes the method).
+ *
+ * Per pair, everything on the stack:
+ *  1. the auxiliary plane (x0, n0, e1, e2) and the slave and master nodes in plane
+ *     coordinates S, Mp, in forward-mode dual numbers over the pair's 27 variables (slave
+ *     xyz, master xyz, slave nodal normals), the values with numpy's operation order so that
+ *     the clip topology is decided on the same bits;
+ *  2. screening on values: facing test, separation test, Sutherland-Hodgman clip with vertex
+ *     labels, the clip area against the area tolerance;
+ *  3. the clip vertices recomputed from their labels, the fan cells around the vertex mean,
+ *     both (affine) inverse maps at the centre and the vertices, in dual numbers over the 12
+ *     plane coordinates (local variables);
+ *  4. the 28 integrals int N_a N_k N_i (slave, symmetric) and int N_a N_i Nm_l over the clip
+ *     polygon as the Gauss rule's sum (a fixed trilinear form T in the corner values of each
+ *     fan cell, every factor being affine on a cell); their local gradients from what
+ *     multiplies each corner value and each cell area (values), contracted once per point;
+ *  5. the local gradients chained to the 27 variables; D, M, Dn, Mn, the areas and the gaps
+ *     as linear combinations of the 28 integrals (the multiplier basis Phi_j = sum_a A_ja N_a
+ *     and the normal field n = sum_i N_i n_i), the nodal normals' direct contributions added.
+ */
+#include <math.h>
+#include <string.h>
+
+#define NL 12 /* local variables: S (3 x 2) then Mp (3 x 2) */
+#define NV 27 /* the pair's variables */
+#define MAXV 8
+#define SLOTS 10
+#define NI 28 /* integrals: 10 slave triples, 18 mixed */
+
+static const double FACING_TOLERANCE = 1e-8;
+static const double AREA_TOLERANCE = 1e-14;
+
+/* ---- dual numbers over the 27 pair variables (the auxiliary plane) ---- */
+typedef struct { double v, d[NV]; } d27;
+
+static inline d27 add27(d27 a, d27 b) { d27 r; r.v = a.v + b.v; for (int i = 0; i < NV; ++i) r.d[i] = a.d[i] + b.d[i]; return r; }
+static inline d27 sub27(d27 a, d27 b) { d27 r; r.v = a.v - b.v; for (int i = 0; i < NV; ++i) r.d[i] = a.d[i] - b.d[i]; return r; }
+static inline d27 mul27(d27 a, d27 b) { d27 r; r.v = a.v * b.v; for (int i = 0; i < NV; ++i) r.d[i] = a.d[i] * b.v + b.d[i] * a.v; return r; }
+static inline d27 scale27(d27 a, double s) { d27 r; r.v = a.v * s; for (int i = 0; i < NV; ++i) r.d[i] = a.d[i] * s; return r; }
+static inline d27 div27(d27 a, d27 b) {
+    d27 r; double inverse = 1.0 / b.v; r.v = a.v * inverse;
+    for (int i = 0; i < NV; ++i) r.d[i] = (a.d[i] - b.d[i] * r.v) * inverse;
+    return r;
+}
+static inline d27 sqrt27(d27 a) {
+    d27 r; r.v = sqrt(a.v); double f = r.v > 0.0 ? 0.5 / r.v : 0.0;
+    for (int i = 0; i < NV; ++i) r.d[i] = a.d[i] * f;
+    return r;
+}
+static inline d27 dot27(const d27 *a, const d27 *b) { return add27(add27(mul27(a[0], b[0]), mul27(a[1], b[1])), mul27(a[2], b[2])); }
+static inline void normalize27(const d27 *v, d27 *out) {
+    d27 length = sqrt27(dot27(v, v));
+    for (int c = 0; c < 3; ++c) out[c] = div27(v[c], length);
+}
+
+/* ---- dual numbers over the 12 plane coordinates ---- */
+typedef struct { double v, d[NL]; } dl;
+
+static inline dl addl(dl a, dl b) { dl r; r.v = a.v + b.v; for (int i = 0; i < NL; ++i) r.d[i] = a.d[i] + b.d[i]; return r; }
+static inline dl subl(dl a, dl b) { dl r; r.v = a.v - b.v; for (int i = 0; i < NL; ++i) r.d[i] = a.d[i] - b.d[i]; return r; }
+static inline dl mull(dl a, dl b) { dl r; r.v = a.v * b.v; for (int i = 0; i < NL; ++i) r.d[i] = a.d[i] * b.v + b.d[i] * a.v; return r; }
+static inline dl scalel(dl a, double s) { dl r; r.v = a.v * s; for (int i = 0; i < NL; ++i) r.d[i] = a.d[i] * s; return r; }
+static inline dl divl(dl a, dl b) {
+    dl r; double inverse = 1.0 / b.v; r.v = a.v * inverse;
+    for (int i = 0; i < NL; ++i) r.d[i] = (a.d[i] - b.d[i] * r.v) * inverse;
+    return r;
+}
+static inline dl cross2l(const dl *a, const dl *b) { return subl(mull(a[0], b[1]), mull(a[1], b[0])); }
+
+/* ---- quadrature: T_abd = sum_g w_g b_ga b_gb b_gd ---- */
+static int rule_tensor(int rule, double T[3][3][3]) {
+    double bary[7][3], weight[7];
+    int q;
+    if (rule == 1) {
+        q = 1; bary[0][0] = bary[0][1] = bary[0][2] = 1.0 / 3.0; weight[0] = 1.0;
+    } else if (rule == 3) {
+        q = 3;
+        for (int g = 0; g < 3; ++g) {
+            for (int a = 0; a < 3; ++a) bary[g][a] = (a == g) ? 2.0 / 3.0 : 1.0 / 6.0;
+            weight[g] = 1.0 / 3.0;
+        }
+    } else if (rule == 7) {
+        const double a1 = 0.059715871789770, b1 = 0.470142064105115;
+        const double a2 = 0.797426985353087, b2 = 0.101286507323456;
+        q = 7;
+        bary[0][0] = bary[0][1] = bary[0][2] = 1.0 / 3.0; weight[0] = 0.225;
+        for (int g = 0; g < 3; ++g) {
+            for (int a = 0; a < 3; ++a) {
+                bary[1 + g][a] = (a == g) ? a1 : b1;
+                bary[4 + g][a] = (a == g) ? a2 : b2;
+            }
+            weight[1 + g] = 0.132394152788506;
+            weight[4 + g] = 0.125939180544827;
+        }
+    } else {
+        return -1;
+    }
+    for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b)
+            for (int d = 0; d < 3; ++d) {
+                double s = 0.0;
+                for (int g = 0; g < q; ++g) s += weight[g] * bary[g][a] * bary[g][b] * bary[g][d];
+                T[a][b][d] = s;
+            }
+    return 0;
+}
+
+/* ---- screening (values, numpy's operation order) ---- */
+static double polygon_area3(const double P[3][2]) {
+    double t0 = P[0][0] * P[1][1] - P[1][0] * P[0][1];
+    double t1 = P[1][0] * P[2][1] - P[2][0] * P[1][1];
+    double t2 = P[2][0] * P[0][1] - P[0][0] * P[2][1];
+    return 0.5 * ((t0 + t1) + t2);
+}
+
+static int separated(const double S[3][2], const double Mp[3][2]) {
+    double size = 0.0;
+    for (int k = 0; k < 3; ++k)
+        for (int c = 0; c < 2; ++c) {
+            if (fabs(S[k][c]) > size) size = fabs(S[k][c]);
+            if (fabs(Mp[k][c]) > size) size = fabs(Mp[k][c]);
+        }
+    for (int pass = 0; pass < 2; ++pass) {
+        const double (*polygon)[2] = pass == 0 ? S : Mp;
+        const double (*other)[2] = pass == 0 ? Mp : S;
+        double area = polygon_area3(polygon);
+        double orientation = area > 0.0 ? 1.0 : (area < 0.0 ? -1.0 : 0.0);
+        for (int i = 0; i < 3; ++i) {
+            const double *start = polygon[i], *end = polygon[(i + 1) % 3];
+            double d0 = (end[0] - start[0]) * orientation, d1 = (end[1] - start[1]) * orientation;
+            double largest = -INFINITY;
+            for (int m = 0; m < 3; ++m) {
+                double side = d0 * (other[m][1] - start[1]) - d1 * (other[m][0] - start[0]);
+                if (side > largest) largest = side;
+            }
+            double gap = 1e-8 * size * hypot(d0, d1);
+            if (largest < -gap) return 1;
+        }
+    }
+    return 0;
+}
+
+typedef struct { double pos[SLOTS][2]; int label[SLOTS][3]; int edge[SLOTS][2]; int count; } polygon_t;
+
+static void emit(polygon_t *p, const double *position, const int *label, const int *edge) {
+    if (p->count < SLOTS) {
+        p->pos[p->count][0] = position[0]; p->pos[p->count][1] = position[1];
+        for (int c = 0; c < 3; ++c) p->label[p->count][c] = label[c];
+        p->edge[p->count][0] = edge[0]; p->edge[p->count][1] = edge[1];
+    }
+    p->count++;
+}
+
+/* Sutherland-Hodgman: the slave triangle clipped by the reversed (counter-clockwise)
+ * master triangle; labels (kind, i, j): 0 slave node i, 1 master node j, 2 slave edge i x
+ * master edge j (reversed numbering). Returns -1 if a polygon outgrew its slots. */
+static int clip(const double S[3][2], const double Mp[3][2], polygon_t *out) {
+    const int nm = 3;
+    double Mr[3][2];
+    for (int j = 0; j < 3; ++j) { Mr[j][0] = Mp[2 - j][0]; Mr[j][1] = Mp[2 - j][1]; }
+    polygon_t a, b;
+    polygon_t *cur = &a, *next = &b;
+    memset(cur, 0, sizeof(polygon_t));
+    for (int i = 0; i < 3; ++i) {
+        cur->pos[i][0] = S[i][0]; cur->pos[i][1] = S[i][1];
+        cur->label[i][1] = i; cur->edge[i][1] = i;
+    }
+    cur->count = 3;
+    for (int j = 0; j < nm; ++j) {
+        const double *start = Mr[j], *end = Mr[(j + 1) % nm];
+        double dir0 = end[0] - start[0], dir1 = end[1] - start[1];
+        memset(next, 0, sizeof(polygon_t));
+        int count = cur->count < SLOTS ? cur->count : SLOTS;
+        for (int k = 0; k < count; ++k) {
+            int following = (k + 1) % cur->count;
+            if (following >= SLOTS) return -1;
+            const double *p = cur->pos[k], *q = cur->pos[following];
+            double s_cur = dir0 * (p[1] - start[1]) - dir1 * (p[0] - start[0]);
+            double s_next = dir0 * (q[1] - start[1]) - dir1 * (q[0] - start[0]);
+            int in_cur = s_cur >= 0.0, in_next = s_next >= 0.0;
+            double denominator = (s_cur - s_next == 0.0) ? 1.0 : s_cur - s_next;
+            double t = s_cur / denominator;
+            double crossing[2] = {p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])};
+            const int *edge = cur->edge[k];
+            int crossing_label[3];
+            if (edge[0] == 0) {
+                crossing_label[0] = 2; crossing_label[1] = edge[1]; crossing_label[2] = j;
+            } else {
+                crossing_label[0] = 1; crossing_label[1] = 0;
+                crossing_label[2] = ((edge[1] + 1) % nm == j) ? j : (j + 1) % nm;
+            }
+            int along_clip[2] = {1, j};
+            if (!in_cur && in_next) emit(next, crossing, crossing_label, edge);
+            if (in_next) emit(next, q, cur->label[following], cur->edge[following]);
+            if (in_cur && !in_next) emit(next, crossing, crossing_label, along_clip);
+        }
+        polygon_t *swap = cur; cur = next; next = swap;
+    }
+    *out = *cur;
+    if (out->count > MAXV) out->count = MAXV;
+    return 0;
+}
+
+/* 0.5 sum_k (x_k y_k+1 - x_k+1 y_k) over 8 slots (zero beyond count), numpy's pairwise sum */
+static double padded_area(const polygon_t *p) {
+    double term[MAXV];
+    for (int k = 0; k < MAXV; ++k) {
+        if (k < p->count) {
+            int f = (k + 1) % p->count;
+            term[k] = p->pos[k][0] * p->pos[f][1] - p->pos[f][0] * p->pos[k][1];
+        } else {
+            term[k] = 0.0;
+        }
+    }
+    return 0.5 * (((term[0] + term[1]) + (term[2] + term[3])) + ((term[4] + term[5]) + (term[6] + term[7])));
+}
+
+/* ---- the integrals' index tables ---- */
+static int triple[NI][3];   /* functions (0-2 slave N, 3-5 master Nm) of each integral */
+static int slave_index[3][3][3];  /* int N_a N_k N_i -> integral */
+static int mixed_index[3][3][3];  /* int N_a N_i Nm_l -> integral ([a][i][l]) */
+static int pair_index[6][6];      /* unordered function pair -> sigma slot (-1: not needed) */
+static int tables_ready = 0;
+
+static void make_tables(void) {
+    int o = 0;
+    for (int a = 0; a < 3; ++a)
+        for (int k = a; k < 3; ++k)
+            for (int i = k; i < 3; ++i) {
+                triple[o][0] = a; triple[o][1] = k; triple[o][2] = i;
+                int idx[3] = {a, k, i};
+                for (int p = 0; p < 3; ++p)
+                    for (int q = 0; q < 3; ++q)
+                        for (int r = 0; r < 3; ++r)
+                            if (p != q && q != r && p != r)
+                                slave_index[idx[p]][idx[q]][idx[r]] = o;
+                slave_index[a][k][i] = slave_index[a][i][k] = slave_index[k][a][i] = o;
+                slave_index[k][i][a] = slave_index[i][a][k] = slave_index[i][k][a] = o;
+                ++o;
+            }
+    for (int a = 0; a < 3; ++a)
+        for (int i = a; i < 3; ++i)
+            for (int l = 0; l < 3; ++l) {
+                triple[o][0] = a; triple[o][1] = i; triple[o][2] = 3 + l;
+                mixed_index[a][i][l] = mixed_index[i][a][l] = o;
+                ++o;
+            }
+    int s = 0;
+    for (int u = 0; u < 6; ++u)
+        for (int v = 0; v < 6; ++v) pair_index[u][v] = -1;
+    for (int u = 0; u < 6; ++u)
+        for (int v = u; v < 6; ++v)
+            if (u < 3) { pair_index[u][v] = pair_index[v][u] = s++; }
+    tables_ready = 1;
+}
+#define NPAIRS 15
+
+/* ---- one pair ---- */
+typedef struct {
+    double *D, *M, *Dn, *Mn, *gap, *area;
+    double *gD, *gM, *gDn, *gMn, *ggap, *garea;
+} outputs_t;
+
+/* the auxiliary plane over the 27 variables: S[i][a], Mp[l][a] and the n0 value */
+static void auxiliary_plane(const double *xs, const double *xm, const double *nn,
+                            d27 S[3][2], d27 Mp[3][2], double n0v[3]) {
+    d27 X[3][3], Y[3][3], N[3][3];
+    for (int k = 0; k < 3; ++k)
+        for (int c = 0; c < 3; ++c) {
+            memset(&X[k][c], 0, sizeof(d27)); memset(&Y[k][c], 0, sizeof(d27));
+            memset(&N[k][c], 0, sizeof(d27));
+            X[k][c].v = xs[3 * k + c]; X[k][c].d[3 * k + c] = 1.0;
+            Y[k][c].v = xm[3 * k + c]; Y[k][c].d[9 + 3 * k + c] = 1.0;
+            N[k][c].v = nn[3 * k + c]; N[k][c].d[18 + 3 * k + c] = 1.0;
+        }
+    d27 x0[3], v[3], n0[3], edge[3], w[3], e[2][3];
+    for (int c = 0; c < 3; ++c) {
+        x0[c] = scale27(add27(add27(X[0][c], X[1][c]), X[2][c]), 1.0 / 3.0);
+        v[c] = scale27(add27(add27(N[0][c], N[1][c]), N[2][c]), 1.0 / 3.0);
+    }
+    normalize27(v, n0);
+    for (int c = 0; c < 3; ++c) edge[c] = sub27(X[1][c], X[0][c]);
+    d27 along = dot27(edge, n0);
+    for (int c = 0; c < 3; ++c) w[c] = sub27(edge[c], mul27(n0[c], along));
+    normalize27(w, e[0]);
+    e[1][0] = sub27(mul27(n0[1], e[0][2]), mul27(n0[2], e[0][1]));
+    e[1][1] = sub27(mul27(n0[2], e[0][0]), mul27(n0[0], e[0][2]));
+    e[1][2] = sub27(mul27(n0[0], e[0][1]), mul27(n0[1], e[0][0]));
+    for (int k = 0; k < 3; ++k) {
+        d27 os[3], om[3];
+        for (int c = 0; c < 3; ++c) { os[c] = sub27(X[k][c], x0[c]); om[c] = sub27(Y[k][c], x0[c]); }
+        for (int a = 0; a < 2; ++a) { S[k][a] = dot27(os, e[a]); Mp[k][a] = dot27(om, e[a]); }
+    }
+    for (int c = 0; c < 3; ++c) n0v[c] = n0[c].v;
+}
+
+/* N(p) of a triangle (corners C, local slots base + 2k + r) at the points P: values and
+ * gradients over the local variables, dxi = A^-1 (dp - sum_k N_k dC_k) */
+static void inverse_map(const double C[3][2], int base, const dl (*P)[2], int np,
+                        double N[][3], double dN[][3][NL]) {
+    double A00 = C[1][0] - C[0][0], A01 = C[2][0] - C[0][0];
+    double A10 = C[1][1] - C[0][1], A11 = C[2][1] - C[0][1];
+    double det = A00 * A11 - A01 * A10;
+    double I00 = A11 / det, I01 = -A01 / det, I10 = -A10 / det, I11 = A00 / det;
+    for (int p = 0; p < np; ++p) {
+        double o0 = P[p][0].v - C[0][0], o1 = P[p][1].v - C[0][1];
+        double xi0 = I00 * o0 + I01 * o1, xi1 = I10 * o0 + I11 * o1;
+        double Nk[3] = {1.0 - xi0 - xi1, xi0, xi1};
+        double rhs[2][NL];
+        for (int r = 0; r < 2; ++r) {
+            for (int s = 0; s < NL; ++s) rhs[r][s] = P[p][r].d[s];
+            for (int k = 0; k < 3; ++k) rhs[r][base + 2 * k + r] -= Nk[k];
+        }
+        for (int k = 0; k < 3; ++k) N[p][k] = Nk[k];
+        for (int s = 0; s < NL; ++s) {
+            double d0 = I00 * rhs[0][s] + I01 * rhs[1][s];
+            double d1 = I10 * rhs[0][s] + I11 * rhs[1][s];
+            dN[p][0][s] = -d0 - d1; dN[p][1][s] = d0; dN[p][2][s] = d1;
+        }
+    }
+}
+
+static void zero_pair(const outputs_t *o, long p) {
+    memset(o->D + 9 * p, 0, 9 * sizeof(double)); memset(o->M + 9 * p, 0, 9 * sizeof(double));
+    memset(o->Dn + 27 * p, 0, 27 * sizeof(double)); memset(o->Mn + 27 * p, 0, 27 * sizeof(double));
+    memset(o->gap + 3 * p, 0, 3 * sizeof(double)); memset(o->area + 3 * p, 0, 3 * sizeof(double));
+    memset(o->gDn + 27 * NV * p, 0, 27 * NV * sizeof(double));
+    memset(o->gMn + 27 * NV * p, 0, 27 * NV * sizeof(double));
+    memset(o->ggap + 3 * NV * p, 0, 3 * NV * sizeof(double));
+    memset(o->garea + 3 * NV * p, 0, 3 * NV * sizeof(double));
+    if (o->gD) memset(o->gD + 9 * NV * p, 0, 9 * NV * sizeof(double));
+    if (o->gM) memset(o->gM + 9 * NV * p, 0, 9 * NV * sizeof(double));
+}
+
+static int pair(long p, const double *xs, const double *xm, const double *nn,
+                const unsigned char *crosspoint, int dual_basis, const double T[3][3][3],
+                const outputs_t *o, unsigned char *valid, double *overlap) {
+    d27 S27[3][2], M27[3][2];
+    double n0[3];
+    auxiliary_plane(xs, xm, nn, S27, M27, n0);
+    double S[3][2], Mp[3][2];
+    for (int k = 0; k < 3; ++k)
+        for (int a = 0; a < 2; ++a) { S[k][a] = S27[k][a].v; Mp[k][a] = M27[k][a].v; }
+    /* facing: n0 . (master unit normal) < -tol */
+    double u[3], w[3], mn[3];
+    for (int c = 0; c < 3; ++c) { u[c] = xm[3 + c] - xm[c]; w[c] = xm[6 + c] - xm[c]; }
+    mn[0] = u[1] * w[2] - u[2] * w[1]; mn[1] = u[2] * w[0] - u[0] * w[2]; mn[2] = u[0] * w[1] - u[1] * w[0];
+    double length = sqrt((mn[0] * mn[0] + mn[1] * mn[1]) + mn[2] * mn[2]);
+    for (int c = 0; c < 3; ++c) mn[c] = mn[c] / length;
+    if (!(((n0[0] * mn[0] + n0[1] * mn[1]) + n0[2] * mn[2]) < -FACING_TOLERANCE)) return 0;
+    if (separated(S, Mp)) return 0;
+    polygon_t poly;
+    if (clip(S, Mp, &poly) != 0) return -1;
+    double slave_area = fabs(polygon_area3(S));
+    double clip_area = padded_area(&poly);
+    if (!(poly.count >= 3 && clip_area > AREA_TOLERANCE * slave_area)) return 0;
+    valid[p] = 1;
+    overlap[p] = clip_area / slave_area;
+    const int V = poly.count, np = V + 1;
+
+    /* clip vertices over the local variables, recomputed from the labels */
+    dl Sl[3][2], Ml[3][2];
+    for (int k = 0; k < 3; ++k)
+        for (int a = 0; a < 2; ++a) {
+            memset(&Sl[k][a], 0, sizeof(dl)); memset(&Ml[k][a], 0, sizeof(dl));
+            Sl[k][a].v = S[k][a]; Sl[k][a].d[2 * k + a] = 1.0;
+            Ml[k][a].v = Mp[k][a]; Ml[k][a].d[6 + 2 * k + a] = 1.0;
+        }
+    dl P[MAXV + 1][2]; /* 0: centre, 1..V: vertices */
+    for (int k = 0; k < V; ++k) {
+        int kind = poly.label[k][0], i = poly.label[k][1], j = poly.label[k][2];
+        if (kind == 0) {
+            P[1 + k][0] = Sl[i][0]; P[1 + k][1] = Sl[i][1];
+        } else if (kind == 1) {
+            int node = (3 - 1 - j + 3) % 3;
+            P[1 + k][0] = Ml[node][0]; P[1 + k][1] = Ml[node][1];
+        } else {
+            int e = ((3 - 2 - j) % 3 + 3) % 3;
+            const dl *a0 = Sl[i], *a1 = Sl[(i + 1) % 3], *b0 = Ml[e], *b1 = Ml[(e + 1) % 3];
+            dl da[2] = {subl(a1[0], a0[0]), subl(a1[1], a0[1])};
+            dl db[2] = {subl(b1[0], b0[0]), subl(b1[1], b0[1])};
+            dl ba[2] = {subl(b0[0], a0[0]), subl(b0[1], a0[1])};
+            dl denominator = cross2l(da, db);
+            dl numerator = cross2l(ba, db);
+            dl t;
+            if (denominator.v != 0.0) {
+                t = divl(numerator, denominator);
+            } else {
+                t = numerator;
+            }
+            P[1 + k][0] = addl(a0[0], mull(da[0], t));
+            P[1 + k][1] = addl(a0[1], mull(da[1], t));
+        }
+    }
+    double weight = 1.0 / V;
+    for (int a = 0; a < 2; ++a) {
+        P[0][a] = scalel(P[1][a], weight);
+        for (int k = 1; k < V; ++k) P[0][a] = addl(P[0][a], scalel(P[1 + k][a], weight));
+    }
+    dl W[MAXV];
+    for (int c = 0; c < V; ++c) {
+        const dl *v0 = P[1 + c], *v1 = P[1 + (c + 1) % V];
+        dl ea[2] = {subl(v0[0], P[0][0]), subl(v0[1], P[0][1])};
+        dl eb[2] = {subl(v1[0], P[0][0]), subl(v1[1], P[0][1])};
+        W[c] = scalel(cross2l(ea, eb), 0.5);
+    }
+    /* the six functions (slave N_0..2, master Nm_0..2) at the points */
+    double F[6][MAXV + 1], dF[6][MAXV + 1][NL];
+    {
+        double Nv[MAXV + 1][3], dNv[MAXV + 1][3][NL];
+        inverse_map(S, 0, (const dl (*)[2])P, np, Nv, dNv);
+        for (int q = 0; q < np; ++q)
+            for (int k = 0; k < 3; ++k) { F[k][q] = Nv[q][k]; memcpy(dF[k][q], dNv[q][k], sizeof(double) * NL); }
+        inverse_map(Mp, 6, (const dl (*)[2])P, np, Nv, dNv);
+        for (int q = 0; q < np; ++q)
+            for (int k = 0; k < 3; ++k) { F[3 + k][q] = Nv[q][k]; memcpy(dF[3 + k][q], dNv[q][k], sizeof(double) * NL); }
+    }
+    /* the integrals: values, what multiplies each cell area and each point value */
+    double I[NI], coefW[NI][MAXV], coef[NI][3][MAXV + 1];
+    memset(I, 0, sizeof I); memset(coef, 0, sizeof coef);
+    for (int c = 0; c < V; ++c) {
+        int corner[3] = {0, 1 + c, 1 + (c + 1) % V};
+        double f[6][3], sigma[NPAIRS][3];
+        for (int u = 0; u < 6; ++u)
+            for (int r = 0; r < 3; ++r) f[u][r] = F[u][corner[r]];
+        for (int u = 0; u < 3; ++u)
+            for (int v = u; v < 6; ++v) {
+                int s = pair_index[u][v];
+                for (int r = 0; r < 3; ++r) {
+                    double total = 0.0;
+                    for (int q = 0; q < 3; ++q)
+                        for (int t = 0; t < 3; ++t) total += T[r][q][t] * f[u][q] * f[v][t];
+                    sigma[s][r] = total;
+                }
+            }
+        double wc = W[c].v;
+        for (int o = 0; o < NI; ++o) {
+            int u1 = triple[o][0], u2 = triple[o][1], u3 = triple[o][2];
+            const double *s23 = sigma[pair_index[u2][u3]], *s13 = sigma[pair_index[u1][u3]],
+                         *s12 = sigma[pair_index[u1][u2]];
+            double tau = (f[u1][0] * s23[0] + f[u1][1] * s23[1]) + f[u1][2] * s23[2];
+            I[o] += wc * tau;
+            coefW[o][c] = tau;
+            for (int r = 0; r < 3; ++r) {
+                coef[o][0][corner[r]] += wc * s23[r];
+                coef[o][1][corner[r]] += wc * s13[r];
+                coef[o][2][corner[r]] += wc * s12[r];
+            }
+        }
+    }
+    /* local gradients of the integrals */
+    double dI[NI][NL];
+    for (int o = 0; o < NI; ++o) {
+        double g[NL] = {0};
+        for (int c = 0; c < V; ++c)
+            for (int s = 0; s < NL; ++s) g[s] += coefW[o][c] * W[c].d[s];
+        for (int slot = 0; slot < 3; ++slot) {
+            int u = triple[o][slot];
+            for (int q = 0; q < np; ++q) {
+                double k = coef[o][slot][q];
+                for (int s = 0; s < NL; ++s) g[s] += k * dF[u][q][s];
+            }
+        }
+        memcpy(dI[o], g, sizeof g);
+    }
+    /* chained to the 27 variables */
+    double chain[NL][NV];
+    for (int k = 0; k < 3; ++k)
+        for (int a = 0; a < 2; ++a) {
+            memcpy(chain[2 * k + a], S27[k][a].d, sizeof(double) * NV);
+            memcpy(chain[6 + 2 * k + a], M27[k][a].d, sizeof(double) * NV);
+        }
+    double gI[NI][NV];
+    for (int o = 0; o < NI; ++o) {
+        double g[NV] = {0};
+        for (int s = 0; s < NL; ++s) {
+            double k = dI[o][s];
+            for (int v = 0; v < NV; ++v) g[v] += k * chain[s][v];
+        }
+        memcpy(gI[o], g, sizeof g);
+    }
+    /* the multiplier basis Phi_j = sum_a A_ja N_a */
+    double A[3][3];
+    for (int j = 0; j < 3; ++j)
+        for (int a = 0; a < 3; ++a) A[j][a] = dual_basis ? (j == a ? 3.0 : -1.0) : (j == a ? 1.0 : 0.0);
+    if (crosspoint && (crosspoint[0] || crosspoint[1] || crosspoint[2])) {
+        int others = 0;
+        double shared[3] = {0.0, 0.0, 0.0};
+        for (int j = 0; j < 3; ++j) {
+            if (crosspoint[j]) for (int a = 0; a < 3; ++a) shared[a] += A[j][a];
+            else ++others;
+        }
+        double share = others > 0 ? 1.0 / others : 0.0;
+        for (int j = 0; j < 3; ++j)
+            for (int a = 0; a < 3; ++a) A[j][a] = crosspoint[j] ? 0.0 : A[j][a] + shared[a] * share;
+    }
+    /* J_jki = int Phi_j N_k N_i, K_jli = int Phi_j Nm_l N_i, with their gradients */
+    double J[3][3][3], K[3][3][3], gJ[3][3][3][NV], gK[3][3][3][NV];
+    for (int j = 0; j < 3; ++j)
+        for (int k = 0; k < 3; ++k)
+            for (int i = 0; i < 3; ++i) {
+                double js = 0.0, ks = 0.0, gj[NV] = {0}, gk[NV] = {0};
+                for (int a = 0; a < 3; ++a) {
+                    double c = A[j][a];
+                    if (c == 0.0) continue;
+                    int os = slave_index[a][k][i], om = mixed_index[a][i][k];
+                    js += c * I[os]; ks += c * I[om];
+                    for (int v = 0; v < NV; ++v) { gj[v] += c * gI[os][v]; gk[v] += c * gI[om][v]; }
+                }
+                J[j][k][i] = js; K[j][k][i] = ks;
+                memcpy(gJ[j][k][i], gj, sizeof gj); memcpy(gK[j][k][i], gk, sizeof gk);
+            }
+    /* the outputs */
+    double *D = o->D + 9 * p, *M = o->M + 9 * p, *Dn = o->Dn + 27 * p, *Mn = o->Mn + 27 * p;
+    double *gap = o->gap + 3 * p, *area = o->area + 3 * p;
+    double *gDn = o->gDn + 27 * NV * p, *gMn = o->gMn + 27 * NV * p;
+    double *ggap = o->ggap + 3 * NV * p, *garea = o->garea + 3 * NV * p;
+    double gD[3][3][NV];
+    for (int j = 0; j < 3; ++j) {
+        double area_j = 0.0, ga[NV] = {0};
+        for (int k = 0; k < 3; ++k) {
+            double d = 0.0, m = 0.0, gd[NV] = {0}, gm[NV] = {0};
+            for (int i = 0; i < 3; ++i) {
+                d += J[j][k][i]; m += K[j][k][i];
+                for (int v = 0; v < NV; ++v) { gd[v] += gJ[j][k][i][v]; gm[v] += gK[j][k][i][v]; }
+            }
+            D[3 * j + k] = d; M[3 * j + k] = m;
+            area_j += d;
+            for (int v = 0; v < NV; ++v) ga[v] += gd[v];
+            memcpy(gD[j][k], gd, sizeof gd);
+            if (o->gD) memcpy(o->gD + (9 * p + 3 * j + k) * NV, gd, sizeof gd);
+            if (o->gM) memcpy(o->gM + (9 * p + 3 * j + k) * NV, gm, sizeof gm);
+            for (int c = 0; c < 3; ++c) {
+                double dn = 0.0, mnv = 0.0;
+                double *gdn = gDn + ((3 * j + k) * 3 + c) * NV, *gmn = gMn + ((3 * j + k) * 3 + c) * NV;
+                for (int v = 0; v < NV; ++v) { gdn[v] = 0.0; gmn[v] = 0.0; }
+                for (int i = 0; i < 3; ++i) {
+                    double ni = nn[3 * i + c];
+                    dn += ni * J[j][k][i]; mnv += ni * K[j][k][i];
+                    for (int v = 0; v < NV; ++v) { gdn[v] += ni * gJ[j][k][i][v]; gmn[v] += ni * gK[j][k][i][v]; }
+                    gdn[18 + 3 * i + c] += J[j][k][i];
+                    gmn[18 + 3 * i + c] += K[j][k][i];
+                }
+                Dn[(3 * j + k) * 3 + c] = dn; Mn[(3 * j + k) * 3 + c] = mnv;
+            }
+        }
+        area[j] = area_j;
+        memcpy(garea + j * NV, ga, sizeof ga);
+    }
+    /* gap_j = sum_lc Mn_jlc xm_lc - sum_kc Dn_jkc xs_kc */
+    for (int j = 0; j < 3; ++j) {
+        double gm = 0.0, gs = 0.0, g[NV] = {0};
+        for (int k = 0; k < 3; ++k)
+            for (int c = 0; c < 3; ++c) {
+                int e = (3 * j + k) * 3 + c;
+                gm += Mn[e] * xm[3 * k + c];
+                gs += Dn[e] * xs[3 * k + c];
+                for (int v = 0; v < NV; ++v) g[v] += gMn[e * NV + v] * xm[3 * k + c] - gDn[e * NV + v] * xs[3 * k + c];
+                g[3 * k + c] -= Dn[e];
+                g[9 + 3 * k + c] += Mn[e];
+            }
+        gap[j] = gm - gs;
+        memcpy(ggap + j * NV, g, sizeof g);
+    }
+    return 1;
+}
+
+/* n pairs: xs, xm, nn (n, 3, 3); crosspoint (n, 3) or NULL; rule 1, 3 or 7; outputs as
+ * surface3.pair_quantities (gradients (..., 27)); gD, gM may be NULL. Returns 0, or -1 for a
+ * bad rule, or -2 - p if pair p's clip polygon outgrew its slots. */
+int surface3_triangles(long n, const double *xs, const double *xm, const double *nn,
+                       const unsigned char *crosspoint, int dual_basis, int rule,
+                       unsigned char *valid, double *overlap,
+                       double *D, double *M, double *Dn, double *Mn, double *gap, double *area,
+                       double *gD, double *gM, double *gDn, double *gMn, double *ggap,
+                       double *garea) {
+    double T[3][3][3];
+    if (rule_tensor(rule, T) != 0) return -1;
+    if (!tables_ready) make_tables();
+    outputs_t o = {D, M, Dn, Mn, gap, area, gD, gM, gDn, gMn, ggap, garea};
+    for (long p = 0; p < n; ++p) {
+        valid[p] = 0;
+        overlap[p] = 0.0;
+        int status = pair(p, xs + 9 * p, xm + 9 * p, nn + 9 * p,
+                          crosspoint ? crosspoint + 3 * p : NULL, dual_basis, T, &o, valid, overlap);
+        if (status < 0) return -2 - (int)p;
+        if (status == 0) zero_pair(&o, p);
+    }
+    return 0;
+}
