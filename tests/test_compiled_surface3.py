@@ -1,0 +1,276 @@
+"""The compiled 3D triangle kernel (kernels/surface3.c through kernels/compiled.py) against the
+numpy kernel (kernels/surface3.pair_quantities, factorized=False): values and every gradient to
+1e-13 of each output's largest entry, on random and mesh configurations; a Taylor test of its
+gradients; and the compile cache (one compile per cache, none in a second process, three
+processes on an empty cache)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+from test_kernel_surface3_speedpath import random_pairs
+
+from dolfinx_mortar.kernels import compiled, surface3
+
+TOLERANCE = 1e-13
+VALUES = ("D", "M", "Dn", "Mn", "gap", "area")
+GRADIENTS = ("Dn", "Mn", "gap", "area", "D", "M")
+
+
+def reference(slave, master, nodal, **options):
+    q = surface3.pair_quantities(slave, master, nodal, factorized=False, scalar_gradients=True,
+                                 **options)
+    values = {"D": q.D, "M": q.M, "Dn": q.Dn.value, "Mn": q.Mn.value, "gap": q.gap.value,
+              "area": q.area.value, "valid": q.valid, "overlap": q.overlap}
+    grads = {"Dn": q.Dn.grad, "Mn": q.Mn.grad, "gap": q.gap.grad, "area": q.area.grad,
+             "D": q.D_dual.grad, "M": q.M_dual.grad}
+    return values, grads
+
+
+def assert_agree(slave, master, nodal, **options):
+    """The compiled kernel equals the numpy kernel; returns the number of valid pairs."""
+    values, grads = reference(slave, master, nodal, **options)
+    got = compiled.pair_quantities_compiled(slave, master, nodal, scalar_gradients=True,
+                                            **options)
+    np.testing.assert_array_equal(got["valid"], values["valid"])
+    np.testing.assert_allclose(got["overlap"], values["overlap"], rtol=0, atol=TOLERANCE)
+    # the gap is sum Mn xm - sum Dn xs: measured against its terms (1e3 times the gap on a
+    # flat interface with a gap of 1e-3: either kernel's rounding of Mn and Dn shows there)
+    terms = (np.abs(values["Mn"] * master[:, None]).sum(axis=(-1, -2))
+             + np.abs(values["Dn"] * slave[:, None]).sum(axis=(-1, -2)))
+    for name in VALUES:
+        scale = np.abs(values[name]).max(initial=0.0)
+        if name == "gap":
+            scale = max(scale, terms.max(initial=0.0))
+        error = np.abs(got[name] - values[name]).max(initial=0.0)
+        assert error <= TOLERANCE * scale or error == 0.0, (name, error, scale)
+    for name in GRADIENTS:
+        scale = np.abs(grads[name]).max(initial=0.0)
+        error = np.abs(got[name + "_grad"] - grads[name]).max(initial=0.0)
+        assert error <= TOLERANCE * scale or error == 0.0, (name + "_grad", error, scale)
+    return int(values["valid"].sum())
+
+
+@pytest.mark.parametrize("basis", ["standard", "dual"])
+@pytest.mark.parametrize("crosspoints", [False, True])
+@pytest.mark.parametrize("rule", [1, 3, 7])
+def test_random_pairs(basis, crosspoints, rule):
+    """Overlapping, partly overlapping and disjoint pairs, rotated (clip polygons of 3 to 6
+    vertices)."""
+    slave, master, nodal, crosspoint = random_pairs(600, seed=21)
+    valid = assert_agree(slave, master, nodal, basis=basis, num_gauss_points=rule,
+                         crosspoint=crosspoint if crosspoints else None)
+    assert 200 < valid < 600
+
+
+def test_not_facing():
+    """The master turned over (its nodes reversed) faces the same way as the slave."""
+    slave, master, nodal, _ = random_pairs(200, seed=22)
+    got = compiled.pair_quantities_compiled(slave, master[:, ::-1], nodal)
+    assert not got["valid"].any()
+    assert not np.abs(got["Dn_grad"]).any() and not np.abs(got["gap"]).any()
+    assert assert_agree(slave, master[:, ::-1], nodal) == 0
+    assert assert_agree(slave, master, nodal) > 50
+
+
+def flat_pair(master_xy, z=0.1):
+    """The unit slave triangle in z = 0 (outward normal +z) and a master triangle at height z
+    facing down (clockwise seen from +z)."""
+    slave = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    master = np.column_stack([master_xy, np.full(3, z)])
+    return slave, master
+
+
+def test_tiny_overlaps_near_the_area_tolerance():
+    """A master corner reaching into the slave triangle by areas from 1e-17 to 1e-11 of it:
+    both kernels keep or drop the same pairs (the tolerance is 1e-14)."""
+    slaves, masters = [], []
+    for depth in np.geomspace(1e-9, 1e-5, 120):
+        # a master triangle (clockwise from +z) whose corner pokes depth into the slave's
+        # corner region near (0.5, 0): overlap area ~ depth^2
+        xy = np.array([[0.5, depth], [0.5 + 1.0, -1.0], [0.5 - 1.0, -1.0]])
+        slave, master = flat_pair(xy)
+        slaves.append(slave)
+        masters.append(master)
+    slave, master = np.array(slaves), np.array(masters)
+    nodal = np.broadcast_to([0.0, 0.0, 1.0], slave.shape).copy()
+    values, _ = reference(slave, master, nodal)
+    ratio = values["overlap"]
+    assert values["valid"].any() and not values["valid"].all()
+    assert ratio[values["valid"]].min() < 1e-12
+    for basis in ("standard", "dual"):
+        assert_agree(slave, master, nodal, basis=basis)
+
+
+def test_master_vertices_on_slave_edges():
+    """Master vertices exactly on slave edges and slave vertices, master edges along slave
+    edges: degenerate clip polygons, decided on the same bits as numpy."""
+    rng = np.random.default_rng(23)
+    configurations = [
+        [[0.5, 0.0], [0.5, 1.0], [1.5, 0.0]],  # a vertex on an edge, an edge through a vertex
+        [[0.0, 0.0], [0.0, 1.0], [1.0, 0.0]],  # the slave itself, reversed
+        [[0.25, 0.0], [0.0, 0.5], [1.0, 0.5]],  # two vertices on two edges
+        [[0.5, 0.5], [0.5, -0.5], [-0.5, 0.5]],  # a vertex on the hypotenuse
+        [[0.0, 0.0], [0.5, 0.5], [1.0, 0.0]],  # a shared vertex and edge
+    ]
+    slaves, masters, normals = [], [], []
+    for xy in configurations:
+        xy = np.array(xy, float)
+        a, b = xy[1] - xy[0], xy[2] - xy[0]
+        if a[0] * b[1] - a[1] * b[0] > 0:
+            xy = xy[::-1]  # clockwise seen from +z: the master faces down
+        for z in (0.1, -0.05):
+            slave, master = flat_pair(xy, z)
+            for tilt in (0.0, 0.1):
+                nodal = np.array([0.0, 0, 1]) + tilt * rng.uniform(-1, 1, (3, 3))
+                slaves.append(slave)
+                masters.append(master)
+                normals.append(nodal / np.linalg.norm(nodal, axis=1, keepdims=True))
+    slave, master, nodal = np.array(slaves), np.array(masters), np.array(normals)
+    crosspoint = rng.random((slave.shape[0], 3)) < 0.3
+    for basis in ("standard", "dual"):
+        assert assert_agree(slave, master, nodal, basis=basis) > 10
+        assert_agree(slave, master, nodal, basis=basis, crosspoint=crosspoint)
+
+
+@pytest.mark.parametrize("sizes", [(3, 4), (4, 4)])
+def test_mesh_interface_pairs(sizes, monkeypatch):
+    """The candidate pairs the interface hands the numpy kernel on two tetrahedral blocks
+    (flat: nodes on each other's edges; bent)."""
+    from test_mortar3d import bent_displacement, interface, two_blocks
+
+    calls = []
+    original = surface3.pair_quantities
+
+    def recording(slave_x, master_x, slave_normals, **options):
+        calls.append((slave_x, master_x, slave_normals, options))
+        return original(slave_x, master_x, slave_normals, **options)
+
+    monkeypatch.setattr(surface3, "pair_quantities", recording)
+    tagged = two_blocks("tetrahedron", *sizes)
+    for u in (None, bent_displacement(tagged)):
+        mortar = interface(tagged, u, basis="dual")
+        mortar.destroy()
+    monkeypatch.undo()  # the comparison calls the numpy kernel itself
+    assert calls, "the interface did not call surface3.pair_quantities"
+    checked = False
+    for slave, master, nodal, options in calls:
+        if (options.get("normals", "averaged") != "averaged" or slave.shape[1] != 3
+                or options.get("integration", "segment") != "segment"):
+            continue
+        checked = True
+        for basis in ("standard", "dual"):
+            assert assert_agree(slave, master, nodal, basis=basis,
+                                num_gauss_points=options.get("num_gauss_points"),
+                                crosspoint=options.get("crosspoint")) > 10
+    assert checked
+
+
+@pytest.mark.parametrize("basis", ["standard", "dual"])
+def test_taylor(basis):
+    """f(x + h d) - f(x) - h f'(x) d = O(h^2) for the compiled gradients, several pairs."""
+    slave, master, nodal, crosspoint = random_pairs(40, seed=24)
+    keep = compiled.pair_quantities_compiled(slave, master, nodal)["overlap"] > 0.2
+    slave, master, nodal, crosspoint = slave[keep], master[keep], nodal[keep], crosspoint[keep]
+    n = slave.shape[0]
+    assert n >= 5
+    x = np.concatenate([slave.reshape(n, 9), master.reshape(n, 9), nodal.reshape(n, 9)], axis=1)
+    direction = np.random.default_rng(25).uniform(-1, 1, x.shape)
+    names = ("D", "M", "Dn", "Mn", "gap", "area")
+
+    def evaluate(values):
+        return compiled.pair_quantities_compiled(
+            values[:, :9].reshape(n, 3, 3), values[:, 9:18].reshape(n, 3, 3),
+            values[:, 18:].reshape(n, 3, 3), basis=basis, crosspoint=crosspoint,
+            scalar_gradients=True)
+
+    base = evaluate(x)
+    flat = np.concatenate([base[name].reshape(n, -1) for name in names], axis=1)
+    gradient = np.concatenate([base[name + "_grad"].reshape(n, -1, 27) for name in names],
+                              axis=1)
+    predicted = np.einsum("nov,nv->no", gradient, direction)
+    assert np.abs(predicted).max() > 1e-3
+    steps = np.array([1e-3, 5e-4, 2.5e-4, 1.25e-4])
+    remainders = []
+    for h in steps:
+        moved = evaluate(x + h * direction)
+        assert moved["valid"].all()
+        shifted = np.concatenate([moved[name].reshape(n, -1) for name in names], axis=1)
+        remainders.append(np.abs(shifted - flat - h * predicted).max())
+    slopes = np.diff(np.log(remainders)) / np.diff(np.log(steps))
+    assert np.all(np.abs(slopes - 2.0) < 0.1), slopes
+
+
+# -- the compile cache -------------------------------------------------------------------------
+
+PROBE = textwrap.dedent("""
+    import json, sys
+    sys.path.insert(0, {tests!r})
+    import numpy as np
+    from test_kernel_surface3_speedpath import random_pairs
+    from dolfinx_mortar.kernels import compiled
+    slave, master, nodal, _ = random_pairs(50, seed=1)
+    out = compiled.pair_quantities_compiled(slave, master, nodal)
+    info = compiled.build_info()
+    print(json.dumps({{"compiled": info["compiled"], "seconds": info["seconds"],
+                      "valid": int(out["valid"].sum()), "area": float(out["area"].sum())}}))
+""")
+
+
+def probe(cache, count=1):
+    """Start ``count`` processes at once on the cache directory; their reports."""
+    import json
+
+    environment = dict(os.environ, DOLFINX_MORTAR_CACHE_DIR=str(cache))
+    script = PROBE.format(tests=os.path.dirname(os.path.abspath(__file__)))
+    processes = [subprocess.Popen([sys.executable, "-c", script], env=environment,
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                 for _ in range(count)]
+    reports = []
+    for process in processes:
+        stdout, stderr = process.communicate(timeout=600)
+        assert process.returncode == 0, stderr
+        reports.append(json.loads(stdout.strip().splitlines()[-1]))
+    return reports
+
+
+def test_cache_compiles_once(tmp_path):
+    (first,) = probe(tmp_path)
+    assert first["compiled"] and first["valid"] > 10
+    modules = list(tmp_path.glob("_dolfinx_mortar_surface3_*.so"))
+    assert len(modules) == 1
+    assert not [p for p in tmp_path.iterdir() if p.is_dir()]  # no build directory left
+    (second,) = probe(tmp_path)
+    assert not second["compiled"]
+    assert second["area"] == first["area"]
+    assert modules[0].stat().st_mtime == list(tmp_path.glob("*.so"))[0].stat().st_mtime
+
+
+def test_concurrent_processes_on_an_empty_cache(tmp_path):
+    reports = probe(tmp_path / "cache", count=3)
+    assert sum(report["compiled"] for report in reports) == 1
+    assert len({report["area"] for report in reports}) == 1
+    assert len(list((tmp_path / "cache").glob("*.so"))) == 1
+
+
+def test_lock_timeout(tmp_path, monkeypatch):
+    """A lock held elsewhere: the wait ends with an error naming the lock file."""
+    import fcntl
+
+    monkeypatch.setenv("DOLFINX_MORTAR_COMPILE_TIMEOUT", "0.3")
+    name = compiled.module_name()
+    tmp_path.mkdir(exist_ok=True)
+    with open(tmp_path / (name + ".lock"), "a") as held:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        script = (f"import sys; from dolfinx_mortar.kernels import compiled\n"
+                  f"compiled.build(directory={str(tmp_path)!r})")
+        result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                                env=dict(os.environ, DOLFINX_MORTAR_COMPILE_TIMEOUT="0.3"),
+                                timeout=120)
+    assert result.returncode != 0
+    assert "lock" in result.stderr and name in result.stderr
