@@ -206,7 +206,7 @@ static int clip(const double S[3][2], const double Mp[3][2], polygon_t *out) {
 
 /* 0.5 sum_k (x_k y_k+1 - x_k+1 y_k) over 8 slots (zero beyond count), numpy's pairwise sum */
 static double padded_area(const polygon_t *p) {
-    double term[MAXV];
+    double term[MAXV] = {0.0};
     for (int k = 0; k < MAXV; ++k) {
         if (k < p->count) {
             int f = (k + 1) % p->count;
@@ -264,21 +264,24 @@ typedef struct {
     double *gD, *gM, *gDn, *gMn, *ggap, *garea;
 } outputs_t;
 
-/* the auxiliary plane over the 27 variables: S[i][a], Mp[l][a] and the n0 value */
-static void auxiliary_plane(const double *xs, const double *xm, const double *nn,
-                            d27 S[3][2], d27 Mp[3][2], double n0v[3]) {
-    d27 X[3][3], Y[3][3], N[3][3];
+/* The auxiliary plane: S[i][a] = (xs_i - x0) . e_a and Mp[l][a] = (xm_l - x0) . e_a (values, in
+ * numpy's operation order), n0, and what the chain rule needs: e_a, de_a over the 27 variables,
+ * the offsets xs_i - x0 and xm_l - x0. */
+typedef struct {
+    double S[3][2], Mp[3][2], n0[3], e[2][3], de[2][3][NV], os[3][3], om[3][3];
+} plane_t;
+
+static void auxiliary_plane(const double *xs, const double *xm, const double *nn, plane_t *pl) {
+    d27 N[3][3], X[2][3];
+    memset(N, 0, sizeof N); memset(X, 0, sizeof X);
     for (int k = 0; k < 3; ++k)
-        for (int c = 0; c < 3; ++c) {
-            memset(&X[k][c], 0, sizeof(d27)); memset(&Y[k][c], 0, sizeof(d27));
-            memset(&N[k][c], 0, sizeof(d27));
-            X[k][c].v = xs[3 * k + c]; X[k][c].d[3 * k + c] = 1.0;
-            Y[k][c].v = xm[3 * k + c]; Y[k][c].d[9 + 3 * k + c] = 1.0;
-            N[k][c].v = nn[3 * k + c]; N[k][c].d[18 + 3 * k + c] = 1.0;
-        }
-    d27 x0[3], v[3], n0[3], edge[3], w[3], e[2][3];
+        for (int c = 0; c < 3; ++c) { N[k][c].v = nn[3 * k + c]; N[k][c].d[18 + 3 * k + c] = 1.0; }
+    for (int k = 0; k < 2; ++k)
+        for (int c = 0; c < 3; ++c) { X[k][c].v = xs[3 * k + c]; X[k][c].d[3 * k + c] = 1.0; }
+    double x0[3];
+    d27 v[3], n0[3], edge[3], w[3], e[2][3];
     for (int c = 0; c < 3; ++c) {
-        x0[c] = scale27(add27(add27(X[0][c], X[1][c]), X[2][c]), 1.0 / 3.0);
+        x0[c] = ((xs[c] + xs[3 + c]) + xs[6 + c]) * (1.0 / 3.0);
         v[c] = scale27(add27(add27(N[0][c], N[1][c]), N[2][c]), 1.0 / 3.0);
     }
     normalize27(v, n0);
@@ -289,12 +292,48 @@ static void auxiliary_plane(const double *xs, const double *xm, const double *nn
     e[1][0] = sub27(mul27(n0[1], e[0][2]), mul27(n0[2], e[0][1]));
     e[1][1] = sub27(mul27(n0[2], e[0][0]), mul27(n0[0], e[0][2]));
     e[1][2] = sub27(mul27(n0[0], e[0][1]), mul27(n0[1], e[0][0]));
+    for (int a = 0; a < 2; ++a)
+        for (int c = 0; c < 3; ++c) { pl->e[a][c] = e[a][c].v; memcpy(pl->de[a][c], e[a][c].d, sizeof(double) * NV); }
+    for (int c = 0; c < 3; ++c) pl->n0[c] = n0[c].v;
     for (int k = 0; k < 3; ++k) {
-        d27 os[3], om[3];
-        for (int c = 0; c < 3; ++c) { os[c] = sub27(X[k][c], x0[c]); om[c] = sub27(Y[k][c], x0[c]); }
-        for (int a = 0; a < 2; ++a) { S[k][a] = dot27(os, e[a]); Mp[k][a] = dot27(om, e[a]); }
+        for (int c = 0; c < 3; ++c) { pl->os[k][c] = xs[3 * k + c] - x0[c]; pl->om[k][c] = xm[3 * k + c] - x0[c]; }
+        for (int a = 0; a < 2; ++a) {
+            const double *ea = pl->e[a];
+            pl->S[k][a] = (pl->os[k][0] * ea[0] + pl->os[k][1] * ea[1]) + pl->os[k][2] * ea[2];
+            pl->Mp[k][a] = (pl->om[k][0] * ea[0] + pl->om[k][1] * ea[1]) + pl->om[k][2] * ea[2];
+        }
     }
-    for (int c = 0; c < 3; ++c) n0v[c] = n0[c].v;
+}
+
+/* out (27) = q (12, over S then Mp) chained to the pair's variables:
+ * dS_ia = e_a . (dxs_i - dx0) + (xs_i - x0) . de_a, dMp_la = e_a . (dxm_l - dx0) + (xm_l - x0) . de_a */
+static void chain(const plane_t *pl, const double *q, double *out) {
+    double total[2] = {0.0, 0.0}, r[2][3] = {{0.0}};
+    for (int k = 0; k < 3; ++k)
+        for (int a = 0; a < 2; ++a) {
+            double qs = q[2 * k + a], qm = q[6 + 2 * k + a];
+            total[a] += qs + qm;
+            for (int c = 0; c < 3; ++c) r[a][c] += qs * pl->os[k][c] + qm * pl->om[k][c];
+        }
+    for (int k = 0; k < 3; ++k)
+        for (int c = 0; c < 3; ++c) {
+            double xs_part = 0.0, xm_part = 0.0;
+            for (int a = 0; a < 2; ++a) {
+                xs_part += (q[2 * k + a] - total[a] * (1.0 / 3.0)) * pl->e[a][c];
+                xm_part += q[6 + 2 * k + a] * pl->e[a][c];
+            }
+            out[3 * k + c] = xs_part;
+            out[9 + 3 * k + c] = xm_part;
+            out[18 + 3 * k + c] = 0.0;
+        }
+    for (int a = 0; a < 2; ++a)
+        for (int c = 0; c < 3; ++c) {
+            double rc = r[a][c];
+            const double *de = pl->de[a][c];
+            /* e_a depends on xs_0, xs_1 (columns 0-5) and the nodal normals (18-26) only */
+            for (int v = 0; v < 6; ++v) out[v] += rc * de[v];
+            for (int v = 18; v < NV; ++v) out[v] += rc * de[v];
+        }
 }
 
 /* N(p) of a triangle (corners C, local slots base + 2k + r) at the points P: values and
@@ -338,12 +377,10 @@ static void zero_pair(const outputs_t *o, long p) {
 static int pair(long p, const double *xs, const double *xm, const double *nn,
                 const unsigned char *crosspoint, int dual_basis, const double T[3][3][3],
                 const outputs_t *o, unsigned char *valid, double *overlap) {
-    d27 S27[3][2], M27[3][2];
-    double n0[3];
-    auxiliary_plane(xs, xm, nn, S27, M27, n0);
-    double S[3][2], Mp[3][2];
-    for (int k = 0; k < 3; ++k)
-        for (int a = 0; a < 2; ++a) { S[k][a] = S27[k][a].v; Mp[k][a] = M27[k][a].v; }
+    plane_t pl;
+    auxiliary_plane(xs, xm, nn, &pl);
+    const double (*S)[2] = (const double (*)[2])pl.S, (*Mp)[2] = (const double (*)[2])pl.Mp;
+    const double *n0 = pl.n0;
     /* facing: n0 . (master unit normal) < -tol */
     double u[3], w[3], mn[3];
     for (int c = 0; c < 3; ++c) { u[c] = xm[3 + c] - xm[c]; w[c] = xm[6 + c] - xm[c]; }
@@ -466,22 +503,6 @@ static int pair(long p, const double *xs, const double *xm, const double *nn,
         }
         memcpy(dI[o], g, sizeof g);
     }
-    /* chained to the 27 variables */
-    double chain[NL][NV];
-    for (int k = 0; k < 3; ++k)
-        for (int a = 0; a < 2; ++a) {
-            memcpy(chain[2 * k + a], S27[k][a].d, sizeof(double) * NV);
-            memcpy(chain[6 + 2 * k + a], M27[k][a].d, sizeof(double) * NV);
-        }
-    double gI[NI][NV];
-    for (int o = 0; o < NI; ++o) {
-        double g[NV] = {0};
-        for (int s = 0; s < NL; ++s) {
-            double k = dI[o][s];
-            for (int v = 0; v < NV; ++v) g[v] += k * chain[s][v];
-        }
-        memcpy(gI[o], g, sizeof g);
-    }
     /* the multiplier basis Phi_j = sum_a A_ja N_a */
     double A[3][3];
     for (int j = 0; j < 3; ++j)
@@ -497,73 +518,75 @@ static int pair(long p, const double *xs, const double *xm, const double *nn,
         for (int j = 0; j < 3; ++j)
             for (int a = 0; a < 3; ++a) A[j][a] = crosspoint[j] ? 0.0 : A[j][a] + shared[a] * share;
     }
-    /* J_jki = int Phi_j N_k N_i, K_jli = int Phi_j Nm_l N_i, with their gradients */
-    double J[3][3][3], K[3][3][3], gJ[3][3][3][NV], gK[3][3][3][NV];
+    /* J_jki = int Phi_j N_k N_i, K_jli = int Phi_j Nm_l N_i, values and local gradients */
+    double J[3][3][3], K[3][3][3], dJ[3][3][3][NL], dK[3][3][3][NL];
     for (int j = 0; j < 3; ++j)
         for (int k = 0; k < 3; ++k)
             for (int i = 0; i < 3; ++i) {
-                double js = 0.0, ks = 0.0, gj[NV] = {0}, gk[NV] = {0};
+                double js = 0.0, ks = 0.0, gj[NL] = {0}, gk[NL] = {0};
                 for (int a = 0; a < 3; ++a) {
                     double c = A[j][a];
                     if (c == 0.0) continue;
                     int os = slave_index[a][k][i], om = mixed_index[a][i][k];
                     js += c * I[os]; ks += c * I[om];
-                    for (int v = 0; v < NV; ++v) { gj[v] += c * gI[os][v]; gk[v] += c * gI[om][v]; }
+                    for (int s = 0; s < NL; ++s) { gj[s] += c * dI[os][s]; gk[s] += c * dI[om][s]; }
                 }
                 J[j][k][i] = js; K[j][k][i] = ks;
-                memcpy(gJ[j][k][i], gj, sizeof gj); memcpy(gK[j][k][i], gk, sizeof gk);
+                memcpy(dJ[j][k][i], gj, sizeof gj); memcpy(dK[j][k][i], gk, sizeof gk);
             }
-    /* the outputs */
+    /* the outputs: values, local gradients chained, the nodal normals' direct terms */
     double *D = o->D + 9 * p, *M = o->M + 9 * p, *Dn = o->Dn + 27 * p, *Mn = o->Mn + 27 * p;
     double *gap = o->gap + 3 * p, *area = o->area + 3 * p;
     double *gDn = o->gDn + 27 * NV * p, *gMn = o->gMn + 27 * NV * p;
     double *ggap = o->ggap + 3 * NV * p, *garea = o->garea + 3 * NV * p;
-    double gD[3][3][NV];
     for (int j = 0; j < 3; ++j) {
-        double area_j = 0.0, ga[NV] = {0};
+        double area_j = 0.0, la[NL] = {0}, lgap[NL] = {0};
+        double gap_m = 0.0, gap_s = 0.0, gap_normals[3][3] = {{0.0}};
         for (int k = 0; k < 3; ++k) {
-            double d = 0.0, m = 0.0, gd[NV] = {0}, gm[NV] = {0};
+            double d = 0.0, m = 0.0, ld[NL] = {0}, lm[NL] = {0};
             for (int i = 0; i < 3; ++i) {
                 d += J[j][k][i]; m += K[j][k][i];
-                for (int v = 0; v < NV; ++v) { gd[v] += gJ[j][k][i][v]; gm[v] += gK[j][k][i][v]; }
+                for (int s = 0; s < NL; ++s) { ld[s] += dJ[j][k][i][s]; lm[s] += dK[j][k][i][s]; }
             }
             D[3 * j + k] = d; M[3 * j + k] = m;
             area_j += d;
-            for (int v = 0; v < NV; ++v) ga[v] += gd[v];
-            memcpy(gD[j][k], gd, sizeof gd);
-            if (o->gD) memcpy(o->gD + (9 * p + 3 * j + k) * NV, gd, sizeof gd);
-            if (o->gM) memcpy(o->gM + (9 * p + 3 * j + k) * NV, gm, sizeof gm);
+            for (int s = 0; s < NL; ++s) la[s] += ld[s];
+            if (o->gD) chain(&pl, ld, o->gD + (9 * p + 3 * j + k) * NV);
+            if (o->gM) chain(&pl, lm, o->gM + (9 * p + 3 * j + k) * NV);
             for (int c = 0; c < 3; ++c) {
-                double dn = 0.0, mnv = 0.0;
-                double *gdn = gDn + ((3 * j + k) * 3 + c) * NV, *gmn = gMn + ((3 * j + k) * 3 + c) * NV;
-                for (int v = 0; v < NV; ++v) { gdn[v] = 0.0; gmn[v] = 0.0; }
+                int e = (3 * j + k) * 3 + c;
+                double dn = 0.0, mnv = 0.0, ldn[NL] = {0}, lmn[NL] = {0};
                 for (int i = 0; i < 3; ++i) {
                     double ni = nn[3 * i + c];
                     dn += ni * J[j][k][i]; mnv += ni * K[j][k][i];
-                    for (int v = 0; v < NV; ++v) { gdn[v] += ni * gJ[j][k][i][v]; gmn[v] += ni * gK[j][k][i][v]; }
-                    gdn[18 + 3 * i + c] += J[j][k][i];
-                    gmn[18 + 3 * i + c] += K[j][k][i];
+                    for (int s = 0; s < NL; ++s) { ldn[s] += ni * dJ[j][k][i][s]; lmn[s] += ni * dK[j][k][i][s]; }
+                    /* d gap_j / d n_i[c] = sum_l xm_lc K_jli - sum_k xs_kc J_jki */
+                    gap_normals[i][c] += xm[3 * k + c] * K[j][k][i] - xs[3 * k + c] * J[j][k][i];
                 }
-                Dn[(3 * j + k) * 3 + c] = dn; Mn[(3 * j + k) * 3 + c] = mnv;
+                Dn[e] = dn; Mn[e] = mnv;
+                double xmc = xm[3 * k + c], xsc = xs[3 * k + c];
+                gap_m += mnv * xmc; gap_s += dn * xsc;
+                for (int s = 0; s < NL; ++s) lgap[s] += lmn[s] * xmc - ldn[s] * xsc;
+                chain(&pl, ldn, gDn + e * NV);
+                chain(&pl, lmn, gMn + e * NV);
+                for (int i = 0; i < 3; ++i) {
+                    gDn[e * NV + 18 + 3 * i + c] += J[j][k][i];
+                    gMn[e * NV + 18 + 3 * i + c] += K[j][k][i];
+                }
             }
         }
         area[j] = area_j;
-        memcpy(garea + j * NV, ga, sizeof ga);
-    }
-    /* gap_j = sum_lc Mn_jlc xm_lc - sum_kc Dn_jkc xs_kc */
-    for (int j = 0; j < 3; ++j) {
-        double gm = 0.0, gs = 0.0, g[NV] = {0};
+        chain(&pl, la, garea + j * NV);
+        gap[j] = gap_m - gap_s;
+        double *g = ggap + j * NV;
+        chain(&pl, lgap, g);
         for (int k = 0; k < 3; ++k)
             for (int c = 0; c < 3; ++c) {
                 int e = (3 * j + k) * 3 + c;
-                gm += Mn[e] * xm[3 * k + c];
-                gs += Dn[e] * xs[3 * k + c];
-                for (int v = 0; v < NV; ++v) g[v] += gMn[e * NV + v] * xm[3 * k + c] - gDn[e * NV + v] * xs[3 * k + c];
                 g[3 * k + c] -= Dn[e];
                 g[9 + 3 * k + c] += Mn[e];
+                g[18 + 3 * k + c] += gap_normals[k][c];
             }
-        gap[j] = gm - gs;
-        memcpy(ggap + j * NV, g, sizeof g);
     }
     return 1;
 }
