@@ -1,0 +1,161 @@
+"""The compiled 3D triangle kernel (kernels/compiled.py) against the numpy kernel: time per pair
+on random overlapping triangle pairs, peak memory, first-use compile time and a second
+process's load time, -O2 against -O3.
+
+    tools/run python3 benchmarks/compiled_kernel.py [--sizes 1000 10000 100000] [--json out.json]
+
+Times are the median of ``--repeats`` calls in one process (the compiled module loaded
+before). numpy is timed twice: as the contact code calls it today (``factorized=True``, the
+gradients of Dn, Mn and the areas kept factorized, expanded later by their consumers) and
+with the full gradients the compiled kernel returns (``factorized=False``, expanded with
+``.grad``). Peak memory is tracemalloc's peak over one call (numpy's allocations are traced;
+the compiled kernel's work arrays are on the C stack, so its peak is its output arrays).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import tracemalloc
+
+import numpy as np
+
+from dolfinx_mortar.kernels import compiled, surface3
+
+
+def overlapping_pairs(n: int, seed: int = 0):
+    """Slave triangles with a facing master triangle shifted by less than its size (clip
+    polygons of 3 to 6 vertices), nodal normals tilted by ~0.1, all rotated at random."""
+    rng = np.random.default_rng(seed)
+    slave = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.0]]) + 0.1 * rng.standard_normal((n, 3, 3))
+    shift = rng.uniform(-0.3, 0.3, (n, 1, 3))
+    shift[..., 2] = 0.05 * rng.standard_normal((n, 1))
+    master = (np.array([[0, 0, 0], [0, 1, 0], [1, 0, 0.0]]) * rng.uniform(0.7, 1.3, (n, 1, 1))
+              + shift + 0.1 * rng.standard_normal((n, 3, 3)))
+    normals = np.array([0, 0, 1.0]) + 0.1 * rng.standard_normal((n, 3, 3))
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    Q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+    crosspoint = rng.random((n, 3)) < 0.05
+    return slave @ Q.T, master @ Q.T, normals @ Q.T, crosspoint
+
+
+def numpy_kernel(factorized: bool):
+    def run(slave, master, nodal, crosspoint):
+        q = surface3.pair_quantities(slave, master, nodal, crosspoint=crosspoint,
+                                     factorized=factorized)
+        if not factorized:
+            for item in (q.Dn, q.Mn, q.gap, q.area):
+                item.grad  # noqa: B018 (the full gradients, as the compiled kernel returns)
+        return q
+
+    return run
+
+
+def compiled_kernel(slave, master, nodal, crosspoint):
+    return compiled.pair_quantities_compiled(slave, master, nodal, crosspoint=crosspoint)
+
+
+def median_time(function, args, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        function(*args)
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def peak_memory(function, args) -> float:
+    tracemalloc.start()
+    function(*args)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    return peak
+
+
+def compile_and_load_times() -> dict:
+    """A fresh cache: the first process compiles, a second loads (each its own interpreter)."""
+    script = ("import json; from dolfinx_mortar.kernels import compiled; compiled._get(); "
+              "print(json.dumps(compiled.build_info()))")
+    result = {}
+    with tempfile.TemporaryDirectory() as cache:
+        environment = dict(os.environ, DOLFINX_MORTAR_CACHE_DIR=cache)
+        for key in ("first_process", "second_process"):
+            start = time.perf_counter()
+            out = subprocess.run([sys.executable, "-c", script], env=environment, check=True,
+                                 capture_output=True, text=True).stdout
+            info = json.loads(out.strip().splitlines()[-1])
+            result[key] = {"compiled": info["compiled"], "build_or_load_seconds": info["seconds"],
+                           "process_seconds": time.perf_counter() - start}
+    return result
+
+
+def flag_comparison(args, repeats: int) -> dict:
+    """The compiled kernel's time per pair built with other flags (compiled into a temporary
+    cache; the default module is put back afterwards)."""
+    result = {}
+    default = compiled._get()
+    with tempfile.TemporaryDirectory() as cache:
+        for flags in (("-O2",) + compiled.COMPILE_ARGS[1:],
+                      ("-O3",) + compiled.COMPILE_ARGS[1:],
+                      ("-O3", "-march=native") + compiled.COMPILE_ARGS[1:]):
+            module, info = compiled.build(flags, directory=cache)
+            compiled._module = module
+            try:
+                seconds = median_time(compiled_kernel, args, repeats)
+            finally:
+                compiled._module = default
+            result[" ".join(flags)] = {"seconds_per_pair": seconds / args[0].shape[0],
+                                       "compile_seconds": info.get("compile_seconds")}
+    return result
+
+
+def main(argv=None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[1000, 10000, 100000])
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--json", help="write the results here")
+    parser.add_argument("--skip-numpy-full", action="store_true",
+                        help="do not time numpy with full gradients (memory)")
+    options = parser.parse_args(argv)
+
+    report = {"compile": compile_and_load_times(), "sizes": []}
+    compiled._get()  # loaded before timing
+    print(f"compile (fresh cache, own process): "
+          f"{report['compile']['first_process']['build_or_load_seconds']:.2f} s; "
+          f"load in a second process: "
+          f"{report['compile']['second_process']['build_or_load_seconds'] * 1e3:.1f} ms")
+    kernels = {"numpy (factorized)": numpy_kernel(True), "C": compiled_kernel}
+    if not options.skip_numpy_full:
+        kernels["numpy (full gradients)"] = numpy_kernel(False)
+    header = f"{'pairs':>8} {'valid':>8} " + " ".join(
+        f"{name + ' us/pair':>28} {'peak MB':>8}" for name in kernels)
+    print(header)
+    for n in options.sizes:
+        args = overlapping_pairs(n)
+        row = {"pairs": n, "valid": int(compiled_kernel(*args)["valid"].sum())}
+        for name, function in kernels.items():
+            function(*args)  # warm-up
+            seconds = median_time(function, args, options.repeats)
+            row[name] = {"us_per_pair": 1e6 * seconds / n, "peak_MB": peak_memory(function, args) / 1e6}
+        report["sizes"].append(row)
+        print(f"{n:>8} {row['valid']:>8} " + " ".join(
+            f"{row[name]['us_per_pair']:>28.2f} {row[name]['peak_MB']:>8.0f}" for name in kernels))
+    args = overlapping_pairs(min(options.sizes[-1], 20000), seed=1)
+    report["flags"] = flag_comparison(args, options.repeats)
+    for flags, result in report["flags"].items():
+        print(f"C built with {flags}: {1e6 * result['seconds_per_pair']:.2f} us/pair "
+              f"(compile {result['compile_seconds']:.2f} s)")
+    if options.json:
+        with open(options.json, "w") as out:
+            json.dump(report, out, indent=2)
+    return report
+
+
+if __name__ == "__main__":
+    main()
