@@ -142,7 +142,8 @@ def main(argv=None) -> dict:
         for name, function in kernels.items():
             function(*args)  # warm-up
             seconds = median_time(function, args, options.repeats)
-            row[name] = {"us_per_pair": 1e6 * seconds / n, "peak_MB": peak_memory(function, args) / 1e6}
+            row[name] = {"us_per_pair": 1e6 * seconds / n,
+                         "peak_MB": peak_memory(function, args) / 1e6}
         report["sizes"].append(row)
         print(f"{n:>8} {row['valid']:>8} " + " ".join(
             f"{row[name]['us_per_pair']:>28.2f} {row[name]['peak_MB']:>8.0f}" for name in kernels))

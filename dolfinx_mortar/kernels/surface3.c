@@ -219,42 +219,43 @@ static double padded_area(const polygon_t *p) {
 }
 
 /* ---- the integrals' index tables ---- */
-static int triple[NI][3];   /* functions (0-2 slave N, 3-5 master Nm) of each integral */
-static int slave_index[3][3][3];  /* int N_a N_k N_i -> integral */
-static int mixed_index[3][3][3];  /* int N_a N_i Nm_l -> integral ([a][i][l]) */
-static int pair_index[6][6];      /* unordered function pair -> sigma slot (-1: not needed) */
-static int tables_ready = 0;
+/* made per call (no mutable static state: calls from several threads do not race) */
+typedef struct {
+    int triple[NI][3];         /* functions (0-2 slave N, 3-5 master Nm) of each integral */
+    int slave_index[3][3][3];  /* int N_a N_k N_i -> integral */
+    int mixed_index[3][3][3];  /* int N_a N_i Nm_l -> integral ([a][i][l]) */
+    int pair_index[6][6];      /* unordered function pair -> sigma slot (-1: not needed) */
+} tables_t;
 
-static void make_tables(void) {
+static void make_tables(tables_t *tb) {
     int o = 0;
     for (int a = 0; a < 3; ++a)
         for (int k = a; k < 3; ++k)
             for (int i = k; i < 3; ++i) {
-                triple[o][0] = a; triple[o][1] = k; triple[o][2] = i;
+                tb->triple[o][0] = a; tb->triple[o][1] = k; tb->triple[o][2] = i;
                 int idx[3] = {a, k, i};
                 for (int p = 0; p < 3; ++p)
                     for (int q = 0; q < 3; ++q)
                         for (int r = 0; r < 3; ++r)
                             if (p != q && q != r && p != r)
-                                slave_index[idx[p]][idx[q]][idx[r]] = o;
-                slave_index[a][k][i] = slave_index[a][i][k] = slave_index[k][a][i] = o;
-                slave_index[k][i][a] = slave_index[i][a][k] = slave_index[i][k][a] = o;
+                                tb->slave_index[idx[p]][idx[q]][idx[r]] = o;
+                tb->slave_index[a][k][i] = tb->slave_index[a][i][k] = tb->slave_index[k][a][i] = o;
+                tb->slave_index[k][i][a] = tb->slave_index[i][a][k] = tb->slave_index[i][k][a] = o;
                 ++o;
             }
     for (int a = 0; a < 3; ++a)
         for (int i = a; i < 3; ++i)
             for (int l = 0; l < 3; ++l) {
-                triple[o][0] = a; triple[o][1] = i; triple[o][2] = 3 + l;
-                mixed_index[a][i][l] = mixed_index[i][a][l] = o;
+                tb->triple[o][0] = a; tb->triple[o][1] = i; tb->triple[o][2] = 3 + l;
+                tb->mixed_index[a][i][l] = tb->mixed_index[i][a][l] = o;
                 ++o;
             }
     int s = 0;
     for (int u = 0; u < 6; ++u)
-        for (int v = 0; v < 6; ++v) pair_index[u][v] = -1;
+        for (int v = 0; v < 6; ++v) tb->pair_index[u][v] = -1;
     for (int u = 0; u < 6; ++u)
         for (int v = u; v < 6; ++v)
-            if (u < 3) { pair_index[u][v] = pair_index[v][u] = s++; }
-    tables_ready = 1;
+            if (u < 3) { tb->pair_index[u][v] = tb->pair_index[v][u] = s++; }
 }
 #define NPAIRS 15
 
@@ -376,7 +377,7 @@ static void zero_pair(const outputs_t *o, long p) {
 
 static int pair(long p, const double *xs, const double *xm, const double *nn,
                 const unsigned char *crosspoint, int dual_basis, const double T[3][3][3],
-                const outputs_t *o, unsigned char *valid, double *overlap) {
+                const tables_t *tb, const outputs_t *o, unsigned char *valid, double *overlap) {
     plane_t pl;
     auxiliary_plane(xs, xm, nn, &pl);
     const double (*S)[2] = (const double (*)[2])pl.S, (*Mp)[2] = (const double (*)[2])pl.Mp;
@@ -465,7 +466,7 @@ static int pair(long p, const double *xs, const double *xm, const double *nn,
             for (int r = 0; r < 3; ++r) f[u][r] = F[u][corner[r]];
         for (int u = 0; u < 3; ++u)
             for (int v = u; v < 6; ++v) {
-                int s = pair_index[u][v];
+                int s = tb->pair_index[u][v];
                 for (int r = 0; r < 3; ++r) {
                     double total = 0.0;
                     for (int q = 0; q < 3; ++q)
@@ -475,9 +476,9 @@ static int pair(long p, const double *xs, const double *xm, const double *nn,
             }
         double wc = W[c].v;
         for (int o = 0; o < NI; ++o) {
-            int u1 = triple[o][0], u2 = triple[o][1], u3 = triple[o][2];
-            const double *s23 = sigma[pair_index[u2][u3]], *s13 = sigma[pair_index[u1][u3]],
-                         *s12 = sigma[pair_index[u1][u2]];
+            int u1 = tb->triple[o][0], u2 = tb->triple[o][1], u3 = tb->triple[o][2];
+            const double *s23 = sigma[tb->pair_index[u2][u3]], *s13 = sigma[tb->pair_index[u1][u3]],
+                         *s12 = sigma[tb->pair_index[u1][u2]];
             double tau = (f[u1][0] * s23[0] + f[u1][1] * s23[1]) + f[u1][2] * s23[2];
             I[o] += wc * tau;
             coefW[o][c] = tau;
@@ -495,7 +496,7 @@ static int pair(long p, const double *xs, const double *xm, const double *nn,
         for (int c = 0; c < V; ++c)
             for (int s = 0; s < NL; ++s) g[s] += coefW[o][c] * W[c].d[s];
         for (int slot = 0; slot < 3; ++slot) {
-            int u = triple[o][slot];
+            int u = tb->triple[o][slot];
             for (int q = 0; q < np; ++q) {
                 double k = coef[o][slot][q];
                 for (int s = 0; s < NL; ++s) g[s] += k * dF[u][q][s];
@@ -527,7 +528,7 @@ static int pair(long p, const double *xs, const double *xm, const double *nn,
                 for (int a = 0; a < 3; ++a) {
                     double c = A[j][a];
                     if (c == 0.0) continue;
-                    int os = slave_index[a][k][i], om = mixed_index[a][i][k];
+                    int os = tb->slave_index[a][k][i], om = tb->mixed_index[a][i][k];
                     js += c * I[os]; ks += c * I[om];
                     for (int s = 0; s < NL; ++s) { gj[s] += c * dI[os][s]; gk[s] += c * dI[om][s]; }
                 }
@@ -602,13 +603,14 @@ int surface3_triangles(long n, const double *xs, const double *xm, const double 
                        double *garea) {
     double T[3][3][3];
     if (rule_tensor(rule, T) != 0) return -1;
-    if (!tables_ready) make_tables();
+    tables_t tables;
+    make_tables(&tables);
     outputs_t o = {D, M, Dn, Mn, gap, area, gD, gM, gDn, gMn, ggap, garea};
     for (long p = 0; p < n; ++p) {
         valid[p] = 0;
         overlap[p] = 0.0;
         int status = pair(p, xs + 9 * p, xm + 9 * p, nn + 9 * p,
-                          crosspoint ? crosspoint + 3 * p : NULL, dual_basis, T, &o, valid, overlap);
+                          crosspoint ? crosspoint + 3 * p : NULL, dual_basis, T, &tables, &o, valid, overlap);
         if (status < 0) return -2 - (int)p;
         if (status == 0) zero_pair(&o, p);
     }
