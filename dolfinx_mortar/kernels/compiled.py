@@ -14,6 +14,13 @@ naming the lock file) and find the module there. A reader never sees a half-writ
 
 :func:`build_info` tells whether this process compiled the module (and how long it took)
 or loaded it from the cache.
+
+Why cffi and C rather than numba: Debian's python3-numba pins one Python minor version
+(``python3 (<< 3.15), python3 (>= 3.14~)`` for 0.65), so it drops out of sid whenever sid moves
+to the next Python before numba catches up; cffi (``Depends: python3:any``), the C compiler and
+python3-dev are what FFCx already needs in both suites (python3-ffcx depends on python3-cffi).
+Compiling needs setuptools on Python >= 3.12 (cffi's ``ffi.compile``): sid's python3-cffi
+depends on it, trixie's does not (there it comes with python3-ffcx).
 """
 
 from __future__ import annotations
