@@ -53,6 +53,12 @@ int surface3_triangles(long n, const double *xs, const double *xm, const double 
                        double *D, double *M, double *Dn, double *Mn, double *gap, double *area,
                        double *gD, double *gM, double *gDn, double *gMn, double *ggap,
                        double *garea);
+int surface3_pairs(long n, int ns, int nm, const double *xs, const double *xm, const double *nn,
+                   const unsigned char *crosspoint, int normals, int dual_basis, int rule,
+                   unsigned char *valid, double *overlap,
+                   double *D, double *M, double *Dn, double *Mn, double *gap, double *area,
+                   double *gD, double *gM, double *gDn, double *gMn, double *ggap,
+                   double *garea);
 """
 NUM_VARIABLES = 27
 
@@ -164,63 +170,84 @@ def _pointer(ffi, array: np.ndarray | None, ctype: str):
     return ffi.cast(ctype, ffi.from_buffer(array))
 
 
-def pair_quantities_compiled(slave_x, master_x, slave_normals, *, basis: str = "standard",
-                             crosspoint=None, num_gauss_points: int | None = None,
-                             scalar_gradients: bool = False) -> dict:
-    """Segment-based mortar integrals of triangle pairs with averaged normals, compiled.
+_NORMAL_FIELDS = {"averaged": 0, "slave": 1, "master": 2}
+
+
+def pair_quantities_compiled(slave_x, master_x, slave_normals, *, normals: str = "averaged",
+                             basis: str = "standard", crosspoint=None,
+                             num_gauss_points: int | None = None,
+                             scalar_gradients: bool = False, pointwise: bool = False) -> dict:
+    """Segment-based mortar integrals of triangle or quadrilateral pairs, compiled.
 
     The same quantities as :func:`dolfinx_mortar.kernels.surface3.pair_quantities` with
-    ``normals="averaged"``, ``integration="segment"``, for ns = nm = 3, as plain arrays
-    (leading axis: the pair): values ``D``, ``M`` (n, 3, 3), ``Dn``, ``Mn`` (n, 3, 3, 3),
-    ``gap``, ``area`` (n, 3), ``valid`` (n,) bool, ``overlap`` (n,); full gradients over
-    the pair's 27 variables (slave xyz, master xyz, slave nodal normals) ``Dn_grad``,
-    ``Mn_grad`` (n, 3, 3, 3, 27), ``gap_grad``, ``area_grad`` (n, 3, 27), and with
-    ``scalar_gradients`` ``D_grad``, ``M_grad`` (n, 3, 3, 27). Zero where not valid.
+    ``integration="segment"``, for ns, nm in {3, 4} slave and master nodes, as plain arrays
+    (leading axis: the pair): values ``D`` (n, ns, ns), ``M`` (n, ns, nm), ``Dn``
+    (n, ns, ns, 3), ``Mn`` (n, ns, nm, 3), ``gap``, ``area`` (n, ns), ``valid`` (n,) bool,
+    ``overlap`` (n,); full gradients over the pair's nv = 3 (2 ns + nm) variables (slave xyz,
+    master xyz, slave nodal normals) ``Dn_grad``, ``Mn_grad``, ``gap_grad``, ``area_grad``
+    (the value's shape + (nv,)), and with ``scalar_gradients`` ``D_grad``, ``M_grad``. Zero
+    where not valid.
+
+    A triangle on a triangle with averaged normals takes the corner-value path (numpy's
+    ``_affine_integrals``) unless ``pointwise``; everything else is integrated at every
+    Gauss point in dual arithmetic over the pair's variables (numpy's pointwise path).
     """
     if basis not in ("standard", "dual"):
         raise ValueError(f"unknown multiplier basis {basis!r}; expected standard or dual")
+    if normals not in _NORMAL_FIELDS:
+        raise ValueError(f"unknown normal field {normals!r}; expected one of "
+                         f"{sorted(_NORMAL_FIELDS)}")
     rule = num_gauss_points or 7
     if rule not in (1, 3, 7):
         raise ValueError(f"3D segments take 1, 3 or 7 Gauss points per cell, got {rule}")
     slave_x = np.ascontiguousarray(slave_x, dtype=np.float64)
     master_x = np.ascontiguousarray(master_x, dtype=np.float64)
     slave_normals = np.ascontiguousarray(slave_normals, dtype=np.float64)
-    n = slave_x.shape[0]
-    for name, array in (("slave_x", slave_x), ("master_x", master_x),
-                        ("slave_normals", slave_normals)):
-        if array.shape != (n, 3, 3):
-            raise ValueError(f"{name} must be (n, 3, 3) (triangles), got {array.shape}")
+    if slave_x.ndim != 3 or master_x.ndim != 3:
+        raise ValueError("slave_x and master_x must be (n, nodes, 3)")
+    n, ns = slave_x.shape[:2]
+    nm = master_x.shape[1]
+    for name, array, nodes in (("slave_x", slave_x, ns), ("master_x", master_x, nm),
+                               ("slave_normals", slave_normals, ns)):
+        if array.shape != (n, nodes, 3) or nodes not in (3, 4):
+            raise ValueError(f"{name} must be (n, 3 or 4, 3) (triangles or quadrilaterals) "
+                             f"matching the pairs, got {array.shape}")
     cross = None
     if crosspoint is not None:
-        cross = np.ascontiguousarray(np.asarray(crosspoint, dtype=bool).reshape(n, 3),
+        cross = np.ascontiguousarray(np.asarray(crosspoint, dtype=bool).reshape(n, ns),
                                      dtype=np.uint8)
-    nv = NUM_VARIABLES
+    nv = 3 * (2 * ns + nm)
     out = {
         "valid": np.zeros(n, dtype=np.uint8), "overlap": np.empty(n),
-        "D": np.empty((n, 3, 3)), "M": np.empty((n, 3, 3)),
-        "Dn": np.empty((n, 3, 3, 3)), "Mn": np.empty((n, 3, 3, 3)),
-        "gap": np.empty((n, 3)), "area": np.empty((n, 3)),
-        "Dn_grad": np.empty((n, 3, 3, 3, nv)), "Mn_grad": np.empty((n, 3, 3, 3, nv)),
-        "gap_grad": np.empty((n, 3, nv)), "area_grad": np.empty((n, 3, nv)),
+        "D": np.empty((n, ns, ns)), "M": np.empty((n, ns, nm)),
+        "Dn": np.empty((n, ns, ns, 3)), "Mn": np.empty((n, ns, nm, 3)),
+        "gap": np.empty((n, ns)), "area": np.empty((n, ns)),
+        "Dn_grad": np.empty((n, ns, ns, 3, nv)), "Mn_grad": np.empty((n, ns, nm, 3, nv)),
+        "gap_grad": np.empty((n, ns, nv)), "area_grad": np.empty((n, ns, nv)),
     }
     if scalar_gradients:
-        out["D_grad"] = np.empty((n, 3, 3, nv))
-        out["M_grad"] = np.empty((n, 3, 3, nv))
+        out["D_grad"] = np.empty((n, ns, ns, nv))
+        out["M_grad"] = np.empty((n, ns, nm, nv))
     if n == 0:
         out["valid"] = out["valid"].astype(bool)
         return out
     module = _get()
     ffi, lib = module.ffi, module.lib
     d = "double *"
-    status = lib.surface3_triangles(
-        n, _pointer(ffi, slave_x, d), _pointer(ffi, master_x, d),
-        _pointer(ffi, slave_normals, d), _pointer(ffi, cross, "unsigned char *"),
-        int(basis == "dual"), rule,
+    arrays = (
+        _pointer(ffi, slave_x, d), _pointer(ffi, master_x, d), _pointer(ffi, slave_normals, d),
+        _pointer(ffi, cross, "unsigned char *"))
+    results = (
         _pointer(ffi, out["valid"], "unsigned char *"), _pointer(ffi, out["overlap"], d),
         *(_pointer(ffi, out[key], d) for key in ("D", "M", "Dn", "Mn", "gap", "area")),
         _pointer(ffi, out.get("D_grad"), d), _pointer(ffi, out.get("M_grad"), d),
         *(_pointer(ffi, out[key], d) for key in ("Dn_grad", "Mn_grad", "gap_grad",
                                                   "area_grad")))
+    if ns == 3 and nm == 3 and normals == "averaged" and not pointwise:
+        status = lib.surface3_triangles(n, *arrays, int(basis == "dual"), rule, *results)
+    else:
+        status = lib.surface3_pairs(n, ns, nm, *arrays, _NORMAL_FIELDS[normals],
+                                    int(basis == "dual"), rule, *results)
     if status == -1:
         raise ValueError(f"bad rule {rule}")
     if status != 0:

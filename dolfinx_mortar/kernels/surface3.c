@@ -616,3 +616,579 @@ int surface3_triangles(long n, const double *xs, const double *xm, const double 
     }
     return 0;
 }
+
+/* ======================================================================================
+ * The general pointwise path: triangle or quadrilateral slave and master facets, any normal
+ * field, standard or dual basis, crosspoints (surface3.py's _polygon_integrals with
+ * pointwise=True). Everything is in forward-mode dual numbers over the pair's variables
+ * (3 (2 ns + nm) <= 36 of them: slave xyz, master xyz, slave nodal normals): the clip cells,
+ * the Gauss points, both inverse maps (Newton for quadrilaterals, then one Newton step in dual
+ * arithmetic at the converged point) and the integrands. The screening (facing, separation,
+ * clip, area) is on values in numpy's operation order, as for triangles.
+ * ====================================================================================== */
+#define NX 36
+
+typedef struct { double v, d[NX]; } dx;
+
+static inline dx constx(double v) { dx r; memset(&r, 0, sizeof r); r.v = v; return r; }
+static inline dx addx(dx a, dx b) { dx r; r.v = a.v + b.v; for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] + b.d[i]; return r; }
+static inline dx subx(dx a, dx b) { dx r; r.v = a.v - b.v; for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] - b.d[i]; return r; }
+static inline dx mulx(dx a, dx b) { dx r; r.v = a.v * b.v; for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] * b.v + b.d[i] * a.v; return r; }
+static inline dx scalex(dx a, double s) { dx r; r.v = a.v * s; for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] * s; return r; }
+static inline dx negx(dx a) { dx r; r.v = -a.v; for (int i = 0; i < NX; ++i) r.d[i] = -a.d[i]; return r; }
+static inline dx divx(dx a, dx b) {
+    dx r; double inverse = 1.0 / b.v; r.v = a.v * inverse;
+    for (int i = 0; i < NX; ++i) r.d[i] = (a.d[i] - b.d[i] * r.v) * inverse;
+    return r;
+}
+static inline dx sqrtx(dx a) {
+    dx r; r.v = sqrt(a.v); double f = r.v > 0.0 ? 0.5 / r.v : 0.0;
+    for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] * f;
+    return r;
+}
+/* r += a * b */
+static inline void accumulatex(dx *r, dx a, dx b) {
+    r->v += a.v * b.v;
+    for (int i = 0; i < NX; ++i) r->d[i] += a.d[i] * b.v + b.d[i] * a.v;
+}
+static inline dx dotx(const dx *a, const dx *b) { return addx(addx(mulx(a[0], b[0]), mulx(a[1], b[1])), mulx(a[2], b[2])); }
+static inline void crossx(const dx *a, const dx *b, dx *out) {
+    out[0] = subx(mulx(a[1], b[2]), mulx(a[2], b[1]));
+    out[1] = subx(mulx(a[2], b[0]), mulx(a[0], b[2]));
+    out[2] = subx(mulx(a[0], b[1]), mulx(a[1], b[0]));
+}
+static inline void normalizex(const dx *v, dx *out) {
+    dx length = sqrtx(dotx(v, v));
+    for (int c = 0; c < 3; ++c) out[c] = divx(v[c], length);
+}
+static inline dx cross2x(const dx *a, const dx *b) { return subx(mulx(a[0], b[1]), mulx(a[1], b[0])); }
+
+/* the reference facets: triangles (0,0), (1,0), (0,1); quadrilaterals (-1,-1), (1,-1), (1,1), (-1,1) */
+static const double QUAD_SIGNS[4][2] = {{-1.0, -1.0}, {1.0, -1.0}, {1.0, 1.0}, {-1.0, 1.0}};
+
+static void shape_values(double r, double s, int nodes, double *N, double dN[][2]) {
+    if (nodes == 3) {
+        N[0] = 1.0 - r - s; N[1] = r; N[2] = s;
+        if (dN) { dN[0][0] = -1.0; dN[0][1] = -1.0; dN[1][0] = 1.0; dN[1][1] = 0.0; dN[2][0] = 0.0; dN[2][1] = 1.0; }
+        return;
+    }
+    for (int k = 0; k < 4; ++k) {
+        double a = QUAD_SIGNS[k][0], b = QUAD_SIGNS[k][1];
+        N[k] = (1.0 + r * a) * (1.0 + s * b) * 0.25;
+        if (dN) { dN[k][0] = a * (1.0 + s * b) * 0.25; dN[k][1] = b * (1.0 + r * a) * 0.25; }
+    }
+}
+
+static void shape_duals(const dx *xi, int nodes, dx *N) {
+    if (nodes == 3) {
+        N[0] = subx(subx(constx(1.0), xi[0]), xi[1]); N[1] = xi[0]; N[2] = xi[1];
+        return;
+    }
+    for (int k = 0; k < 4; ++k) {
+        dx u = addx(constx(1.0), scalex(xi[0], QUAD_SIGNS[k][0]));
+        dx w = addx(constx(1.0), scalex(xi[1], QUAD_SIGNS[k][1]));
+        N[k] = scalex(mulx(u, w), 0.25);
+    }
+}
+
+/* xi with sum_k N_k(xi) C_k = P (plane coordinates): closed form for triangles, Newton for
+ * bilinear quadrilaterals; the derivatives dxi = J^-1 (dP - sum_k N_k(xi) dC_k) at the root */
+static void inverse_map_x(const dx (*C)[2], int nodes, const dx *P, dx *xi) {
+    double x[2] = {0.0, 0.0}, N[4], dN[4][2], J[2][2];
+    if (nodes == 3) {
+        double A00 = C[1][0].v - C[0][0].v, A01 = C[2][0].v - C[0][0].v;
+        double A10 = C[1][1].v - C[0][1].v, A11 = C[2][1].v - C[0][1].v;
+        double det = A00 * A11 - A01 * A10;
+        double o0 = P[0].v - C[0][0].v, o1 = P[1].v - C[0][1].v;
+        x[0] = (A11 * o0 - A01 * o1) / det;
+        x[1] = (A00 * o1 - A10 * o0) / det;
+    } else {
+        for (int iteration = 0; iteration < 20; ++iteration) {
+            shape_values(x[0], x[1], 4, N, dN);
+            double residual[2];
+            for (int c = 0; c < 2; ++c) {
+                residual[c] = -P[c].v;
+                for (int k = 0; k < 4; ++k) residual[c] += N[k] * C[k][c].v;
+                for (int d = 0; d < 2; ++d) {
+                    J[c][d] = 0.0;
+                    for (int k = 0; k < 4; ++k) J[c][d] += C[k][c].v * dN[k][d];
+                }
+            }
+            double det = J[0][0] * J[1][1] - J[0][1] * J[1][0];
+            double step0 = (J[1][1] * residual[0] - J[0][1] * residual[1]) / det;
+            double step1 = (J[0][0] * residual[1] - J[1][0] * residual[0]) / det;
+            x[0] -= step0; x[1] -= step1;
+            if (fabs(step0) < 1e-15 * (1.0 + fabs(x[0])) && fabs(step1) < 1e-15 * (1.0 + fabs(x[1]))) break;
+        }
+    }
+    /* one Newton step in dual arithmetic at x: xi = x - J^-1 F(x) */
+    shape_values(x[0], x[1], nodes, N, dN);
+    dx F[2];
+    for (int c = 0; c < 2; ++c) {
+        F[c] = negx(P[c]);
+        for (int k = 0; k < nodes; ++k) F[c] = addx(F[c], scalex(C[k][c], N[k]));
+        for (int d = 0; d < 2; ++d) {
+            J[c][d] = 0.0;
+            for (int k = 0; k < nodes; ++k) J[c][d] += C[k][c].v * dN[k][d];
+        }
+    }
+    double det = J[0][0] * J[1][1] - J[0][1] * J[1][0];
+    double I[2][2] = {{J[1][1] / det, -J[0][1] / det}, {-J[1][0] / det, J[0][0] / det}};
+    for (int a = 0; a < 2; ++a) {
+        xi[a] = constx(x[a]);
+        xi[a] = subx(xi[a], addx(scalex(F[0], I[a][0]), scalex(F[1], I[a][1])));
+    }
+}
+
+/* 4 x 4 (or 3 x 3) inverse by Gauss-Jordan elimination with partial pivoting */
+static void invert(int n, const double A[4][4], double out[4][4]) {
+    double a[4][8];
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < 2 * n; ++j) a[i][j] = j < n ? A[i][j] : (j - n == i ? 1.0 : 0.0);
+    for (int col = 0; col < n; ++col) {
+        int pivot = col;
+        for (int i = col + 1; i < n; ++i)
+            if (fabs(a[i][col]) > fabs(a[pivot][col])) pivot = i;
+        if (pivot != col)
+            for (int j = 0; j < 2 * n; ++j) { double t = a[col][j]; a[col][j] = a[pivot][j]; a[pivot][j] = t; }
+        double inverse = 1.0 / a[col][col];
+        for (int j = 0; j < 2 * n; ++j) a[col][j] *= inverse;
+        for (int i = 0; i < n; ++i) {
+            if (i == col) continue;
+            double f = a[i][col];
+            if (f != 0.0)
+                for (int j = 0; j < 2 * n; ++j) a[i][j] -= f * a[col][j];
+        }
+    }
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j) out[i][j] = a[i][n + j];
+}
+
+/* A (ns x ns) with Phi = A N biorthogonal on the whole slave facet: A = D_e M_e^-1, for
+ * quadrilaterals from the 3 x 3 Gauss rule of the area element, dA = (dD_e - A dM_e) M_e^-1 */
+static void dual_coefficients_x(const dx (*xs)[3], int ns, dx A[4][4]) {
+    if (ns == 3) {
+        for (int j = 0; j < 3; ++j)
+            for (int k = 0; k < 3; ++k) A[j][k] = constx(j == k ? 3.0 : -1.0);
+        return;
+    }
+    const double g[3] = {-0.7745966692414834, 0.0, 0.7745966692414834};
+    const double w[3] = {5.0 / 9.0, 8.0 / 9.0, 5.0 / 9.0};
+    dx mass[4][4], lumped[4];
+    for (int j = 0; j < 4; ++j) {
+        lumped[j] = constx(0.0);
+        for (int k = 0; k < 4; ++k) mass[j][k] = constx(0.0);
+    }
+    for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b) {
+            double N[4], dN[4][2];
+            shape_values(g[a], g[b], 4, N, dN);
+            dx t1[3], t2[3], normal[3];
+            for (int c = 0; c < 3; ++c) {
+                t1[c] = constx(0.0); t2[c] = constx(0.0);
+                for (int k = 0; k < 4; ++k) {
+                    t1[c] = addx(t1[c], scalex(xs[k][c], dN[k][0]));
+                    t2[c] = addx(t2[c], scalex(xs[k][c], dN[k][1]));
+                }
+            }
+            crossx(t1, t2, normal);
+            dx jw = scalex(sqrtx(dotx(normal, normal)), w[a] * w[b]);
+            for (int j = 0; j < 4; ++j) {
+                lumped[j] = addx(lumped[j], scalex(jw, N[j]));
+                for (int k = 0; k < 4; ++k) mass[j][k] = addx(mass[j][k], scalex(jw, N[j] * N[k]));
+            }
+        }
+    double Me[4][4], inverse[4][4], Av[4][4];
+    for (int j = 0; j < 4; ++j)
+        for (int k = 0; k < 4; ++k) Me[j][k] = mass[j][k].v;
+    invert(4, Me, inverse);
+    for (int j = 0; j < 4; ++j)
+        for (int k = 0; k < 4; ++k) Av[j][k] = lumped[j].v * inverse[j][k];
+    /* B = A dM_e (per variable), then dA = dD_e - B M_e^-1 */
+    for (int j = 0; j < 4; ++j)
+        for (int k = 0; k < 4; ++k) {
+            A[j][k].v = Av[j][k];
+            for (int s = 0; s < NX; ++s) A[j][k].d[s] = lumped[j].d[s] * inverse[j][k];
+        }
+    for (int i = 0; i < 4; ++i)
+        for (int m = 0; m < 4; ++m) {
+            double B[NX] = {0.0};
+            for (int l = 0; l < 4; ++l)
+                for (int s = 0; s < NX; ++s) B[s] += Av[i][l] * mass[l][m].d[s];
+            for (int k = 0; k < 4; ++k)
+                for (int s = 0; s < NX; ++s) A[i][k].d[s] -= B[s] * inverse[m][k];
+        }
+}
+
+static double polygon_area_k(const double (*P)[2], int k) {
+    double total = 0.0;
+    for (int i = 0; i < k; ++i) {
+        int f = (i + 1) % k;
+        double t = P[i][0] * P[f][1] - P[f][0] * P[i][1];
+        total = i == 0 ? t : total + t;
+    }
+    return 0.5 * total;
+}
+
+static int separated_k(const double (*S)[2], int ns, const double (*Mp)[2], int nm) {
+    double size = 0.0;
+    for (int k = 0; k < ns; ++k)
+        for (int c = 0; c < 2; ++c) if (fabs(S[k][c]) > size) size = fabs(S[k][c]);
+    for (int k = 0; k < nm; ++k)
+        for (int c = 0; c < 2; ++c) if (fabs(Mp[k][c]) > size) size = fabs(Mp[k][c]);
+    for (int pass = 0; pass < 2; ++pass) {
+        const double (*polygon)[2] = pass == 0 ? S : Mp;
+        const double (*other)[2] = pass == 0 ? Mp : S;
+        int k = pass == 0 ? ns : nm, ko = pass == 0 ? nm : ns;
+        double area = polygon_area_k(polygon, k);
+        double orientation = area > 0.0 ? 1.0 : (area < 0.0 ? -1.0 : 0.0);
+        for (int i = 0; i < k; ++i) {
+            const double *start = polygon[i], *end = polygon[(i + 1) % k];
+            double d0 = (end[0] - start[0]) * orientation, d1 = (end[1] - start[1]) * orientation;
+            double largest = -INFINITY;
+            for (int m = 0; m < ko; ++m) {
+                double side = d0 * (other[m][1] - start[1]) - d1 * (other[m][0] - start[0]);
+                if (side > largest) largest = side;
+            }
+            double gap = 1e-8 * size * hypot(d0, d1);
+            if (largest < -gap) return 1;
+        }
+    }
+    return 0;
+}
+
+/* Sutherland-Hodgman as clip(): the slave polygon (ns) by the reversed master polygon (nm) */
+static int clip_k(const double (*S)[2], int ns, const double (*Mp)[2], int nm, polygon_t *out) {
+    double Mr[4][2];
+    for (int j = 0; j < nm; ++j) { Mr[j][0] = Mp[nm - 1 - j][0]; Mr[j][1] = Mp[nm - 1 - j][1]; }
+    polygon_t a, b;
+    polygon_t *cur = &a, *next = &b;
+    memset(cur, 0, sizeof(polygon_t));
+    for (int i = 0; i < ns; ++i) {
+        cur->pos[i][0] = S[i][0]; cur->pos[i][1] = S[i][1];
+        cur->label[i][1] = i; cur->edge[i][1] = i;
+    }
+    cur->count = ns;
+    for (int j = 0; j < nm; ++j) {
+        const double *start = Mr[j], *end = Mr[(j + 1) % nm];
+        double dir0 = end[0] - start[0], dir1 = end[1] - start[1];
+        memset(next, 0, sizeof(polygon_t));
+        int count = cur->count < SLOTS ? cur->count : SLOTS;
+        for (int k = 0; k < count; ++k) {
+            int following = (k + 1) % cur->count;
+            if (following >= SLOTS) return -1;
+            const double *p = cur->pos[k], *q = cur->pos[following];
+            double s_cur = dir0 * (p[1] - start[1]) - dir1 * (p[0] - start[0]);
+            double s_next = dir0 * (q[1] - start[1]) - dir1 * (q[0] - start[0]);
+            int in_cur = s_cur >= 0.0, in_next = s_next >= 0.0;
+            double denominator = (s_cur - s_next == 0.0) ? 1.0 : s_cur - s_next;
+            double t = s_cur / denominator;
+            double crossing[2] = {p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])};
+            const int *edge = cur->edge[k];
+            int crossing_label[3];
+            if (edge[0] == 0) {
+                crossing_label[0] = 2; crossing_label[1] = edge[1]; crossing_label[2] = j;
+            } else {
+                crossing_label[0] = 1; crossing_label[1] = 0;
+                crossing_label[2] = ((edge[1] + 1) % nm == j) ? j : (j + 1) % nm;
+            }
+            int along_clip[2] = {1, j};
+            if (!in_cur && in_next) emit(next, crossing, crossing_label, edge);
+            if (in_next) emit(next, q, cur->label[following], cur->edge[following]);
+            if (in_cur && !in_next) emit(next, crossing, crossing_label, along_clip);
+        }
+        polygon_t *swap = cur; cur = next; next = swap;
+    }
+    *out = *cur;
+    if (out->count > MAXV) out->count = MAXV;
+    return 0;
+}
+
+typedef struct { int ns, nm, nv; } sizes_t;
+
+/* The pair's outputs (values and gradients over its nv variables): zero unless valid */
+static int pair_general(long p, sizes_t z, const double *xsv, const double *xmv, const double *nnv,
+                        const unsigned char *crosspoint, int normals, int dual_basis,
+                        int q, const double (*bary)[3], const double *rule_weights,
+                        const outputs_t *o, unsigned char *valid, double *overlap) {
+    const int ns = z.ns, nm = z.nm, nv = z.nv;
+    dx xs[4][3], xm[4][3], node_normals[4][3];
+    for (int k = 0; k < ns; ++k)
+        for (int c = 0; c < 3; ++c) {
+            xs[k][c] = constx(xsv[3 * k + c]); xs[k][c].d[3 * k + c] = 1.0;
+        }
+    for (int k = 0; k < nm; ++k)
+        for (int c = 0; c < 3; ++c) {
+            xm[k][c] = constx(xmv[3 * k + c]); xm[k][c].d[3 * ns + 3 * k + c] = 1.0;
+        }
+    /* the normal field's nodal normals */
+    if (normals == 0) {
+        for (int k = 0; k < ns; ++k)
+            for (int c = 0; c < 3; ++c) {
+                node_normals[k][c] = constx(nnv[3 * k + c]);
+                node_normals[k][c].d[3 * (ns + nm) + 3 * k + c] = 1.0;
+            }
+    } else if (normals == 1) {
+        for (int i = 0; i < ns; ++i) {
+            dx a[3], b[3], v[3];
+            for (int c = 0; c < 3; ++c) {
+                a[c] = subx(xs[(i + 1) % ns][c], xs[i][c]);
+                b[c] = subx(xs[(i + ns - 1) % ns][c], xs[i][c]);
+            }
+            crossx(a, b, v);
+            normalizex(v, node_normals[i]);
+        }
+    } else {
+        dx a[3], b[3], v[3], unit[3];
+        for (int c = 0; c < 3; ++c) {
+            if (nm == 4) { a[c] = subx(xm[2][c], xm[0][c]); b[c] = subx(xm[3][c], xm[1][c]); }
+            else { a[c] = subx(xm[1][c], xm[0][c]); b[c] = subx(xm[2][c], xm[0][c]); }
+        }
+        crossx(a, b, v);
+        normalizex(v, unit);
+        for (int i = 0; i < ns; ++i)
+            for (int c = 0; c < 3; ++c) node_normals[i][c] = negx(unit[c]);
+    }
+    /* the auxiliary plane */
+    dx x0[3], sum[3], n0[3], edge[3], wv[3], e[2][3];
+    for (int c = 0; c < 3; ++c) {
+        x0[c] = xs[0][c]; sum[c] = node_normals[0][c];
+        for (int k = 1; k < ns; ++k) { x0[c] = addx(x0[c], xs[k][c]); sum[c] = addx(sum[c], node_normals[k][c]); }
+        x0[c] = scalex(x0[c], 1.0 / ns);
+        sum[c] = scalex(sum[c], 1.0 / ns);
+    }
+    normalizex(sum, n0);
+    for (int c = 0; c < 3; ++c) edge[c] = subx(xs[1][c], xs[0][c]);
+    dx along = dotx(edge, n0);
+    for (int c = 0; c < 3; ++c) wv[c] = subx(edge[c], mulx(n0[c], along));
+    normalizex(wv, e[0]);
+    crossx(n0, e[0], e[1]);
+    dx Sx[4][2], Mx[4][2];
+    double S[4][2], Mp[4][2];
+    for (int k = 0; k < ns; ++k) {
+        dx offset[3];
+        for (int c = 0; c < 3; ++c) offset[c] = subx(xs[k][c], x0[c]);
+        for (int a = 0; a < 2; ++a) { Sx[k][a] = dotx(offset, e[a]); S[k][a] = Sx[k][a].v; }
+    }
+    for (int k = 0; k < nm; ++k) {
+        dx offset[3];
+        for (int c = 0; c < 3; ++c) offset[c] = subx(xm[k][c], x0[c]);
+        for (int a = 0; a < 2; ++a) { Mx[k][a] = dotx(offset, e[a]); Mp[k][a] = Mx[k][a].v; }
+    }
+    /* screening on values */
+    {
+        double u[3], w[3], mn[3];
+        for (int c = 0; c < 3; ++c) {
+            if (nm == 4) { u[c] = xmv[6 + c] - xmv[c]; w[c] = xmv[9 + c] - xmv[3 + c]; }
+            else { u[c] = xmv[3 + c] - xmv[c]; w[c] = xmv[6 + c] - xmv[c]; }
+        }
+        mn[0] = u[1] * w[2] - u[2] * w[1]; mn[1] = u[2] * w[0] - u[0] * w[2]; mn[2] = u[0] * w[1] - u[1] * w[0];
+        double length = sqrt((mn[0] * mn[0] + mn[1] * mn[1]) + mn[2] * mn[2]);
+        for (int c = 0; c < 3; ++c) mn[c] = mn[c] / length;
+        if (!(((n0[0].v * mn[0] + n0[1].v * mn[1]) + n0[2].v * mn[2]) < -FACING_TOLERANCE)) return 0;
+    }
+    if (separated_k((const double (*)[2])S, ns, (const double (*)[2])Mp, nm)) return 0;
+    polygon_t poly;
+    if (clip_k((const double (*)[2])S, ns, (const double (*)[2])Mp, nm, &poly) != 0) return -1;
+    double slave_area = fabs(polygon_area_k((const double (*)[2])S, ns));
+    double clip_area = padded_area(&poly);
+    if (!(poly.count >= 3 && clip_area > AREA_TOLERANCE * slave_area)) return 0;
+    valid[p] = 1;
+    overlap[p] = clip_area / slave_area;
+    const int V = poly.count;
+
+    /* the clip vertices from their labels, the centre */
+    dx vertex[MAXV][2], centre[2];
+    for (int k = 0; k < V; ++k) {
+        int kind = poly.label[k][0], i = poly.label[k][1], j = poly.label[k][2];
+        if (kind == 0) {
+            vertex[k][0] = Sx[i][0]; vertex[k][1] = Sx[i][1];
+        } else if (kind == 1) {
+            int node = ((nm - 1 - j) % nm + nm) % nm;
+            vertex[k][0] = Mx[node][0]; vertex[k][1] = Mx[node][1];
+        } else {
+            int es = ((nm - 2 - j) % nm + nm) % nm;
+            const dx *a0 = Sx[i], *a1 = Sx[(i + 1) % ns], *b0 = Mx[es], *b1 = Mx[(es + 1) % nm];
+            dx da[2] = {subx(a1[0], a0[0]), subx(a1[1], a0[1])};
+            dx db[2] = {subx(b1[0], b0[0]), subx(b1[1], b0[1])};
+            dx ba[2] = {subx(b0[0], a0[0]), subx(b0[1], a0[1])};
+            dx denominator = cross2x(da, db), numerator = cross2x(ba, db);
+            dx t = denominator.v != 0.0 ? divx(numerator, denominator) : numerator;
+            vertex[k][0] = addx(a0[0], mulx(da[0], t));
+            vertex[k][1] = addx(a0[1], mulx(da[1], t));
+        }
+    }
+    double weight = 1.0 / V;
+    for (int a = 0; a < 2; ++a) {
+        centre[a] = scalex(vertex[0][a], weight);
+        for (int k = 1; k < V; ++k) centre[a] = addx(centre[a], scalex(vertex[k][a], weight));
+    }
+    /* the multiplier basis coefficients, the crosspoints' shares */
+    dx A[4][4];
+    if (dual_basis) dual_coefficients_x((const dx (*)[3])xs, ns, A);
+    int cross[4] = {0, 0, 0, 0}, others = 0, any_cross = 0;
+    for (int j = 0; j < ns; ++j) {
+        cross[j] = crosspoint ? crosspoint[j] != 0 : 0;
+        others += !cross[j];
+        any_cross |= cross[j];
+    }
+    double share = others > 0 ? 1.0 / others : 0.0;
+
+    /* the integrals over the fan cells' Gauss points */
+    dx D[4][4], M[4][4], Dn[4][4][3], Mn[4][4][3], area[4];
+    for (int j = 0; j < ns; ++j) {
+        area[j] = constx(0.0);
+        for (int k = 0; k < 4; ++k) {
+            D[j][k] = constx(0.0); M[j][k] = constx(0.0);
+            for (int c = 0; c < 3; ++c) { Dn[j][k][c] = constx(0.0); Mn[j][k][c] = constx(0.0); }
+        }
+    }
+    for (int cell = 0; cell < V; ++cell) {
+        const dx *v0 = vertex[cell], *v1 = vertex[(cell + 1) % V];
+        dx ea[2] = {subx(v0[0], centre[0]), subx(v0[1], centre[1])};
+        dx eb[2] = {subx(v1[0], centre[0]), subx(v1[1], centre[1])};
+        dx cell_area = scalex(cross2x(ea, eb), 0.5);
+        for (int g = 0; g < q; ++g) {
+            dx P[2], xi[2], eta[2], N[4], Nm[4], Phi[4], normal[3];
+            for (int a = 0; a < 2; ++a)
+                P[a] = addx(addx(scalex(centre[a], bary[g][0]), scalex(v0[a], bary[g][1])),
+                            scalex(v1[a], bary[g][2]));
+            dx W = scalex(cell_area, rule_weights[g]);
+            inverse_map_x((const dx (*)[2])Sx, ns, P, xi);
+            inverse_map_x((const dx (*)[2])Mx, nm, P, eta);
+            shape_duals(xi, ns, N);
+            shape_duals(eta, nm, Nm);
+            for (int j = 0; j < ns; ++j) {
+                if (dual_basis) {
+                    Phi[j] = mulx(N[0], A[j][0]);
+                    for (int k = 1; k < ns; ++k) Phi[j] = addx(Phi[j], mulx(N[k], A[j][k]));
+                } else {
+                    Phi[j] = N[j];
+                }
+            }
+            if (any_cross) {
+                dx shared = constx(0.0);
+                for (int j = 0; j < ns; ++j) if (cross[j]) shared = addx(shared, Phi[j]);
+                for (int j = 0; j < ns; ++j)
+                    Phi[j] = cross[j] ? constx(0.0) : addx(Phi[j], scalex(shared, share));
+            }
+            for (int c = 0; c < 3; ++c) {
+                normal[c] = mulx(node_normals[0][c], N[0]);
+                for (int j = 1; j < ns; ++j) normal[c] = addx(normal[c], mulx(node_normals[j][c], N[j]));
+            }
+            for (int j = 0; j < ns; ++j) {
+                if (cross[j]) continue;
+                dx Q = mulx(W, Phi[j]);
+                area[j] = addx(area[j], Q);
+                for (int k = 0; k < ns; ++k) {
+                    dx QN = mulx(Q, N[k]);
+                    D[j][k] = addx(D[j][k], QN);
+                    for (int c = 0; c < 3; ++c) accumulatex(&Dn[j][k][c], QN, normal[c]);
+                }
+                for (int l = 0; l < nm; ++l) {
+                    dx QN = mulx(Q, Nm[l]);
+                    M[j][l] = addx(M[j][l], QN);
+                    for (int c = 0; c < 3; ++c) accumulatex(&Mn[j][l][c], QN, normal[c]);
+                }
+            }
+        }
+    }
+    /* the outputs */
+    for (int j = 0; j < ns; ++j) {
+        dx gap = constx(0.0);
+        for (int l = 0; l < nm; ++l)
+            for (int c = 0; c < 3; ++c) accumulatex(&gap, Mn[j][l][c], xm[l][c]);
+        for (int k = 0; k < ns; ++k)
+            for (int c = 0; c < 3; ++c) gap = subx(gap, mulx(Dn[j][k][c], xs[k][c]));
+        o->gap[ns * p + j] = gap.v;
+        memcpy(o->ggap + (ns * p + j) * nv, gap.d, sizeof(double) * nv);
+        o->area[ns * p + j] = area[j].v;
+        memcpy(o->garea + (ns * p + j) * nv, area[j].d, sizeof(double) * nv);
+        for (int k = 0; k < ns; ++k) {
+            long e = (long)ns * ns * p + ns * j + k;
+            o->D[e] = D[j][k].v;
+            if (o->gD) memcpy(o->gD + e * nv, D[j][k].d, sizeof(double) * nv);
+            for (int c = 0; c < 3; ++c) {
+                o->Dn[3 * e + c] = Dn[j][k][c].v;
+                memcpy(o->gDn + (3 * e + c) * nv, Dn[j][k][c].d, sizeof(double) * nv);
+            }
+        }
+        for (int l = 0; l < nm; ++l) {
+            long e = (long)ns * nm * p + nm * j + l;
+            o->M[e] = M[j][l].v;
+            if (o->gM) memcpy(o->gM + e * nv, M[j][l].d, sizeof(double) * nv);
+            for (int c = 0; c < 3; ++c) {
+                o->Mn[3 * e + c] = Mn[j][l][c].v;
+                memcpy(o->gMn + (3 * e + c) * nv, Mn[j][l][c].d, sizeof(double) * nv);
+            }
+        }
+    }
+    return 1;
+}
+
+static void zero_pair_general(const outputs_t *o, sizes_t z, long p) {
+    const long ss = z.ns * z.ns, sm = z.ns * z.nm, nv = z.nv;
+    memset(o->D + ss * p, 0, ss * sizeof(double)); memset(o->M + sm * p, 0, sm * sizeof(double));
+    memset(o->Dn + 3 * ss * p, 0, 3 * ss * sizeof(double));
+    memset(o->Mn + 3 * sm * p, 0, 3 * sm * sizeof(double));
+    memset(o->gap + z.ns * p, 0, z.ns * sizeof(double));
+    memset(o->area + z.ns * p, 0, z.ns * sizeof(double));
+    memset(o->gDn + 3 * ss * nv * p, 0, 3 * ss * nv * sizeof(double));
+    memset(o->gMn + 3 * sm * nv * p, 0, 3 * sm * nv * sizeof(double));
+    memset(o->ggap + z.ns * nv * p, 0, z.ns * nv * sizeof(double));
+    memset(o->garea + z.ns * nv * p, 0, z.ns * nv * sizeof(double));
+    if (o->gD) memset(o->gD + ss * nv * p, 0, ss * nv * sizeof(double));
+    if (o->gM) memset(o->gM + sm * nv * p, 0, sm * nv * sizeof(double));
+}
+
+/* n pairs of ns-node slave and nm-node master facets (3 or 4 each): xs (n, ns, 3), xm (n, nm,
+ * 3), nn (n, ns, 3); crosspoint (n, ns) or NULL; normals 0 averaged, 1 slave, 2 master; rule
+ * 1, 3 or 7; outputs as surface3.pair_quantities (gradients (..., 3 (2 ns + nm))); gD, gM may
+ * be NULL. Returns 0, -1 for bad arguments, or -2 - p if pair p's clip polygon outgrew its
+ * slots. */
+int surface3_pairs(long n, int ns, int nm, const double *xs, const double *xm, const double *nn,
+                   const unsigned char *crosspoint, int normals, int dual_basis, int rule,
+                   unsigned char *valid, double *overlap,
+                   double *D, double *M, double *Dn, double *Mn, double *gap, double *area,
+                   double *gD, double *gM, double *gDn, double *gMn, double *ggap,
+                   double *garea) {
+    if ((ns != 3 && ns != 4) || (nm != 3 && nm != 4) || normals < 0 || normals > 2) return -1;
+    double bary[7][3], weights[7];
+    int q;
+    if (rule == 1) {
+        q = 1; bary[0][0] = bary[0][1] = bary[0][2] = 1.0 / 3.0; weights[0] = 1.0;
+    } else if (rule == 3) {
+        q = 3;
+        for (int g = 0; g < 3; ++g) {
+            for (int a = 0; a < 3; ++a) bary[g][a] = (a == g) ? 2.0 / 3.0 : 1.0 / 6.0;
+            weights[g] = 1.0 / 3.0;
+        }
+    } else if (rule == 7) {
+        const double a1 = 0.059715871789770, b1 = 0.470142064105115;
+        const double a2 = 0.797426985353087, b2 = 0.101286507323456;
+        q = 7;
+        bary[0][0] = bary[0][1] = bary[0][2] = 1.0 / 3.0; weights[0] = 0.225;
+        for (int g = 0; g < 3; ++g) {
+            for (int a = 0; a < 3; ++a) {
+                bary[1 + g][a] = (a == g) ? a1 : b1;
+                bary[4 + g][a] = (a == g) ? a2 : b2;
+            }
+            weights[1 + g] = 0.132394152788506;
+            weights[4 + g] = 0.125939180544827;
+        }
+    } else {
+        return -1;
+    }
+    sizes_t z = {ns, nm, 3 * (2 * ns + nm)};
+    outputs_t o = {D, M, Dn, Mn, gap, area, gD, gM, gDn, gMn, ggap, garea};
+    for (long p = 0; p < n; ++p) {
+        valid[p] = 0;
+        overlap[p] = 0.0;
+        int status = pair_general(p, z, xs + 3 * ns * p, xm + 3 * nm * p, nn + 3 * ns * p,
+                                  crosspoint ? crosspoint + ns * p : NULL, normals, dual_basis,
+                                  q, (const double (*)[3])bary, weights, &o, valid, overlap);
+        if (status < 0) return -2 - (int)p;
+        if (status == 0) zero_pair_general(&o, z, p);
+    }
+    return 0;
+}
