@@ -1,8 +1,9 @@
-"""The compiled 3D triangle kernel (kernels/compiled.py) against the numpy kernel: time per pair
-on random overlapping triangle pairs, peak memory, first-use compile time and a second
-process's load time, -O2 against -O3.
+"""The compiled 3D kernel (kernels/compiled.py) against the numpy kernel: time per pair on random
+overlapping triangle pairs, peak memory, first-use compile time and a second process's load
+time, -O2 against -O3; then per facet combination (triangles, quadrilaterals) and normal field.
 
     tools/run python3 benchmarks/compiled_kernel.py [--sizes 1000 10000 100000] [--json out.json]
+        [--facet-pairs 2000]
 
 Times are the median of ``--repeats`` calls in one process (the compiled module loaded
 before). numpy is timed twice: as the contact code calls it today (``factorized=True``, the
@@ -43,6 +44,61 @@ def overlapping_pairs(n: int, seed: int = 0):
     Q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
     crosspoint = rng.random((n, 3)) < 0.05
     return slave @ Q.T, master @ Q.T, normals @ Q.T, crosspoint
+
+
+def overlapping_facets(n: int, ns: int, nm: int, seed: int = 0):
+    """Triangles (3) or squares (4), perturbed out of their plane, the master turned over and
+    shifted by less than its size, nodal normals tilted by ~0.1, all rotated at random."""
+    rng = np.random.default_rng(seed)
+    slave_reference = {3: [[0, 0, 0], [1, 0, 0], [0, 1, 0.0]],
+                       4: [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.0]]}
+    master_reference = {3: [[0, 0, 0], [0, 1, 0], [1, 0, 0.0]],
+                        4: [[0, 0, 0], [0, 1, 0], [1, 1, 0], [1, 0, 0.0]]}
+    slave = np.array(slave_reference[ns]) + 0.1 * rng.standard_normal((n, ns, 3))
+    shift = rng.uniform(-0.3, 0.3, (n, 1, 3))
+    shift[..., 2] = 0.05 * rng.standard_normal((n, 1))
+    master = (np.array(master_reference[nm]) * rng.uniform(0.7, 1.3, (n, 1, 1)) + shift
+              + 0.1 * rng.standard_normal((n, nm, 3)))
+    normals = np.array([0, 0, 1.0]) + 0.1 * rng.standard_normal((n, ns, 3))
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    Q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+    crosspoint = rng.random((n, ns)) < 0.05
+    return slave @ Q.T, master @ Q.T, normals @ Q.T, crosspoint
+
+
+def facet_comparison(n: int, repeats: int) -> list:
+    """us per pair, numpy (full gradients, D and M gradients too) against C, per facet
+    combination, normal field and basis; C on triangles also on its pointwise path."""
+    rows = []
+    for ns, nm in ((3, 3), (3, 4), (4, 3), (4, 4)):
+        slave, master, nodal, crosspoint = overlapping_facets(n, ns, nm)
+        for normals in ("averaged", "slave", "master"):
+            for basis in ("standard", "dual"):
+                options = dict(normals=normals, basis=basis, crosspoint=crosspoint,
+                               scalar_gradients=True)
+
+                def numpy_run():
+                    q = surface3.pair_quantities(slave, master, nodal, factorized=False,
+                                                 **options)
+                    for item in (q.Dn, q.Mn, q.gap, q.area, q.D_dual, q.M_dual):
+                        item.grad  # noqa: B018
+
+                def c_run(pointwise=False):
+                    compiled.pair_quantities_compiled(slave, master, nodal, pointwise=pointwise,
+                                                      **options)
+
+                numpy_run(), c_run()  # warm-up
+                row = {"ns": ns, "nm": nm, "normals": normals, "basis": basis, "pairs": n,
+                       "numpy_us": 1e6 * median_time(numpy_run, (), repeats) / n,
+                       "C_us": 1e6 * median_time(c_run, (), repeats) / n}
+                if (ns, nm, normals) == (3, 3, "averaged"):
+                    row["C_pointwise_us"] = 1e6 * median_time(c_run, (True,), repeats) / n
+                rows.append(row)
+                extra = (f"  (C pointwise {row['C_pointwise_us']:.1f})"
+                         if "C_pointwise_us" in row else "")
+                print(f"{ns}/{nm} {normals:>8} {basis:>8}: numpy {row['numpy_us']:8.1f} us/pair, "
+                      f"C {row['C_us']:7.1f} us/pair{extra}")
+    return rows
 
 
 def numpy_kernel(factorized: bool):
@@ -120,6 +176,8 @@ def main(argv=None) -> dict:
     parser.add_argument("--sizes", type=int, nargs="+", default=[1000, 10000, 100000])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--json", help="write the results here")
+    parser.add_argument("--facet-pairs", type=int, default=2000,
+                        help="pairs per facet combination (0: skip that comparison)")
     parser.add_argument("--skip-numpy-full", action="store_true",
                         help="do not time numpy with full gradients (memory)")
     options = parser.parse_args(argv)
@@ -152,6 +210,8 @@ def main(argv=None) -> dict:
     for flags, result in report["flags"].items():
         print(f"C built with {flags}: {1e6 * result['seconds_per_pair']:.2f} us/pair "
               f"(compile {result['compile_seconds']:.2f} s)")
+    if options.facet_pairs:
+        report["facets"] = facet_comparison(options.facet_pairs, options.repeats)
     if options.json:
         with open(options.json, "w") as out:
             json.dump(report, out, indent=2)
