@@ -59,6 +59,16 @@ int surface3_pairs(long n, int ns, int nm, const double *xs, const double *xm, c
                    double *D, double *M, double *Dn, double *Mn, double *gap, double *area,
                    double *gD, double *gM, double *gDn, double *gMn, double *ggap,
                    double *garea);
+int surface3_element_scores(long n, int ns, int nm, const double *xs, const double *xm,
+                            const double *nn, int normals, int q, const double *points,
+                            double *score);
+int surface3_element(long n, int ns, int nm, const double *xs, const double *xm, const double *nn,
+                     const unsigned char *crosspoint, int normals, int dual_basis, int q,
+                     const double *points, const double *point_weights,
+                     const unsigned char *on_master, unsigned char *valid, double *overlap,
+                     double *D, double *M, double *Dn, double *Mn, double *gap, double *area,
+                     double *gD, double *gM, double *gDn, double *gMn, double *ggap,
+                     double *garea);
 """
 NUM_VARIABLES = 27
 
@@ -171,16 +181,58 @@ def _pointer(ffi, array: np.ndarray | None, ctype: str):
 
 
 _NORMAL_FIELDS = {"averaged": 0, "slave": 1, "master": 2}
+_A1, _B1, _A2, _B2 = 0.059715871789770, 0.470142064105115, 0.797426985353087, 0.101286507323456
+_TRIANGLE_RULES = {  # barycentric points, weights summing to 1
+    1: ([[1 / 3, 1 / 3, 1 / 3]], [1.0]),
+    3: ([[2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]], [1 / 3] * 3),
+    7: ([[1 / 3, 1 / 3, 1 / 3], [_A1, _B1, _B1], [_B1, _A1, _B1], [_B1, _B1, _A1],
+         [_A2, _B2, _B2], [_B2, _A2, _B2], [_B2, _B2, _A2]],
+        [0.225] + [0.132394152788506] * 3 + [0.125939180544827] * 3),
+}
+
+
+def _facet_rule(nodes: int, rule: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss points (q, 2) and weights on the slave reference facet, as the numpy kernel's
+    element-based integration: a triangle's symmetric rule (weights summing to 1/2); a
+    quadrilateral's 1, 2 x 2 or 3 x 3 Gauss-Legendre rule (3 and 7 read as 4 and 9)."""
+    if nodes == 3:
+        if rule not in _TRIANGLE_RULES:
+            raise ValueError(f"element-based triangles take 1, 3 or 7 Gauss points, got {rule}")
+        bary, weights = _TRIANGLE_RULES[rule]
+        return np.array(bary)[:, 1:].copy(), 0.5 * np.array(weights)
+    per_direction = {1: 1, 3: 2, 4: 2, 7: 3, 9: 3}.get(rule)
+    if per_direction is None:
+        raise ValueError(f"element-based quadrilaterals take 1, 4 or 9 Gauss points, got {rule}")
+    g, w = np.polynomial.legendre.leggauss(per_direction)
+    return (np.array([[a, b] for a in g for b in g]),
+            np.array([wa * wb for wa in w for wb in w]))
+
+
+def _points_on_master(score: np.ndarray, slave_facet: np.ndarray) -> np.ndarray:
+    """(n, q) mask: each Gauss point of a slave facet goes to the pair (of that slave facet)
+    whose master facet it lands on most centrally (the first such pair on ties)."""
+    n, q = score.shape
+    flat = score.ravel()
+    key = np.repeat(np.asarray(slave_facet, dtype=np.int64) * q, q) + np.tile(np.arange(q), n)
+    order = np.lexsort((flat, key))
+    first = np.ones(order.size, dtype=bool)
+    first[1:] = key[order][1:] != key[order][:-1]
+    winner = np.zeros(order.size, dtype=bool)
+    winner[order[first]] = True
+    return (winner & np.isfinite(flat)).reshape(n, q)
 
 
 def pair_quantities_compiled(slave_x, master_x, slave_normals, *, normals: str = "averaged",
                              basis: str = "standard", crosspoint=None,
                              num_gauss_points: int | None = None,
-                             scalar_gradients: bool = False, pointwise: bool = False) -> dict:
-    """Segment-based mortar integrals of triangle or quadrilateral pairs, compiled.
+                             scalar_gradients: bool = False, pointwise: bool = False,
+                             integration: str = "segment", slave_facet=None) -> dict:
+    """Mortar integrals of triangle or quadrilateral pairs, compiled.
 
-    The same quantities as :func:`dolfinx_mortar.kernels.surface3.pair_quantities` with
-    ``integration="segment"``, for ns, nm in {3, 4} slave and master nodes, as plain arrays
+    The same quantities as :func:`dolfinx_mortar.kernels.surface3.pair_quantities`
+    (``integration`` ``segment`` or ``element``; with ``element``, ``slave_facet`` (n,) says
+    which pairs share a slave facet: each of its Gauss points goes to one of them), for ns,
+    nm in {3, 4} slave and master nodes, as plain arrays
     (leading axis: the pair): values ``D`` (n, ns, ns), ``M`` (n, ns, nm), ``Dn``
     (n, ns, ns, 3), ``Mn`` (n, ns, nm, 3), ``gap``, ``area`` (n, ns), ``valid`` (n,) bool,
     ``overlap`` (n,); full gradients over the pair's nv = 3 (2 ns + nm) variables (slave xyz,
@@ -197,8 +249,10 @@ def pair_quantities_compiled(slave_x, master_x, slave_normals, *, normals: str =
     if normals not in _NORMAL_FIELDS:
         raise ValueError(f"unknown normal field {normals!r}; expected one of "
                          f"{sorted(_NORMAL_FIELDS)}")
+    if integration not in ("segment", "element"):
+        raise ValueError(f"unknown integration {integration!r}; expected segment or element")
     rule = num_gauss_points or 7
-    if rule not in (1, 3, 7):
+    if integration == "segment" and rule not in (1, 3, 7):
         raise ValueError(f"3D segments take 1, 3 or 7 Gauss points per cell, got {rule}")
     slave_x = np.ascontiguousarray(slave_x, dtype=np.float64)
     master_x = np.ascontiguousarray(master_x, dtype=np.float64)
@@ -243,7 +297,24 @@ def pair_quantities_compiled(slave_x, master_x, slave_normals, *, normals: str =
         _pointer(ffi, out.get("D_grad"), d), _pointer(ffi, out.get("M_grad"), d),
         *(_pointer(ffi, out[key], d) for key in ("Dn_grad", "Mn_grad", "gap_grad",
                                                   "area_grad")))
-    if ns == 3 and nm == 3 and normals == "averaged" and not pointwise:
+    if integration == "element":
+        points, point_weights = _facet_rule(ns, rule)
+        q = points.shape[0]
+        points = np.ascontiguousarray(points)
+        score = np.empty((n, q))
+        status = lib.surface3_element_scores(
+            n, ns, nm, *arrays[:3], _NORMAL_FIELDS[normals], q, _pointer(ffi, points, d),
+            _pointer(ffi, score, d))
+        if status != 0:
+            raise ValueError("bad element-based arguments")
+        on_master = np.ascontiguousarray(_points_on_master(
+            score, np.arange(n) if slave_facet is None else np.asarray(slave_facet).reshape(-1)),
+            dtype=np.uint8)
+        status = lib.surface3_element(
+            n, ns, nm, *arrays, _NORMAL_FIELDS[normals], int(basis == "dual"), q,
+            _pointer(ffi, points, d), _pointer(ffi, np.ascontiguousarray(point_weights), d),
+            _pointer(ffi, on_master, "unsigned char *"), *results)
+    elif ns == 3 and nm == 3 and normals == "averaged" and not pointwise:
         status = lib.surface3_triangles(n, *arrays, int(basis == "dual"), rule, *results)
     else:
         status = lib.surface3_pairs(n, ns, nm, *arrays, _NORMAL_FIELDS[normals],

@@ -906,13 +906,10 @@ static int clip_k(const double (*S)[2], int ns, const double (*Mp)[2], int nm, p
 
 typedef struct { int ns, nm, nv; } sizes_t;
 
-/* The pair's outputs (values and gradients over its nv variables): zero unless valid */
-static int pair_general(long p, sizes_t z, const double *xsv, const double *xmv, const double *nnv,
-                        const unsigned char *crosspoint, int normals, int dual_basis,
-                        int q, const double (*bary)[3], const double *rule_weights,
-                        const outputs_t *o, unsigned char *valid, double *overlap) {
-    const int ns = z.ns, nm = z.nm, nv = z.nv;
-    dx xs[4][3], xm[4][3], node_normals[4][3];
+/* The pair's variables xs, xm as dual numbers and the normal field's nodal normals */
+static void pair_variables_x(sizes_t z, const double *xsv, const double *xmv, const double *nnv,
+                             int normals, dx xs[4][3], dx xm[4][3], dx node_normals[4][3]) {
+    const int ns = z.ns, nm = z.nm;
     for (int k = 0; k < ns; ++k)
         for (int c = 0; c < 3; ++c) {
             xs[k][c] = constx(xsv[3 * k + c]); xs[k][c].d[3 * k + c] = 1.0;
@@ -949,6 +946,110 @@ static int pair_general(long p, sizes_t z, const double *xsv, const double *xmv,
         for (int i = 0; i < ns; ++i)
             for (int c = 0; c < 3; ++c) node_normals[i][c] = negx(unit[c]);
     }
+}
+
+typedef struct { dx D[4][4], M[4][4], Dn[4][4][3], Mn[4][4][3], area[4]; } integrals_t;
+
+/* the crosspoint flags; returns the share of a crosspoint's function each other node gets */
+static double crosspoint_shares(int ns, const unsigned char *crosspoint, int *cross, int *any) {
+    int others = 0;
+    *any = 0;
+    for (int j = 0; j < ns; ++j) {
+        cross[j] = crosspoint ? crosspoint[j] != 0 : 0;
+        others += !cross[j];
+        *any |= cross[j];
+    }
+    return others > 0 ? 1.0 / others : 0.0;
+}
+
+static void multiplier_basis(int ns, int dual_basis, const dx A[4][4], const dx *N, dx *Phi) {
+    for (int j = 0; j < ns; ++j) {
+        if (dual_basis) {
+            Phi[j] = mulx(N[0], A[j][0]);
+            for (int k = 1; k < ns; ++k) Phi[j] = addx(Phi[j], mulx(N[k], A[j][k]));
+        } else {
+            Phi[j] = N[j];
+        }
+    }
+}
+
+/* One Gauss point of weight W: D += W Phi_j N_k, M += W Phi_j Nm_l, Dn, Mn times the normal
+ * field n = sum_j N_j n_j, area += W Phi_j; a crosspoint's Phi shared by the other nodes */
+static void accumulate_point(integrals_t *in, int ns, int nm, dx W, dx *Phi, const dx *N,
+                             const dx *Nm, const dx (*node_normals)[3], const int *cross,
+                             int any_cross, double share) {
+    dx normal[3];
+    if (any_cross) {
+        dx shared = constx(0.0);
+        for (int j = 0; j < ns; ++j) if (cross[j]) shared = addx(shared, Phi[j]);
+        for (int j = 0; j < ns; ++j)
+            Phi[j] = cross[j] ? constx(0.0) : addx(Phi[j], scalex(shared, share));
+    }
+    for (int c = 0; c < 3; ++c) {
+        normal[c] = mulx(node_normals[0][c], N[0]);
+        for (int j = 1; j < ns; ++j) normal[c] = addx(normal[c], mulx(node_normals[j][c], N[j]));
+    }
+    for (int j = 0; j < ns; ++j) {
+        if (cross[j]) continue;
+        dx Q = mulx(W, Phi[j]);
+        in->area[j] = addx(in->area[j], Q);
+        for (int k = 0; k < ns; ++k) {
+            dx QN = mulx(Q, N[k]);
+            in->D[j][k] = addx(in->D[j][k], QN);
+            for (int c = 0; c < 3; ++c) accumulatex(&in->Dn[j][k][c], QN, normal[c]);
+        }
+        for (int l = 0; l < nm; ++l) {
+            dx QN = mulx(Q, Nm[l]);
+            in->M[j][l] = addx(in->M[j][l], QN);
+            for (int c = 0; c < 3; ++c) accumulatex(&in->Mn[j][l][c], QN, normal[c]);
+        }
+    }
+}
+
+/* D, M, Dn, Mn, the areas and gap_j = sum_lc Mn_jlc xm_lc - sum_kc Dn_jkc xs_kc into pair p's
+ * output slots */
+static void write_outputs(const integrals_t *in, sizes_t z, long p, const dx (*xs)[3],
+                          const dx (*xm)[3], const outputs_t *o) {
+    const int ns = z.ns, nm = z.nm, nv = z.nv;
+    for (int j = 0; j < ns; ++j) {
+        dx gap = constx(0.0);
+        for (int l = 0; l < nm; ++l)
+            for (int c = 0; c < 3; ++c) accumulatex(&gap, in->Mn[j][l][c], xm[l][c]);
+        for (int k = 0; k < ns; ++k)
+            for (int c = 0; c < 3; ++c) gap = subx(gap, mulx(in->Dn[j][k][c], xs[k][c]));
+        o->gap[ns * p + j] = gap.v;
+        memcpy(o->ggap + (ns * p + j) * nv, gap.d, sizeof(double) * nv);
+        o->area[ns * p + j] = in->area[j].v;
+        memcpy(o->garea + (ns * p + j) * nv, in->area[j].d, sizeof(double) * nv);
+        for (int k = 0; k < ns; ++k) {
+            long e = (long)ns * ns * p + ns * j + k;
+            o->D[e] = in->D[j][k].v;
+            if (o->gD) memcpy(o->gD + e * nv, in->D[j][k].d, sizeof(double) * nv);
+            for (int c = 0; c < 3; ++c) {
+                o->Dn[3 * e + c] = in->Dn[j][k][c].v;
+                memcpy(o->gDn + (3 * e + c) * nv, in->Dn[j][k][c].d, sizeof(double) * nv);
+            }
+        }
+        for (int l = 0; l < nm; ++l) {
+            long e = (long)ns * nm * p + nm * j + l;
+            o->M[e] = in->M[j][l].v;
+            if (o->gM) memcpy(o->gM + e * nv, in->M[j][l].d, sizeof(double) * nv);
+            for (int c = 0; c < 3; ++c) {
+                o->Mn[3 * e + c] = in->Mn[j][l][c].v;
+                memcpy(o->gMn + (3 * e + c) * nv, in->Mn[j][l][c].d, sizeof(double) * nv);
+            }
+        }
+    }
+}
+
+/* The pair's outputs (values and gradients over its nv variables): zero unless valid */
+static int pair_general(long p, sizes_t z, const double *xsv, const double *xmv, const double *nnv,
+                        const unsigned char *crosspoint, int normals, int dual_basis,
+                        int q, const double (*bary)[3], const double *rule_weights,
+                        const outputs_t *o, unsigned char *valid, double *overlap) {
+    const int ns = z.ns, nm = z.nm;
+    dx xs[4][3], xm[4][3], node_normals[4][3];
+    pair_variables_x(z, xsv, xmv, nnv, normals, xs, xm, node_normals);
     /* the auxiliary plane */
     dx x0[3], sum[3], n0[3], edge[3], wv[3], e[2][3];
     for (int c = 0; c < 3; ++c) {
@@ -1026,30 +1127,19 @@ static int pair_general(long p, sizes_t z, const double *xsv, const double *xmv,
     /* the multiplier basis coefficients, the crosspoints' shares */
     dx A[4][4];
     if (dual_basis) dual_coefficients_x((const dx (*)[3])xs, ns, A);
-    int cross[4] = {0, 0, 0, 0}, others = 0, any_cross = 0;
-    for (int j = 0; j < ns; ++j) {
-        cross[j] = crosspoint ? crosspoint[j] != 0 : 0;
-        others += !cross[j];
-        any_cross |= cross[j];
-    }
-    double share = others > 0 ? 1.0 / others : 0.0;
+    int cross[4], any_cross;
+    double share = crosspoint_shares(ns, crosspoint, cross, &any_cross);
 
     /* the integrals over the fan cells' Gauss points */
-    dx D[4][4], M[4][4], Dn[4][4][3], Mn[4][4][3], area[4];
-    for (int j = 0; j < ns; ++j) {
-        area[j] = constx(0.0);
-        for (int k = 0; k < 4; ++k) {
-            D[j][k] = constx(0.0); M[j][k] = constx(0.0);
-            for (int c = 0; c < 3; ++c) { Dn[j][k][c] = constx(0.0); Mn[j][k][c] = constx(0.0); }
-        }
-    }
+    integrals_t in;
+    memset(&in, 0, sizeof in);
     for (int cell = 0; cell < V; ++cell) {
         const dx *v0 = vertex[cell], *v1 = vertex[(cell + 1) % V];
         dx ea[2] = {subx(v0[0], centre[0]), subx(v0[1], centre[1])};
         dx eb[2] = {subx(v1[0], centre[0]), subx(v1[1], centre[1])};
         dx cell_area = scalex(cross2x(ea, eb), 0.5);
         for (int g = 0; g < q; ++g) {
-            dx P[2], xi[2], eta[2], N[4], Nm[4], Phi[4], normal[3];
+            dx P[2], xi[2], eta[2], N[4], Nm[4], Phi[4];
             for (int a = 0; a < 2; ++a)
                 P[a] = addx(addx(scalex(centre[a], bary[g][0]), scalex(v0[a], bary[g][1])),
                             scalex(v1[a], bary[g][2]));
@@ -1058,71 +1148,12 @@ static int pair_general(long p, sizes_t z, const double *xsv, const double *xmv,
             inverse_map_x((const dx (*)[2])Mx, nm, P, eta);
             shape_duals(xi, ns, N);
             shape_duals(eta, nm, Nm);
-            for (int j = 0; j < ns; ++j) {
-                if (dual_basis) {
-                    Phi[j] = mulx(N[0], A[j][0]);
-                    for (int k = 1; k < ns; ++k) Phi[j] = addx(Phi[j], mulx(N[k], A[j][k]));
-                } else {
-                    Phi[j] = N[j];
-                }
-            }
-            if (any_cross) {
-                dx shared = constx(0.0);
-                for (int j = 0; j < ns; ++j) if (cross[j]) shared = addx(shared, Phi[j]);
-                for (int j = 0; j < ns; ++j)
-                    Phi[j] = cross[j] ? constx(0.0) : addx(Phi[j], scalex(shared, share));
-            }
-            for (int c = 0; c < 3; ++c) {
-                normal[c] = mulx(node_normals[0][c], N[0]);
-                for (int j = 1; j < ns; ++j) normal[c] = addx(normal[c], mulx(node_normals[j][c], N[j]));
-            }
-            for (int j = 0; j < ns; ++j) {
-                if (cross[j]) continue;
-                dx Q = mulx(W, Phi[j]);
-                area[j] = addx(area[j], Q);
-                for (int k = 0; k < ns; ++k) {
-                    dx QN = mulx(Q, N[k]);
-                    D[j][k] = addx(D[j][k], QN);
-                    for (int c = 0; c < 3; ++c) accumulatex(&Dn[j][k][c], QN, normal[c]);
-                }
-                for (int l = 0; l < nm; ++l) {
-                    dx QN = mulx(Q, Nm[l]);
-                    M[j][l] = addx(M[j][l], QN);
-                    for (int c = 0; c < 3; ++c) accumulatex(&Mn[j][l][c], QN, normal[c]);
-                }
-            }
+            multiplier_basis(ns, dual_basis, A, N, Phi);
+            accumulate_point(&in, ns, nm, W, Phi, N, Nm, (const dx (*)[3])node_normals, cross, any_cross,
+                             share);
         }
     }
-    /* the outputs */
-    for (int j = 0; j < ns; ++j) {
-        dx gap = constx(0.0);
-        for (int l = 0; l < nm; ++l)
-            for (int c = 0; c < 3; ++c) accumulatex(&gap, Mn[j][l][c], xm[l][c]);
-        for (int k = 0; k < ns; ++k)
-            for (int c = 0; c < 3; ++c) gap = subx(gap, mulx(Dn[j][k][c], xs[k][c]));
-        o->gap[ns * p + j] = gap.v;
-        memcpy(o->ggap + (ns * p + j) * nv, gap.d, sizeof(double) * nv);
-        o->area[ns * p + j] = area[j].v;
-        memcpy(o->garea + (ns * p + j) * nv, area[j].d, sizeof(double) * nv);
-        for (int k = 0; k < ns; ++k) {
-            long e = (long)ns * ns * p + ns * j + k;
-            o->D[e] = D[j][k].v;
-            if (o->gD) memcpy(o->gD + e * nv, D[j][k].d, sizeof(double) * nv);
-            for (int c = 0; c < 3; ++c) {
-                o->Dn[3 * e + c] = Dn[j][k][c].v;
-                memcpy(o->gDn + (3 * e + c) * nv, Dn[j][k][c].d, sizeof(double) * nv);
-            }
-        }
-        for (int l = 0; l < nm; ++l) {
-            long e = (long)ns * nm * p + nm * j + l;
-            o->M[e] = M[j][l].v;
-            if (o->gM) memcpy(o->gM + e * nv, M[j][l].d, sizeof(double) * nv);
-            for (int c = 0; c < 3; ++c) {
-                o->Mn[3 * e + c] = Mn[j][l][c].v;
-                memcpy(o->gMn + (3 * e + c) * nv, Mn[j][l][c].d, sizeof(double) * nv);
-            }
-        }
-    }
+    write_outputs(&in, z, p, (const dx (*)[3])xs, (const dx (*)[3])xm, o);
     return 1;
 }
 
@@ -1189,6 +1220,200 @@ int surface3_pairs(long n, int ns, int nm, const double *xs, const double *xm, c
                                   q, (const double (*)[3])bary, weights, &o, valid, overlap);
         if (status < 0) return -2 - (int)p;
         if (status == 0) zero_pair_general(&o, z, p);
+    }
+    return 0;
+}
+
+/* ======================================================================================
+ * Element-based integration (surface3.py's _element_points_on_master and
+ * _integrate_element): the slave facet's Gauss points projected along the normal field onto
+ * the master facet (Newton on values, then one step in dual arithmetic at the root).
+ * ====================================================================================== */
+
+/* (eta, alpha) with sum_l Nm_l(eta) xm_l = point + alpha direction */
+static void project_onto_master(const dx (*xm)[3], int nm, const dx *point, const dx *direction,
+                                dx *eta) {
+    double u[3] = {nm == 3 ? 1.0 / 3.0 : 0.0, nm == 3 ? 1.0 / 3.0 : 0.0, 0.0};
+    double N[4], dN[4][2], J[4][4], inverse[4][4];
+    const int iterations = nm == 3 ? 1 : 30;
+    for (int pass = 0; pass <= iterations; ++pass) {
+        shape_values(u[0], u[1], nm, N, dN);
+        for (int c = 0; c < 3; ++c) {
+            for (int d = 0; d < 2; ++d) {
+                J[c][d] = 0.0;
+                for (int l = 0; l < nm; ++l) J[c][d] += dN[l][d] * xm[l][c].v;
+            }
+            J[c][2] = -direction[c].v;
+        }
+        double det = J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1])
+                     - J[0][1] * (J[1][0] * J[2][2] - J[1][2] * J[2][0])
+                     + J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
+        if (!(fabs(det) > 1e-300))
+            for (int c = 0; c < 3; ++c)
+                for (int d = 0; d < 3; ++d) J[c][d] = c == d ? 1.0 : 0.0;
+        invert(3, (const double (*)[4])J, inverse);
+        if (pass == iterations) break;
+        double residual[3], step[3];
+        for (int c = 0; c < 3; ++c) {
+            residual[c] = -point[c].v - u[2] * direction[c].v;
+            for (int l = 0; l < nm; ++l) residual[c] += N[l] * xm[l][c].v;
+        }
+        int converged = 1;
+        for (int a = 0; a < 3; ++a) {
+            step[a] = (inverse[a][0] * residual[0] + inverse[a][1] * residual[1]) + inverse[a][2] * residual[2];
+        }
+        for (int a = 0; a < 3; ++a) {
+            u[a] -= step[a];
+            converged &= fabs(step[a]) < 1e-15 * (1.0 + fabs(u[a]));
+        }
+        if (converged) {
+            shape_values(u[0], u[1], nm, N, dN);
+            for (int c = 0; c < 3; ++c) {
+                for (int d = 0; d < 2; ++d) {
+                    J[c][d] = 0.0;
+                    for (int l = 0; l < nm; ++l) J[c][d] += dN[l][d] * xm[l][c].v;
+                }
+                J[c][2] = -direction[c].v;
+            }
+            double det2 = J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1])
+                          - J[0][1] * (J[1][0] * J[2][2] - J[1][2] * J[2][0])
+                          + J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
+            if (!(fabs(det2) > 1e-300))
+                for (int c = 0; c < 3; ++c)
+                    for (int d = 0; d < 3; ++d) J[c][d] = c == d ? 1.0 : 0.0;
+            invert(3, (const double (*)[4])J, inverse);
+            break;
+        }
+    }
+    /* F = sum_l Nm_l xm_l - point - alpha direction; (eta, alpha) = u - J^-1 F */
+    dx F[3];
+    for (int c = 0; c < 3; ++c) {
+        F[c] = subx(negx(point[c]), scalex(direction[c], u[2]));
+        for (int l = 0; l < nm; ++l) F[c] = addx(F[c], scalex(xm[l][c], N[l]));
+    }
+    for (int a = 0; a < 2; ++a)
+        eta[a] = subx(constx(u[a]), addx(addx(scalex(F[0], inverse[a][0]), scalex(F[1], inverse[a][1])),
+                                          scalex(F[2], inverse[a][2])));
+}
+
+/* the slave facet's point (Gauss point on its reference facet) and the normal field there */
+static void slave_point(const dx (*xs)[3], const dx (*node_normals)[3], int ns, const double *N,
+                        dx *point, dx *direction) {
+    for (int c = 0; c < 3; ++c) {
+        point[c] = scalex(xs[0][c], N[0]);
+        direction[c] = scalex(node_normals[0][c], N[0]);
+        for (int k = 1; k < ns; ++k) {
+            point[c] = addx(point[c], scalex(xs[k][c], N[k]));
+            direction[c] = addx(direction[c], scalex(node_normals[k][c], N[k]));
+        }
+    }
+}
+
+/* score (n, q): how far each Gauss point (points (q, 2) on the slave reference facet) lands
+ * outside the master facet (<= 1e-12: on it; smaller: more central), +inf where it does not
+ * land on it or the facets do not face each other */
+int surface3_element_scores(long n, int ns, int nm, const double *xs, const double *xm,
+                            const double *nn, int normals, int q, const double *points,
+                            double *score) {
+    if ((ns != 3 && ns != 4) || (nm != 3 && nm != 4) || normals < 0 || normals > 2 || q > 9) return -1;
+    sizes_t z = {ns, nm, 3 * (2 * ns + nm)};
+    for (long p = 0; p < n; ++p) {
+        dx vxs[4][3], vxm[4][3], node_normals[4][3];
+        pair_variables_x(z, xs + 3 * ns * p, xm + 3 * nm * p, nn + 3 * ns * p, normals, vxs, vxm,
+                         node_normals);
+        const double *xmv = xm + 3 * nm * p;
+        double n0[3], u[3], w[3], mn[3];
+        for (int c = 0; c < 3; ++c) {
+            n0[c] = node_normals[0][c].v;
+            for (int k = 1; k < ns; ++k) n0[c] += node_normals[k][c].v;
+            if (nm == 4) { u[c] = xmv[6 + c] - xmv[c]; w[c] = xmv[9 + c] - xmv[3 + c]; }
+            else { u[c] = xmv[3 + c] - xmv[c]; w[c] = xmv[6 + c] - xmv[c]; }
+        }
+        mn[0] = u[1] * w[2] - u[2] * w[1]; mn[1] = u[2] * w[0] - u[0] * w[2]; mn[2] = u[0] * w[1] - u[1] * w[0];
+        double length = sqrt((mn[0] * mn[0] + mn[1] * mn[1]) + mn[2] * mn[2]);
+        for (int c = 0; c < 3; ++c) mn[c] = mn[c] / length;
+        double n0_length = sqrt((n0[0] * n0[0] + n0[1] * n0[1]) + n0[2] * n0[2]);
+        int facing = ((n0[0] * mn[0] + n0[1] * mn[1]) + n0[2] * mn[2]) < -FACING_TOLERANCE * n0_length;
+        for (int g = 0; g < q; ++g) {
+            double N[4];
+            dx point[3], direction[3], eta[2];
+            shape_values(points[2 * g], points[2 * g + 1], ns, N, NULL);
+            slave_point((const dx (*)[3])vxs, (const dx (*)[3])node_normals, ns, N, point, direction);
+            project_onto_master((const dx (*)[3])vxm, nm, point, direction, eta);
+            double e0 = eta[0].v, e1 = eta[1].v, outside;
+            if (nm == 3) {
+                outside = -e0 > -e1 ? -e0 : -e1;
+                if (e0 + e1 - 1.0 > outside) outside = e0 + e1 - 1.0;
+            } else {
+                outside = (fabs(e0) > fabs(e1) ? fabs(e0) : fabs(e1)) - 1.0;
+            }
+            int finite = isfinite(e0) && isfinite(e1);
+            score[q * p + g] = (facing && finite && outside <= 1e-12) ? outside : INFINITY;
+        }
+    }
+    return 0;
+}
+
+/* The pairs' outputs from the Gauss points given to them (on_master (n, q)): W = |x_xi x x_eta|
+ * w_g at the slave points, the master functions at the projected points; valid where any
+ * point is given, overlap = the given points' share of the facet's area */
+int surface3_element(long n, int ns, int nm, const double *xs, const double *xm, const double *nn,
+                     const unsigned char *crosspoint, int normals, int dual_basis, int q,
+                     const double *points, const double *point_weights,
+                     const unsigned char *on_master, unsigned char *valid, double *overlap,
+                     double *D, double *M, double *Dn, double *Mn, double *gap, double *area,
+                     double *gD, double *gM, double *gDn, double *gMn, double *ggap,
+                     double *garea) {
+    if ((ns != 3 && ns != 4) || (nm != 3 && nm != 4) || normals < 0 || normals > 2 || q > 9) return -1;
+    sizes_t z = {ns, nm, 3 * (2 * ns + nm)};
+    outputs_t o = {D, M, Dn, Mn, gap, area, gD, gM, gDn, gMn, ggap, garea};
+    for (long p = 0; p < n; ++p) {
+        valid[p] = 0;
+        overlap[p] = 0.0;
+        int any = 0;
+        for (int g = 0; g < q; ++g) any |= on_master[q * p + g] != 0;
+        if (!any) {
+            zero_pair_general(&o, z, p);
+            continue;
+        }
+        dx vxs[4][3], vxm[4][3], node_normals[4][3];
+        pair_variables_x(z, xs + 3 * ns * p, xm + 3 * nm * p, nn + 3 * ns * p, normals, vxs, vxm,
+                         node_normals);
+        dx A[4][4];
+        if (dual_basis) dual_coefficients_x((const dx (*)[3])vxs, ns, A);
+        int cross[4], any_cross;
+        double share = crosspoint_shares(ns, crosspoint ? crosspoint + ns * p : NULL, cross, &any_cross);
+        integrals_t in;
+        memset(&in, 0, sizeof in);
+        double given = 0.0, total = 0.0;
+        for (int g = 0; g < q; ++g) {
+            double Nv[4], dN[4][2];
+            shape_values(points[2 * g], points[2 * g + 1], ns, Nv, dN);
+            dx t1[3], t2[3], normal[3];
+            for (int c = 0; c < 3; ++c) {
+                t1[c] = scalex(vxs[0][c], dN[0][0]); t2[c] = scalex(vxs[0][c], dN[0][1]);
+                for (int k = 1; k < ns; ++k) {
+                    t1[c] = addx(t1[c], scalex(vxs[k][c], dN[k][0]));
+                    t2[c] = addx(t2[c], scalex(vxs[k][c], dN[k][1]));
+                }
+            }
+            crossx(t1, t2, normal);
+            dx jacobian = sqrtx(dotx(normal, normal));
+            total += jacobian.v * point_weights[g];
+            if (!on_master[q * p + g]) continue;
+            given += jacobian.v * point_weights[g];
+            dx point[3], direction[3], eta[2], N[4], Nm[4], Phi[4];
+            slave_point((const dx (*)[3])vxs, (const dx (*)[3])node_normals, ns, Nv, point, direction);
+            project_onto_master((const dx (*)[3])vxm, nm, point, direction, eta);
+            for (int k = 0; k < ns; ++k) N[k] = constx(Nv[k]);
+            shape_duals(eta, nm, Nm);
+            multiplier_basis(ns, dual_basis, A, N, Phi);
+            accumulate_point(&in, ns, nm, scalex(jacobian, point_weights[g]), Phi, N, Nm,
+                             (const dx (*)[3])node_normals, cross, any_cross, share);
+        }
+        write_outputs(&in, z, p, (const dx (*)[3])vxs, (const dx (*)[3])vxm, &o);
+        valid[p] = 1;
+        overlap[p] = given / total;
     }
     return 0;
 }
