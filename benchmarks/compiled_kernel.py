@@ -66,38 +66,44 @@ def overlapping_facets(n: int, ns: int, nm: int, seed: int = 0):
     return slave @ Q.T, master @ Q.T, normals @ Q.T, crosspoint
 
 
+def numpy_run(slave, master, nodal, options):
+    q = surface3.pair_quantities(slave, master, nodal, factorized=False, **options)
+    for item in (q.Dn, q.Mn, q.gap, q.area, q.D_dual, q.M_dual):
+        item.grad  # noqa: B018 (the full gradients, as the compiled kernel returns)
+
+
+def compiled_run(slave, master, nodal, options, pointwise=False):
+    compiled.pair_quantities_compiled(slave, master, nodal, pointwise=pointwise, **options)
+
+
 def facet_comparison(n: int, repeats: int) -> list:
     """us per pair, numpy (full gradients, D and M gradients too) against C, per facet
-    combination, normal field and basis; C on triangles also on its pointwise path."""
+    combination, normal field and basis (segment-based; element-based with averaged
+    normals); C on triangles also on its pointwise path."""
     rows = []
+    cases = [(normals, basis, "segment") for normals in ("averaged", "slave", "master")
+             for basis in ("standard", "dual")]
+    cases += [("averaged", basis, "element") for basis in ("standard", "dual")]
     for ns, nm in ((3, 3), (3, 4), (4, 3), (4, 4)):
         slave, master, nodal, crosspoint = overlapping_facets(n, ns, nm)
-        for normals in ("averaged", "slave", "master"):
-            for basis in ("standard", "dual"):
-                options = dict(normals=normals, basis=basis, crosspoint=crosspoint,
-                               scalar_gradients=True)
+        for normals, basis, integration in cases:
+            options = dict(normals=normals, basis=basis, crosspoint=crosspoint,
+                           scalar_gradients=True, integration=integration)
 
-                def numpy_run():
-                    q = surface3.pair_quantities(slave, master, nodal, factorized=False,
-                                                 **options)
-                    for item in (q.Dn, q.Mn, q.gap, q.area, q.D_dual, q.M_dual):
-                        item.grad  # noqa: B018
-
-                def c_run(pointwise=False):
-                    compiled.pair_quantities_compiled(slave, master, nodal, pointwise=pointwise,
-                                                      **options)
-
-                numpy_run(), c_run()  # warm-up
-                row = {"ns": ns, "nm": nm, "normals": normals, "basis": basis, "pairs": n,
-                       "numpy_us": 1e6 * median_time(numpy_run, (), repeats) / n,
-                       "C_us": 1e6 * median_time(c_run, (), repeats) / n}
-                if (ns, nm, normals) == (3, 3, "averaged"):
-                    row["C_pointwise_us"] = 1e6 * median_time(c_run, (True,), repeats) / n
-                rows.append(row)
-                extra = (f"  (C pointwise {row['C_pointwise_us']:.1f})"
-                         if "C_pointwise_us" in row else "")
-                print(f"{ns}/{nm} {normals:>8} {basis:>8}: numpy {row['numpy_us']:8.1f} us/pair, "
-                      f"C {row['C_us']:7.1f} us/pair{extra}")
+            arguments = (slave, master, nodal, options)
+            numpy_run(*arguments), compiled_run(*arguments)  # warm-up
+            row = {"ns": ns, "nm": nm, "normals": normals, "basis": basis,
+                   "integration": integration, "pairs": n,
+                   "numpy_us": 1e6 * median_time(numpy_run, arguments, repeats) / n,
+                   "C_us": 1e6 * median_time(compiled_run, arguments, repeats) / n}
+            if (ns, nm, normals, integration) == (3, 3, "averaged", "segment"):
+                row["C_pointwise_us"] = 1e6 * median_time(
+                    compiled_run, (*arguments, True), repeats) / n
+            rows.append(row)
+            extra = (f"  (C pointwise {row['C_pointwise_us']:.1f})"
+                     if "C_pointwise_us" in row else "")
+            print(f"{ns}/{nm} {integration:>7} {normals:>8} {basis:>8}: "
+                  f"numpy {row['numpy_us']:8.1f} us/pair, C {row['C_us']:7.1f} us/pair{extra}")
     return rows
 
 

@@ -1,9 +1,8 @@
-/* The 3D mortar kernel's hot path in C: segment-based integration of a triangle slave facet
- * on a triangle master facet, averaged nodal normals, standard or dual multiplier basis,
- * crosspoints, the 1, 3 or 7 point rule (dolfinx_mortar/kernels/surface3.py is the
- * reference; its module docstring describes the method).
+/* The 3D mortar kernel in C (dolfinx_mortar/kernels/surface3.py is the reference; its module
+ * docstring describes the method). Three entry points:
  *
- * Per pair, everything on the stack:
+ * surface3_triangles: segment-based integration of a triangle slave facet on a triangle master
+ * facet, averaged nodal normals (numpy's corner-value path, _affine_integrals):
  *  1. the auxiliary plane (x0, n0, e1, e2) and the slave and master nodes in plane
  *     coordinates S, Mp, in forward-mode dual numbers over the pair's 27 variables (slave
  *     xyz, master xyz, slave nodal normals), the values with numpy's operation order so that
@@ -20,6 +19,16 @@
  *  5. the local gradients chained to the 27 variables; D, M, Dn, Mn, the areas and the gaps
  *     as linear combinations of the 28 integrals (the multiplier basis Phi_j = sum_a A_ja N_a
  *     and the normal field n = sum_i N_i n_i), the nodal normals' direct contributions added.
+ *
+ * surface3_pairs: segment-based integration of any triangle or quadrilateral facets, any
+ * normal field (numpy's pointwise path): the same screening, then every Gauss point of every
+ * fan cell in dual numbers over the pair's 3 (2 ns + nm) variables.
+ *
+ * surface3_element_scores, surface3_element: element-based integration (the slave facet's
+ * Gauss points projected onto the master facet; which pair gets a point is decided between the
+ * two calls, over the pairs of one slave facet).
+ *
+ * Per pair, every work array is on the stack.
  */
 #include <math.h>
 #include <string.h>
@@ -691,9 +700,44 @@ static void shape_duals(const dx *xi, int nodes, dx *N) {
     }
 }
 
+/* the same over the plane coordinates S, Mp only (NP local variables: S_ka at 2 k + a, Mp_la at
+ * 2 ns + 2 l + a): everything in the plane depends on the pair's variables through them */
+#define NP 16
+typedef struct { double v, d[NP]; } dp;
+
+static inline dp constp(double v) { dp r; memset(&r, 0, sizeof r); r.v = v; return r; }
+static inline dp addp(dp a, dp b) { dp r; r.v = a.v + b.v; for (int i = 0; i < NP; ++i) r.d[i] = a.d[i] + b.d[i]; return r; }
+static inline dp subp(dp a, dp b) { dp r; r.v = a.v - b.v; for (int i = 0; i < NP; ++i) r.d[i] = a.d[i] - b.d[i]; return r; }
+static inline dp mulp(dp a, dp b) { dp r; r.v = a.v * b.v; for (int i = 0; i < NP; ++i) r.d[i] = a.d[i] * b.v + b.d[i] * a.v; return r; }
+static inline dp scalep(dp a, double s) { dp r; r.v = a.v * s; for (int i = 0; i < NP; ++i) r.d[i] = a.d[i] * s; return r; }
+static inline dp negp(dp a) { dp r; r.v = -a.v; for (int i = 0; i < NP; ++i) r.d[i] = -a.d[i]; return r; }
+static inline dp divp(dp a, dp b) {
+    dp r; double inverse = 1.0 / b.v; r.v = a.v * inverse;
+    for (int i = 0; i < NP; ++i) r.d[i] = (a.d[i] - b.d[i] * r.v) * inverse;
+    return r;
+}
+/* r += a * b */
+static inline void accumulatep(dp *r, dp a, dp b) {
+    r->v += a.v * b.v;
+    for (int i = 0; i < NP; ++i) r->d[i] += a.d[i] * b.v + b.d[i] * a.v;
+}
+static inline dp cross2p(const dp *a, const dp *b) { return subp(mulp(a[0], b[1]), mulp(a[1], b[0])); }
+
+static void shape_duals_p(const dp *xi, int nodes, dp *N) {
+    if (nodes == 3) {
+        N[0] = subp(subp(constp(1.0), xi[0]), xi[1]); N[1] = xi[0]; N[2] = xi[1];
+        return;
+    }
+    for (int k = 0; k < 4; ++k) {
+        dp u = addp(constp(1.0), scalep(xi[0], QUAD_SIGNS[k][0]));
+        dp w = addp(constp(1.0), scalep(xi[1], QUAD_SIGNS[k][1]));
+        N[k] = scalep(mulp(u, w), 0.25);
+    }
+}
+
 /* xi with sum_k N_k(xi) C_k = P (plane coordinates): closed form for triangles, Newton for
  * bilinear quadrilaterals; the derivatives dxi = J^-1 (dP - sum_k N_k(xi) dC_k) at the root */
-static void inverse_map_x(const dx (*C)[2], int nodes, const dx *P, dx *xi) {
+static void inverse_map_p(const dp (*C)[2], int nodes, const dp *P, dp *xi) {
     double x[2] = {0.0, 0.0}, N[4], dN[4][2], J[2][2];
     if (nodes == 3) {
         double A00 = C[1][0].v - C[0][0].v, A01 = C[2][0].v - C[0][0].v;
@@ -723,10 +767,10 @@ static void inverse_map_x(const dx (*C)[2], int nodes, const dx *P, dx *xi) {
     }
     /* one Newton step in dual arithmetic at x: xi = x - J^-1 F(x) */
     shape_values(x[0], x[1], nodes, N, dN);
-    dx F[2];
+    dp F[2];
     for (int c = 0; c < 2; ++c) {
-        F[c] = negx(P[c]);
-        for (int k = 0; k < nodes; ++k) F[c] = addx(F[c], scalex(C[k][c], N[k]));
+        F[c] = negp(P[c]);
+        for (int k = 0; k < nodes; ++k) F[c] = addp(F[c], scalep(C[k][c], N[k]));
         for (int d = 0; d < 2; ++d) {
             J[c][d] = 0.0;
             for (int k = 0; k < nodes; ++k) J[c][d] += C[k][c].v * dN[k][d];
@@ -735,8 +779,8 @@ static void inverse_map_x(const dx (*C)[2], int nodes, const dx *P, dx *xi) {
     double det = J[0][0] * J[1][1] - J[0][1] * J[1][0];
     double I[2][2] = {{J[1][1] / det, -J[0][1] / det}, {-J[1][0] / det, J[0][0] / det}};
     for (int a = 0; a < 2; ++a) {
-        xi[a] = constx(x[a]);
-        xi[a] = subx(xi[a], addx(scalex(F[0], I[a][0]), scalex(F[1], I[a][1])));
+        xi[a] = constp(x[a]);
+        xi[a] = subp(xi[a], addp(scalep(F[0], I[a][0]), scalep(F[1], I[a][1])));
     }
 }
 
@@ -1098,59 +1142,168 @@ static int pair_general(long p, sizes_t z, const double *xsv, const double *xmv,
     overlap[p] = clip_area / slave_area;
     const int V = poly.count;
 
+    /* the plane coordinates as local variables */
+    dp Sl[4][2], Ml[4][2];
+    for (int k = 0; k < ns; ++k)
+        for (int a = 0; a < 2; ++a) { Sl[k][a] = constp(S[k][a]); Sl[k][a].d[2 * k + a] = 1.0; }
+    for (int l = 0; l < nm; ++l)
+        for (int a = 0; a < 2; ++a) { Ml[l][a] = constp(Mp[l][a]); Ml[l][a].d[2 * ns + 2 * l + a] = 1.0; }
     /* the clip vertices from their labels, the centre */
-    dx vertex[MAXV][2], centre[2];
+    dp vertex[MAXV][2], centre[2];
     for (int k = 0; k < V; ++k) {
         int kind = poly.label[k][0], i = poly.label[k][1], j = poly.label[k][2];
         if (kind == 0) {
-            vertex[k][0] = Sx[i][0]; vertex[k][1] = Sx[i][1];
+            vertex[k][0] = Sl[i][0]; vertex[k][1] = Sl[i][1];
         } else if (kind == 1) {
             int node = ((nm - 1 - j) % nm + nm) % nm;
-            vertex[k][0] = Mx[node][0]; vertex[k][1] = Mx[node][1];
+            vertex[k][0] = Ml[node][0]; vertex[k][1] = Ml[node][1];
         } else {
             int es = ((nm - 2 - j) % nm + nm) % nm;
-            const dx *a0 = Sx[i], *a1 = Sx[(i + 1) % ns], *b0 = Mx[es], *b1 = Mx[(es + 1) % nm];
-            dx da[2] = {subx(a1[0], a0[0]), subx(a1[1], a0[1])};
-            dx db[2] = {subx(b1[0], b0[0]), subx(b1[1], b0[1])};
-            dx ba[2] = {subx(b0[0], a0[0]), subx(b0[1], a0[1])};
-            dx denominator = cross2x(da, db), numerator = cross2x(ba, db);
-            dx t = denominator.v != 0.0 ? divx(numerator, denominator) : numerator;
-            vertex[k][0] = addx(a0[0], mulx(da[0], t));
-            vertex[k][1] = addx(a0[1], mulx(da[1], t));
+            const dp *a0 = Sl[i], *a1 = Sl[(i + 1) % ns], *b0 = Ml[es], *b1 = Ml[(es + 1) % nm];
+            dp da[2] = {subp(a1[0], a0[0]), subp(a1[1], a0[1])};
+            dp db[2] = {subp(b1[0], b0[0]), subp(b1[1], b0[1])};
+            dp ba[2] = {subp(b0[0], a0[0]), subp(b0[1], a0[1])};
+            dp denominator = cross2p(da, db), numerator = cross2p(ba, db);
+            dp t = denominator.v != 0.0 ? divp(numerator, denominator) : numerator;
+            vertex[k][0] = addp(a0[0], mulp(da[0], t));
+            vertex[k][1] = addp(a0[1], mulp(da[1], t));
         }
     }
     double weight = 1.0 / V;
     for (int a = 0; a < 2; ++a) {
-        centre[a] = scalex(vertex[0][a], weight);
-        for (int k = 1; k < V; ++k) centre[a] = addx(centre[a], scalex(vertex[k][a], weight));
+        centre[a] = scalep(vertex[0][a], weight);
+        for (int k = 1; k < V; ++k) centre[a] = addp(centre[a], scalep(vertex[k][a], weight));
     }
-    /* the multiplier basis coefficients, the crosspoints' shares */
+    /* the integrals of products of N_a, N_k, N_i (slave) and Nm_l (master) over the clip
+     * polygon, over the local variables: L_a = int N_a, I_ak, K_al = int N_a Nm_l, T_aki
+     * (a <= k <= i), U_ail = int N_a N_i Nm_l (a <= i) */
+    dp L[4], I[4][4], K[4][4], T[4][4][4], U[4][4][4];
+    memset(L, 0, sizeof L); memset(I, 0, sizeof I); memset(K, 0, sizeof K);
+    memset(T, 0, sizeof T); memset(U, 0, sizeof U);
+    for (int cell = 0; cell < V; ++cell) {
+        const dp *v0 = vertex[cell], *v1 = vertex[(cell + 1) % V];
+        dp ea[2] = {subp(v0[0], centre[0]), subp(v0[1], centre[1])};
+        dp eb[2] = {subp(v1[0], centre[0]), subp(v1[1], centre[1])};
+        dp cell_area = scalep(cross2p(ea, eb), 0.5);
+        for (int g = 0; g < q; ++g) {
+            dp P[2], xi[2], eta[2], N[4], Nm[4], WN[4], WNN[4][4];
+            for (int a = 0; a < 2; ++a)
+                P[a] = addp(addp(scalep(centre[a], bary[g][0]), scalep(v0[a], bary[g][1])),
+                            scalep(v1[a], bary[g][2]));
+            dp W = scalep(cell_area, rule_weights[g]);
+            inverse_map_p((const dp (*)[2])Sl, ns, P, xi);
+            inverse_map_p((const dp (*)[2])Ml, nm, P, eta);
+            shape_duals_p(xi, ns, N);
+            shape_duals_p(eta, nm, Nm);
+            for (int a = 0; a < ns; ++a) {
+                WN[a] = mulp(W, N[a]);
+                L[a] = addp(L[a], WN[a]);
+                for (int l = 0; l < nm; ++l) accumulatep(&K[a][l], WN[a], Nm[l]);
+                for (int k = a; k < ns; ++k) {
+                    WNN[a][k] = mulp(WN[a], N[k]);
+                    I[a][k] = addp(I[a][k], WNN[a][k]);
+                    for (int i = k; i < ns; ++i) accumulatep(&T[a][k][i], WNN[a][k], N[i]);
+                    for (int l = 0; l < nm; ++l) accumulatep(&U[a][k][l], WNN[a][k], Nm[l]);
+                }
+            }
+        }
+    }
+    /* chained to the pair's variables through the plane coordinates */
+    double chain[NP][NX];
+    for (int k = 0; k < ns; ++k)
+        for (int a = 0; a < 2; ++a) memcpy(chain[2 * k + a], Sx[k][a].d, sizeof(double) * NX);
+    for (int l = 0; l < nm; ++l)
+        for (int a = 0; a < 2; ++a) memcpy(chain[2 * ns + 2 * l + a], Mx[l][a].d, sizeof(double) * NX);
+    const int nl = 2 * (ns + nm);
+    dx Lx[4], Ix[4][4], Kx[4][4], Tx[4][4][4], Ux[4][4][4];
+#define CHAIN(out, in) do { \
+        (out).v = (in).v; \
+        for (int v_ = 0; v_ < NX; ++v_) (out).d[v_] = 0.0; \
+        for (int s_ = 0; s_ < nl; ++s_) { \
+            double f_ = (in).d[s_]; \
+            for (int v_ = 0; v_ < NX; ++v_) (out).d[v_] += f_ * chain[s_][v_]; \
+        } \
+    } while (0)
+    for (int a = 0; a < ns; ++a) {
+        CHAIN(Lx[a], L[a]);
+        for (int l = 0; l < nm; ++l) CHAIN(Kx[a][l], K[a][l]);
+        for (int k = a; k < ns; ++k) {
+            CHAIN(Ix[a][k], I[a][k]);
+            Ix[k][a] = Ix[a][k];
+            for (int l = 0; l < nm; ++l) { CHAIN(Ux[a][k][l], U[a][k][l]); Ux[k][a][l] = Ux[a][k][l]; }
+            for (int i = k; i < ns; ++i) {
+                CHAIN(Tx[a][k][i], T[a][k][i]);
+                Tx[a][i][k] = Tx[k][a][i] = Tx[k][i][a] = Tx[i][a][k] = Tx[i][k][a] = Tx[a][k][i];
+            }
+        }
+    }
+#undef CHAIN
+    /* the multiplier basis Phi_j = sum_a A_ja N_a, a crosspoint's share given to the others */
     dx A[4][4];
-    if (dual_basis) dual_coefficients_x((const dx (*)[3])xs, ns, A);
+    if (dual_basis) {
+        dual_coefficients_x((const dx (*)[3])xs, ns, A);
+    } else {
+        for (int j = 0; j < ns; ++j)
+            for (int a = 0; a < ns; ++a) A[j][a] = constx(j == a ? 1.0 : 0.0);
+    }
     int cross[4], any_cross;
     double share = crosspoint_shares(ns, crosspoint, cross, &any_cross);
-
-    /* the integrals over the fan cells' Gauss points */
+    if (any_cross) {
+        for (int a = 0; a < ns; ++a) {
+            dx shared = constx(0.0);
+            for (int j = 0; j < ns; ++j) if (cross[j]) shared = addx(shared, A[j][a]);
+            for (int j = 0; j < ns; ++j)
+                A[j][a] = cross[j] ? constx(0.0) : addx(A[j][a], scalex(shared, share));
+        }
+    }
+    const int identity = !dual_basis && !any_cross;
+    /* D, M, the areas; Dn_jkc = sum_i n_ic G_jki, G_jki = sum_a A_ja T_aki; Mn likewise */
     integrals_t in;
     memset(&in, 0, sizeof in);
-    for (int cell = 0; cell < V; ++cell) {
-        const dx *v0 = vertex[cell], *v1 = vertex[(cell + 1) % V];
-        dx ea[2] = {subx(v0[0], centre[0]), subx(v0[1], centre[1])};
-        dx eb[2] = {subx(v1[0], centre[0]), subx(v1[1], centre[1])};
-        dx cell_area = scalex(cross2x(ea, eb), 0.5);
-        for (int g = 0; g < q; ++g) {
-            dx P[2], xi[2], eta[2], N[4], Nm[4], Phi[4];
-            for (int a = 0; a < 2; ++a)
-                P[a] = addx(addx(scalex(centre[a], bary[g][0]), scalex(v0[a], bary[g][1])),
-                            scalex(v1[a], bary[g][2]));
-            dx W = scalex(cell_area, rule_weights[g]);
-            inverse_map_x((const dx (*)[2])Sx, ns, P, xi);
-            inverse_map_x((const dx (*)[2])Mx, nm, P, eta);
-            shape_duals(xi, ns, N);
-            shape_duals(eta, nm, Nm);
-            multiplier_basis(ns, dual_basis, A, N, Phi);
-            accumulate_point(&in, ns, nm, W, Phi, N, Nm, (const dx (*)[3])node_normals, cross, any_cross,
-                             share);
+    for (int j = 0; j < ns; ++j) {
+        dx G[4][4], H[4][4];
+        if (identity) {
+            in.area[j] = Lx[j];
+            for (int k = 0; k < ns; ++k) in.D[j][k] = Ix[j][k];
+            for (int l = 0; l < nm; ++l) in.M[j][l] = Kx[j][l];
+        } else {
+            in.area[j] = constx(0.0);
+            for (int k = 0; k < ns; ++k) in.D[j][k] = constx(0.0);
+            for (int l = 0; l < nm; ++l) in.M[j][l] = constx(0.0);
+            for (int a = 0; a < ns; ++a) {
+                accumulatex(&in.area[j], A[j][a], Lx[a]);
+                for (int k = 0; k < ns; ++k) accumulatex(&in.D[j][k], A[j][a], Ix[a][k]);
+                for (int l = 0; l < nm; ++l) accumulatex(&in.M[j][l], A[j][a], Kx[a][l]);
+            }
+        }
+        for (int k = 0; k < ns; ++k) {
+            for (int i = 0; i < ns; ++i) {
+                if (identity) {
+                    G[k][i] = Tx[j][k][i];
+                } else {
+                    G[k][i] = constx(0.0);
+                    for (int a = 0; a < ns; ++a) accumulatex(&G[k][i], A[j][a], Tx[a][k][i]);
+                }
+            }
+        }
+        for (int i = 0; i < ns; ++i)
+            for (int l = 0; l < nm; ++l) {
+                if (identity) {
+                    H[i][l] = Ux[j][i][l];
+                } else {
+                    H[i][l] = constx(0.0);
+                    for (int a = 0; a < ns; ++a) accumulatex(&H[i][l], A[j][a], Ux[a][i][l]);
+                }
+            }
+        for (int c = 0; c < 3; ++c) {
+            for (int k = 0; k < ns; ++k) {
+                in.Dn[j][k][c] = constx(0.0);
+                for (int i = 0; i < ns; ++i) accumulatex(&in.Dn[j][k][c], node_normals[i][c], G[k][i]);
+            }
+            for (int l = 0; l < nm; ++l) {
+                in.Mn[j][l][c] = constx(0.0);
+                for (int i = 0; i < ns; ++i) accumulatex(&in.Mn[j][l][c], node_normals[i][c], H[i][l]);
+            }
         }
     }
     write_outputs(&in, z, p, (const dx (*)[3])xs, (const dx (*)[3])xm, o);
