@@ -104,7 +104,8 @@ def test_tiny_overlaps_near_the_area_tolerance():
     assert values["valid"].any() and not values["valid"].all()
     assert ratio[values["valid"]].min() < 1e-12
     for basis in ("standard", "dual"):
-        assert_agree(slave, master, nodal, basis=basis)
+        for normals in ("averaged", "slave", "master"):
+            assert_agree(slave, master, nodal, basis=basis, normals=normals)
 
 
 def test_master_vertices_on_slave_edges():
@@ -134,8 +135,10 @@ def test_master_vertices_on_slave_edges():
     slave, master, nodal = np.array(slaves), np.array(masters), np.array(normals)
     crosspoint = rng.random((slave.shape[0], 3)) < 0.3
     for basis in ("standard", "dual"):
-        assert assert_agree(slave, master, nodal, basis=basis) > 10
-        assert_agree(slave, master, nodal, basis=basis, crosspoint=crosspoint)
+        for normals in ("averaged", "slave", "master"):
+            assert assert_agree(slave, master, nodal, basis=basis, normals=normals) > 10
+            assert_agree(slave, master, nodal, basis=basis, normals=normals,
+                         crosspoint=crosspoint)
 
 
 GAP_GRADIENT_ON_BENT_HEXAHEDRA = (
@@ -182,7 +185,8 @@ def test_mesh_interface_pairs(cell, sizes, monkeypatch):
 
 
 @pytest.mark.parametrize("basis", ["standard", "dual"])
-def test_taylor(basis):
+@pytest.mark.parametrize("normals", ["averaged", "slave", "master"])
+def test_taylor(basis, normals):
     """f(x + h d) - f(x) - h f'(x) d = O(h^2) for the compiled gradients, several pairs."""
     slave, master, nodal, crosspoint = random_pairs(40, seed=24)
     keep = compiled.pair_quantities_compiled(slave, master, nodal)["overlap"] > 0.2
@@ -196,8 +200,8 @@ def test_taylor(basis):
     def evaluate(values):
         return compiled.pair_quantities_compiled(
             values[:, :9].reshape(n, 3, 3), values[:, 9:18].reshape(n, 3, 3),
-            values[:, 18:].reshape(n, 3, 3), basis=basis, crosspoint=crosspoint,
-            scalar_gradients=True)
+            values[:, 18:].reshape(n, 3, 3), basis=basis, normals=normals,
+            crosspoint=crosspoint, scalar_gradients=True)
 
     base = evaluate(x)
     flat = np.concatenate([base[name].reshape(n, -1) for name in names], axis=1)
@@ -243,10 +247,10 @@ def random_facets(n: int, ns: int, nm: int, seed: int, noise: float = 0.12):
 @pytest.mark.parametrize("basis", ["standard", "dual"])
 def test_facet_combinations(ns, nm, normals, basis):
     """Every facet combination and normal field, with and without crosspoints (triangle on
-    triangle with averaged normals: the corner-value path and the pointwise path)."""
+    triangle: the corner-value path and the pointwise path)."""
     slave, master, nodal, crosspoint = random_facets(150, ns, nm, seed=31 + 2 * ns + nm)
     for cross in (None, crosspoint):
-        for pointwise in ((False, True) if (ns, nm, normals) == (3, 3, "averaged") else (False,)):
+        for pointwise in ((False, True) if (ns, nm) == (3, 3) else (False,)):
             valid = assert_agree(slave, master, nodal, basis=basis, normals=normals,
                                  crosspoint=cross, pointwise=pointwise)
             assert 50 < valid < 150

@@ -48,7 +48,7 @@ _SOURCE_FILE = pathlib.Path(__file__).with_name("surface3.c")
 COMPILE_ARGS = ("-O3", "-ffp-contract=off", "-std=c99")
 _CDEF = """
 int surface3_triangles(long n, const double *xs, const double *xm, const double *nn,
-                       const unsigned char *crosspoint, int dual_basis, int rule,
+                       const unsigned char *crosspoint, int normals, int dual_basis, int rule,
                        unsigned char *valid, double *overlap,
                        double *D, double *M, double *Dn, double *Mn, double *gap, double *area,
                        double *gD, double *gM, double *gDn, double *gMn, double *ggap,
@@ -240,9 +240,9 @@ def pair_quantities_compiled(slave_x, master_x, slave_normals, *, normals: str =
     (the value's shape + (nv,)), and with ``scalar_gradients`` ``D_grad``, ``M_grad``. Zero
     where not valid.
 
-    A triangle on a triangle with averaged normals takes the corner-value path (numpy's
-    ``_affine_integrals``) unless ``pointwise``; everything else is integrated at every
-    Gauss point in dual arithmetic over the pair's variables (numpy's pointwise path).
+    A triangle on a triangle takes the corner-value path (numpy's ``_affine_integrals``)
+    unless ``pointwise``; quadrilaterals are integrated at every Gauss point (numpy's
+    pointwise path).
     """
     if basis not in ("standard", "dual"):
         raise ValueError(f"unknown multiplier basis {basis!r}; expected standard or dual")
@@ -314,8 +314,9 @@ def pair_quantities_compiled(slave_x, master_x, slave_normals, *, normals: str =
             n, ns, nm, *arrays, _NORMAL_FIELDS[normals], int(basis == "dual"), q,
             _pointer(ffi, points, d), _pointer(ffi, np.ascontiguousarray(point_weights), d),
             _pointer(ffi, on_master, "unsigned char *"), *results)
-    elif ns == 3 and nm == 3 and normals == "averaged" and not pointwise:
-        status = lib.surface3_triangles(n, *arrays, int(basis == "dual"), rule, *results)
+    elif ns == 3 and nm == 3 and not pointwise:
+        status = lib.surface3_triangles(n, *arrays, _NORMAL_FIELDS[normals],
+                                        int(basis == "dual"), rule, *results)
     else:
         status = lib.surface3_pairs(n, ns, nm, *arrays, _NORMAL_FIELDS[normals],
                                     int(basis == "dual"), rule, *results)

@@ -2,11 +2,11 @@
  * docstring describes the method). Three entry points:
  *
  * surface3_triangles: segment-based integration of a triangle slave facet on a triangle master
- * facet, averaged nodal normals (numpy's corner-value path, _affine_integrals):
- *  1. the auxiliary plane (x0, n0, e1, e2) and the slave and master nodes in plane
- *     coordinates S, Mp, in forward-mode dual numbers over the pair's 27 variables (slave
- *     xyz, master xyz, slave nodal normals), the values with numpy's operation order so that
- *     the clip topology is decided on the same bits;
+ * facet, any normal field (numpy's corner-value path, _affine_integrals):
+ *  1. the normal field's nodal normals, the auxiliary plane (x0, n0, e1, e2) and the slave
+ *     and master nodes in plane coordinates S, Mp, in forward-mode dual numbers over the
+ *     pair's 27 variables (slave xyz, master xyz, slave nodal normals), the values with
+ *     numpy's operation order so that the clip topology is decided on the same bits;
  *  2. screening on values: facing test, separation test, Sutherland-Hodgman clip with vertex
  *     labels, the clip area against the area tolerance;
  *  3. the clip vertices recomputed from their labels, the fan cells around the vertex mean,
@@ -18,7 +18,8 @@
  *     multiplies each corner value and each cell area (values), contracted once per point;
  *  5. the local gradients chained to the 27 variables; D, M, Dn, Mn, the areas and the gaps
  *     as linear combinations of the 28 integrals (the multiplier basis Phi_j = sum_a A_ja N_a
- *     and the normal field n = sum_i N_i n_i), the nodal normals' direct contributions added.
+ *     and the normal field n = sum_i N_i n_i), the nodal normals' direct contributions added
+ *     (through their own gradients unless they are the variables).
  *
  * surface3_pairs: segment-based integration of any triangle or quadrilateral facets, any
  * normal field (numpy's pointwise path): the same screening, then every Gauss point of every
@@ -279,15 +280,54 @@ typedef struct {
  * the offsets xs_i - x0 and xm_l - x0. */
 typedef struct {
     double S[3][2], Mp[3][2], n0[3], e[2][3], de[2][3][NV], os[3][3], om[3][3];
+    double field[3][3], dfield[3][3][NV]; /* the normal field's nodal normals */
+    int unit_field;                       /* they are the variables 18-26 (averaged) */
 } plane_t;
 
-static void auxiliary_plane(const double *xs, const double *xm, const double *nn, plane_t *pl) {
-    d27 N[3][3], X[2][3];
-    memset(N, 0, sizeof N); memset(X, 0, sizeof X);
+static inline void cross27(const d27 *a, const d27 *b, d27 *out) {
+    out[0] = sub27(mul27(a[1], b[2]), mul27(a[2], b[1]));
+    out[1] = sub27(mul27(a[2], b[0]), mul27(a[0], b[2]));
+    out[2] = sub27(mul27(a[0], b[1]), mul27(a[1], b[0]));
+}
+
+/* normals 0 averaged (the nodal normals), 1 slave (the slave facet's corner normals), 2 master
+ * (minus the master facet's unit normal at every slave node) */
+static void auxiliary_plane(const double *xs, const double *xm, const double *nn, int normals,
+                            plane_t *pl) {
+    d27 N[3][3], X[3][3], Y[3][3];
+    memset(N, 0, sizeof N); memset(X, 0, sizeof X); memset(Y, 0, sizeof Y);
     for (int k = 0; k < 3; ++k)
-        for (int c = 0; c < 3; ++c) { N[k][c].v = nn[3 * k + c]; N[k][c].d[18 + 3 * k + c] = 1.0; }
-    for (int k = 0; k < 2; ++k)
-        for (int c = 0; c < 3; ++c) { X[k][c].v = xs[3 * k + c]; X[k][c].d[3 * k + c] = 1.0; }
+        for (int c = 0; c < 3; ++c) {
+            X[k][c].v = xs[3 * k + c]; X[k][c].d[3 * k + c] = 1.0;
+            Y[k][c].v = xm[3 * k + c]; Y[k][c].d[9 + 3 * k + c] = 1.0;
+        }
+    if (normals == 0) {
+        for (int k = 0; k < 3; ++k)
+            for (int c = 0; c < 3; ++c) { N[k][c].v = nn[3 * k + c]; N[k][c].d[18 + 3 * k + c] = 1.0; }
+    } else if (normals == 1) {
+        for (int i = 0; i < 3; ++i) {
+            d27 a[3], b[3], v[3];
+            for (int c = 0; c < 3; ++c) {
+                a[c] = sub27(X[(i + 1) % 3][c], X[i][c]);
+                b[c] = sub27(X[(i + 2) % 3][c], X[i][c]);
+            }
+            cross27(a, b, v);
+            normalize27(v, N[i]);
+        }
+    } else {
+        d27 a[3], b[3], v[3], unit[3];
+        for (int c = 0; c < 3; ++c) { a[c] = sub27(Y[1][c], Y[0][c]); b[c] = sub27(Y[2][c], Y[0][c]); }
+        cross27(a, b, v);
+        normalize27(v, unit);
+        for (int i = 0; i < 3; ++i)
+            for (int c = 0; c < 3; ++c) N[i][c] = scale27(unit[c], -1.0);
+    }
+    pl->unit_field = normals == 0;
+    for (int i = 0; i < 3; ++i)
+        for (int c = 0; c < 3; ++c) {
+            pl->field[i][c] = N[i][c].v;
+            memcpy(pl->dfield[i][c], N[i][c].d, sizeof(double) * NV);
+        }
     double x0[3];
     d27 v[3], n0[3], edge[3], w[3], e[2][3];
     for (int c = 0; c < 3; ++c) {
@@ -340,9 +380,7 @@ static void chain(const plane_t *pl, const double *q, double *out) {
         for (int c = 0; c < 3; ++c) {
             double rc = r[a][c];
             const double *de = pl->de[a][c];
-            /* e_a depends on xs_0, xs_1 (columns 0-5) and the nodal normals (18-26) only */
-            for (int v = 0; v < 6; ++v) out[v] += rc * de[v];
-            for (int v = 18; v < NV; ++v) out[v] += rc * de[v];
+            for (int v = 0; v < NV; ++v) out[v] += rc * de[v];
         }
 }
 
@@ -384,11 +422,11 @@ static void zero_pair(const outputs_t *o, long p) {
     if (o->gM) memset(o->gM + 9 * NV * p, 0, 9 * NV * sizeof(double));
 }
 
-static int pair(long p, const double *xs, const double *xm, const double *nn,
+static int pair(long p, const double *xs, const double *xm, const double *nn, int normals,
                 const unsigned char *crosspoint, int dual_basis, const double T[3][3][3],
                 const tables_t *tb, const outputs_t *o, unsigned char *valid, double *overlap) {
     plane_t pl;
-    auxiliary_plane(xs, xm, nn, &pl);
+    auxiliary_plane(xs, xm, nn, normals, &pl);
     const double (*S)[2] = (const double (*)[2])pl.S, (*Mp)[2] = (const double (*)[2])pl.Mp;
     const double *n0 = pl.n0;
     /* facing: n0 . (master unit normal) < -tol */
@@ -567,7 +605,7 @@ static int pair(long p, const double *xs, const double *xm, const double *nn,
                 int e = (3 * j + k) * 3 + c;
                 double dn = 0.0, mnv = 0.0, ldn[NL] = {0}, lmn[NL] = {0};
                 for (int i = 0; i < 3; ++i) {
-                    double ni = nn[3 * i + c];
+                    double ni = pl.field[i][c];
                     dn += ni * J[j][k][i]; mnv += ni * K[j][k][i];
                     for (int s = 0; s < NL; ++s) { ldn[s] += ni * dJ[j][k][i][s]; lmn[s] += ni * dK[j][k][i][s]; }
                     /* d gap_j / d n_i[c] = sum_l xm_lc K_jli - sum_k xs_kc J_jki */
@@ -580,8 +618,16 @@ static int pair(long p, const double *xs, const double *xm, const double *nn,
                 chain(&pl, ldn, gDn + e * NV);
                 chain(&pl, lmn, gMn + e * NV);
                 for (int i = 0; i < 3; ++i) {
-                    gDn[e * NV + 18 + 3 * i + c] += J[j][k][i];
-                    gMn[e * NV + 18 + 3 * i + c] += K[j][k][i];
+                    if (pl.unit_field) {
+                        gDn[e * NV + 18 + 3 * i + c] += J[j][k][i];
+                        gMn[e * NV + 18 + 3 * i + c] += K[j][k][i];
+                    } else {
+                        const double *dn_i = pl.dfield[i][c];
+                        for (int v = 0; v < NV; ++v) {
+                            gDn[e * NV + v] += J[j][k][i] * dn_i[v];
+                            gMn[e * NV + v] += K[j][k][i] * dn_i[v];
+                        }
+                    }
                 }
             }
         }
@@ -595,7 +641,11 @@ static int pair(long p, const double *xs, const double *xm, const double *nn,
                 int e = (3 * j + k) * 3 + c;
                 g[3 * k + c] -= Dn[e];
                 g[9 + 3 * k + c] += Mn[e];
-                g[18 + 3 * k + c] += gap_normals[k][c];
+                if (pl.unit_field) {
+                    g[18 + 3 * k + c] += gap_normals[k][c];
+                } else {
+                    for (int v = 0; v < NV; ++v) g[v] += gap_normals[k][c] * pl.dfield[k][c][v];
+                }
             }
     }
     return 1;
@@ -605,7 +655,7 @@ static int pair(long p, const double *xs, const double *xm, const double *nn,
  * surface3.pair_quantities (gradients (..., 27)); gD, gM may be NULL. Returns 0, or -1 for a
  * bad rule, or -2 - p if pair p's clip polygon outgrew its slots. */
 int surface3_triangles(long n, const double *xs, const double *xm, const double *nn,
-                       const unsigned char *crosspoint, int dual_basis, int rule,
+                       const unsigned char *crosspoint, int normals, int dual_basis, int rule,
                        unsigned char *valid, double *overlap,
                        double *D, double *M, double *Dn, double *Mn, double *gap, double *area,
                        double *gD, double *gM, double *gDn, double *gMn, double *ggap,
@@ -618,7 +668,7 @@ int surface3_triangles(long n, const double *xs, const double *xm, const double 
     for (long p = 0; p < n; ++p) {
         valid[p] = 0;
         overlap[p] = 0.0;
-        int status = pair(p, xs + 9 * p, xm + 9 * p, nn + 9 * p,
+        int status = pair(p, xs + 9 * p, xm + 9 * p, nn + 9 * p, normals,
                           crosspoint ? crosspoint + 3 * p : NULL, dual_basis, T, &tables, &o, valid, overlap);
         if (status < 0) return -2 - (int)p;
         if (status == 0) zero_pair(&o, p);
