@@ -70,7 +70,7 @@ int surface3_element(long n, int ns, int nm, const double *xs, const double *xm,
                      double *gD, double *gM, double *gDn, double *gMn, double *ggap,
                      double *garea);
 """
-NUM_VARIABLES = 27
+NUM_VARIABLES = 27  # of a triangle pair; 3 (2 ns + nm) for ns slave and nm master nodes
 
 _module = None
 _info: dict = {}
