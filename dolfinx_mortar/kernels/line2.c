@@ -1,0 +1,380 @@
+/* The 2D mortar kernel in C: a linear slave facet a -> b on a linear master facet c -> d,
+ * averaged, slave or master normals, segment- or element-based integration, standard or dual
+ * multiplier basis, crosspoints (dolfinx_mortar/kernels/line2.py is the reference; its module
+ * docstring describes the method and the 12 pair variables p, a, b, q, c, d).
+ *
+ * Two passes, as the numpy kernel:
+ *  - line2_screen, values only, every pair: facing test, and segment-based the projections of
+ *    c and d onto the slave facet (the overlap length), element-based the master parameter eta
+ *    of each slave Gauss point (the caller gives each point to one master facet);
+ *  - line2_integrate, the contributing pairs only: D, M, Dn, Mn, the areas and the gaps in
+ *    forward-mode dual numbers over the 12 pair variables, per pair on the stack.
+ * Values follow the numpy kernel's operation order, so that the discrete decisions (facing,
+ * projection found, parallel, overlap) are taken on the same bits.
+ */
+#include <math.h>
+#include <string.h>
+
+#define NV 12
+
+static const double FACING_TOLERANCE = 1e-8;
+static const double PARALLEL_TOLERANCE = 1e-10;
+
+enum { AVERAGED = 0, SLAVE = 1, MASTER = 2 };
+
+/* ---- values (screening) ---- */
+
+static void unit_normal(double tx, double ty, double *n) {
+    double inverse = 1.0 / sqrt(tx * tx + ty * ty);
+    n[0] = ty * inverse;
+    n[1] = -tx * inverse;
+}
+
+static void normal_values(const double *x, const unsigned char *has, int normals, double *na,
+                          double *nb) {
+    double n[2];
+    if (normals == MASTER) {
+        unit_normal(x[10] - x[8], x[11] - x[9], n);
+        na[0] = nb[0] = -n[0];
+        na[1] = nb[1] = -n[1];
+        return;
+    }
+    unit_normal(x[4] - x[2], x[5] - x[3], n);
+    if (normals == SLAVE) {
+        na[0] = nb[0] = n[0];
+        na[1] = nb[1] = n[1];
+        return;
+    }
+    double va[2] = {n[0], n[1]}, vb[2] = {n[0], n[1]}, m[2];
+    if (has[0]) {
+        unit_normal(x[2] - x[0], x[3] - x[1], m);
+        va[0] = n[0] + m[0];
+        va[1] = n[1] + m[1];
+    }
+    if (has[1]) {
+        unit_normal(x[6] - x[4], x[7] - x[5], m);
+        vb[0] = n[0] + m[0];
+        vb[1] = n[1] + m[1];
+    }
+    double inverse_a = 1.0 / sqrt(va[0] * va[0] + va[1] * va[1]);
+    double inverse_b = 1.0 / sqrt(vb[0] * vb[0] + vb[1] * vb[1]);
+    na[0] = va[0] * inverse_a; na[1] = va[1] * inverse_a;
+    nb[0] = vb[0] * inverse_b; nb[1] = vb[1] * inverse_b;
+}
+
+static int facing(const double *x) {
+    double tx = x[4] - x[2], ty = x[5] - x[3];
+    double length = sqrt(tx * tx + ty * ty);
+    double ux = x[10] - x[8], uy = x[11] - x[9];
+    double master_length = sqrt(ux * ux + uy * uy);
+    double cosine = (ty / length) * (uy / master_length) + (-tx / length) * (-ux / master_length);
+    return cosine < -FACING_TOLERANCE;
+}
+
+/* xi where the normal line through x_s(xi) meets the point (px, py); returns whether found */
+static int project_value(const double *s0, const double *s1, const double *n0, const double *n1,
+                         double px, double py, double *xi) {
+    double offx = s0[0] - px, offy = s0[1] - py;
+    double c = offx * n0[1] - offy * n0[0];
+    double b = (offx * n1[1] - offy * n1[0]) + (s1[0] * n0[1] - s1[1] * n0[0]);
+    double a = s1[0] * n1[1] - s1[1] * n1[0];
+    double discriminant = b * b - a * c * 4.0;
+    int ok = discriminant >= 0.0;
+    double root = sqrt(ok ? discriminant : 0.0);
+    double sign = b >= 0.0 ? 1.0 : -1.0;
+    double denominator = b + root * sign;
+    double scale = sqrt(s1[0] * s1[0] + s1[1] * s1[1]) * sqrt(n0[0] * n0[0] + n0[1] * n0[1]);
+    ok = ok && fabs(denominator) > PARALLEL_TOLERANCE * scale;
+    double inverse = 1.0 / (ok ? denominator : 1.0);
+    *xi = c * -2.0 * inverse;
+    return ok;
+}
+
+static void segment_limits_value(double xi_c, double xi_d, double *low, double *high) {
+    double lower = xi_c <= xi_d ? xi_c : xi_d;
+    *low = -1.0 >= lower ? -1.0 : lower;
+    double upper = xi_c >= xi_d ? xi_c : xi_d;
+    *high = 1.0 <= upper ? 1.0 : upper;
+}
+
+/* the master parameter eta of the slave point xi; returns whether the master is parallel to
+ * the normal there */
+static int eta_value(const double *x, const double *na, const double *nb, double xi,
+                     double *eta) {
+    double N0 = (1.0 - xi) * 0.5, N1 = (xi + 1.0) * 0.5;
+    double point[2] = {N0 * x[2] + N1 * x[4], N0 * x[3] + N1 * x[5]};
+    double normal[2] = {N0 * na[0] + N1 * nb[0], N0 * na[1] + N1 * nb[1]};
+    double m0[2] = {(x[8] + x[10]) * 0.5, (x[9] + x[11]) * 0.5};
+    double m1[2] = {(x[10] - x[8]) * 0.5, (x[11] - x[9]) * 0.5};
+    double cross = m1[0] * normal[1] - m1[1] * normal[0];
+    int parallel = fabs(cross) <= PARALLEL_TOLERANCE * sqrt(m1[0] * m1[0] + m1[1] * m1[1]);
+    double inverse = 1.0 / (parallel ? 1.0 : cross);
+    double relative[2] = {m0[0] - point[0], m0[1] - point[1]};
+    *eta = -(relative[0] * normal[1] - relative[1] * normal[0]) * inverse;
+    return parallel;
+}
+
+/* n pairs x (n, 12), has_neighbour (n, 2). Segment-based (element == 0): valid (facing and
+ * both projections found) and screened[p] = high - low. Element-based: valid (facing and no
+ * Gauss point where the master is parallel to the normal) and screened (n, g) = eta. */
+void line2_screen(long n, const double *x, const unsigned char *has_neighbour, int normals,
+                  int element, int num_points, const double *points, unsigned char *valid,
+                  double *screened) {
+    for (long p = 0; p < n; ++p) {
+        const double *xp = x + NV * p;
+        double na[2], nb[2];
+        normal_values(xp, has_neighbour + 2 * p, normals, na, nb);
+        int ok = facing(xp);
+        if (!element) {
+            double s0[2] = {(xp[2] + xp[4]) * 0.5, (xp[3] + xp[5]) * 0.5};
+            double s1[2] = {(xp[4] - xp[2]) * 0.5, (xp[5] - xp[3]) * 0.5};
+            double n0[2] = {(na[0] + nb[0]) * 0.5, (na[1] + nb[1]) * 0.5};
+            double n1[2] = {(nb[0] - na[0]) * 0.5, (nb[1] - na[1]) * 0.5};
+            double xi_c, xi_d, low, high;
+            int ok_c = project_value(s0, s1, n0, n1, xp[8], xp[9], &xi_c);
+            int ok_d = project_value(s0, s1, n0, n1, xp[10], xp[11], &xi_d);
+            segment_limits_value(xi_c, xi_d, &low, &high);
+            valid[p] = ok && ok_c && ok_d;
+            screened[p] = high - low;
+        } else {
+            int parallel = 0;
+            for (int g = 0; g < num_points; ++g)
+                parallel |= eta_value(xp, na, nb, points[g], screened + (long)num_points * p + g);
+            valid[p] = ok && !parallel;
+        }
+    }
+}
+
+/* ---- dual numbers over the 12 pair variables ---- */
+typedef struct { double v, d[NV]; } dual;
+
+static inline dual constant(double v) { dual r; r.v = v; memset(r.d, 0, sizeof r.d); return r; }
+static inline dual add(dual a, dual b) { dual r; r.v = a.v + b.v; for (int i = 0; i < NV; ++i) r.d[i] = a.d[i] + b.d[i]; return r; }
+static inline dual sub(dual a, dual b) { dual r; r.v = a.v - b.v; for (int i = 0; i < NV; ++i) r.d[i] = a.d[i] - b.d[i]; return r; }
+static inline dual neg(dual a) { dual r; r.v = -a.v; for (int i = 0; i < NV; ++i) r.d[i] = -a.d[i]; return r; }
+static inline dual mul(dual a, dual b) { dual r; r.v = a.v * b.v; for (int i = 0; i < NV; ++i) r.d[i] = a.d[i] * b.v + b.d[i] * a.v; return r; }
+static inline dual scale(dual a, double s) { dual r; r.v = a.v * s; for (int i = 0; i < NV; ++i) r.d[i] = a.d[i] * s; return r; }
+static inline dual shift(dual a, double s) { a.v = a.v + s; return a; }
+static inline dual from(double s, dual a) { dual r; r.v = s - a.v; for (int i = 0; i < NV; ++i) r.d[i] = -a.d[i]; return r; }
+static inline dual reciprocal(dual a) {
+    dual r; r.v = 1.0 / a.v; double f = -r.v * r.v;
+    for (int i = 0; i < NV; ++i) r.d[i] = a.d[i] * f;
+    return r;
+}
+/* d sqrt(s) taken as 0 at s = 0, as the numpy kernel */
+static inline dual root(dual a) {
+    dual r; r.v = sqrt(a.v); double f = r.v > 0.0 ? 0.5 / r.v : 0.0;
+    for (int i = 0; i < NV; ++i) r.d[i] = a.d[i] * f;
+    return r;
+}
+static inline void accumulate(dual *sum, dual a, dual b) { *sum = add(*sum, mul(a, b)); }
+
+static void unit_normal_dual(dual tx, dual ty, dual *n) {
+    dual inverse = reciprocal(root(add(mul(tx, tx), mul(ty, ty))));
+    n[0] = mul(ty, inverse);
+    n[1] = mul(neg(tx), inverse);
+}
+
+static void normal_duals(const dual *X, const unsigned char *has, int normals, dual *na,
+                         dual *nb) {
+    dual n[2];
+    if (normals == MASTER) {
+        unit_normal_dual(sub(X[10], X[8]), sub(X[11], X[9]), n);
+        na[0] = nb[0] = neg(n[0]);
+        na[1] = nb[1] = neg(n[1]);
+        return;
+    }
+    unit_normal_dual(sub(X[4], X[2]), sub(X[5], X[3]), n);
+    if (normals == SLAVE) {
+        na[0] = nb[0] = n[0];
+        na[1] = nb[1] = n[1];
+        return;
+    }
+    dual va[2] = {n[0], n[1]}, vb[2] = {n[0], n[1]}, m[2];
+    if (has[0]) {
+        unit_normal_dual(sub(X[2], X[0]), sub(X[3], X[1]), m);
+        va[0] = add(n[0], m[0]);
+        va[1] = add(n[1], m[1]);
+    }
+    if (has[1]) {
+        unit_normal_dual(sub(X[6], X[4]), sub(X[7], X[5]), m);
+        vb[0] = add(n[0], m[0]);
+        vb[1] = add(n[1], m[1]);
+    }
+    dual inverse_a = reciprocal(root(add(mul(va[0], va[0]), mul(va[1], va[1]))));
+    dual inverse_b = reciprocal(root(add(mul(vb[0], vb[0]), mul(vb[1], vb[1]))));
+    na[0] = mul(va[0], inverse_a); na[1] = mul(va[1], inverse_a);
+    nb[0] = mul(vb[0], inverse_b); nb[1] = mul(vb[1], inverse_b);
+}
+
+static dual project_dual(const dual *s0, const dual *s1, const dual *n0, const dual *n1,
+                         dual px, dual py) {
+    dual offx = sub(s0[0], px), offy = sub(s0[1], py);
+    dual c = sub(mul(offx, n0[1]), mul(offy, n0[0]));
+    dual b = add(sub(mul(offx, n1[1]), mul(offy, n1[0])), sub(mul(s1[0], n0[1]), mul(s1[1], n0[0])));
+    dual a = sub(mul(s1[0], n1[1]), mul(s1[1], n1[0]));
+    dual discriminant = sub(mul(b, b), scale(mul(a, c), 4.0));
+    if (!(discriminant.v >= 0.0)) discriminant = constant(0.0);
+    dual r = root(discriminant);
+    double sign = b.v >= 0.0 ? 1.0 : -1.0;
+    dual denominator = add(b, scale(r, sign));
+    return mul(scale(c, -2.0), reciprocal(denominator));
+}
+
+typedef struct {
+    double *D, *M, *Dn, *Mn, *gap, *area;          /* values, at the pair's index */
+    double *gD, *gM, *gDn, *gMn, *ggap, *garea;    /* gradients, at the row's index */
+} outputs_t;
+
+static void store(const dual *value, int count, double *values, double *gradients) {
+    for (int o = 0; o < count; ++o) {
+        values[o] = value[o].v;
+        if (gradients) memcpy(gradients + NV * o, value[o].d, NV * sizeof(double));
+    }
+}
+
+/* the integrals of pair p (row r); returns 0 if a Gauss point sees the master parallel to the
+ * normal (segment-based: the pair contributes nothing) */
+static int integrate(const double *x, const unsigned char *has, const unsigned char *cross,
+                     const unsigned char *on_master, int normals, int element, int num_points,
+                     const double *points, const double *weights, const double *dual_basis,
+                     const outputs_t *o, long p, long r) {
+    dual X[NV];
+    for (int i = 0; i < NV; ++i) { X[i] = constant(x[i]); X[i].d[i] = 1.0; }
+    dual na[2], nb[2];
+    normal_duals(X, has, normals, na, nb);
+    dual s1[2] = {scale(sub(X[4], X[2]), 0.5), scale(sub(X[5], X[3]), 0.5)};
+    dual n1[2] = {scale(sub(nb[0], na[0]), 0.5), scale(sub(nb[1], na[1]), 0.5)};
+    dual jacobian = root(add(mul(s1[0], s1[0]), mul(s1[1], s1[1])));
+    dual low, length;
+    if (!element) {
+        dual s0[2] = {scale(add(X[2], X[4]), 0.5), scale(add(X[3], X[5]), 0.5)};
+        dual n0[2] = {scale(add(na[0], nb[0]), 0.5), scale(add(na[1], nb[1]), 0.5)};
+        dual xi_c = project_dual(s0, s1, n0, n1, X[8], X[9]);
+        dual xi_d = project_dual(s0, s1, n0, n1, X[10], X[11]);
+        dual lower = xi_c.v <= xi_d.v ? xi_c : xi_d;
+        low = -1.0 >= lower.v ? constant(-1.0) : lower;
+        dual upper = xi_c.v >= xi_d.v ? xi_c : xi_d;
+        dual high = 1.0 <= upper.v ? constant(1.0) : upper;
+        length = sub(high, low);
+    }
+    dual m0[2] = {scale(add(X[8], X[10]), 0.5), scale(add(X[9], X[11]), 0.5)};
+    dual m1[2] = {scale(sub(X[10], X[8]), 0.5), scale(sub(X[11], X[9]), 0.5)};
+    double m1_length = sqrt(m1[0].v * m1[0].v + m1[1].v * m1[1].v);
+    dual D[2][2], M[2][2], Dn[2][2][2], Mn[2][2][2], area[2], gap[2];
+    dual zero = constant(0.0);
+    for (int j = 0; j < 2; ++j) {
+        area[j] = zero;
+        for (int k = 0; k < 2; ++k) {
+            D[j][k] = M[j][k] = zero;
+            for (int c = 0; c < 2; ++c) Dn[j][k][c] = Mn[j][k][c] = zero;
+        }
+    }
+    for (int g = 0; g < num_points; ++g) {
+        if (element && !on_master[g]) continue;
+        dual xi, weight;
+        if (!element) {
+            dual half_length = scale(length, 0.5);
+            xi = add(low, scale(half_length, points[g] + 1.0));
+            weight = mul(scale(half_length, weights[g]), jacobian);
+        } else {
+            xi = constant(points[g]);
+            weight = scale(jacobian, weights[g]);
+        }
+        dual N[2] = {scale(from(1.0, xi), 0.5), scale(shift(xi, 1.0), 0.5)};
+        dual point[2] = {add(mul(N[0], X[2]), mul(N[1], X[4])), add(mul(N[0], X[3]), mul(N[1], X[5]))};
+        dual normal[2] = {add(mul(N[0], na[0]), mul(N[1], nb[0])), add(mul(N[0], na[1]), mul(N[1], nb[1]))};
+        dual cross_m1 = sub(mul(m1[0], normal[1]), mul(m1[1], normal[0]));
+        if (fabs(cross_m1.v) <= PARALLEL_TOLERANCE * m1_length) {
+            if (!element) return 0;
+            cross_m1 = constant(1.0);
+        }
+        dual relative[2] = {sub(m0[0], point[0]), sub(m0[1], point[1])};
+        dual eta = mul(neg(sub(mul(relative[0], normal[1]), mul(relative[1], normal[0]))),
+                       reciprocal(cross_m1));
+        dual Nm[2] = {scale(from(1.0, eta), 0.5), scale(shift(eta, 1.0), 0.5)};
+        dual phi[2];
+        if (dual_basis) {
+            for (int j = 0; j < 2; ++j)
+                phi[j] = add(scale(N[0], dual_basis[2 * j]), scale(N[1], dual_basis[2 * j + 1]));
+        } else {
+            phi[0] = N[0];
+            phi[1] = N[1];
+        }
+        if (cross && (cross[0] || cross[1])) {
+            /* the basis function of a crosspoint node moves onto the facet's other node */
+            dual total = add(phi[0], phi[1]);
+            phi[0] = cross[0] ? zero : (cross[1] ? total : phi[0]);
+            phi[1] = cross[1] ? zero : (cross[0] ? total : phi[1]);
+        }
+        for (int j = 0; j < 2; ++j) {
+            dual weighted_phi = mul(phi[j], weight);
+            area[j] = add(area[j], weighted_phi);
+            for (int k = 0; k < 2; ++k) {
+                accumulate(&D[j][k], weighted_phi, N[k]);
+                accumulate(&M[j][k], weighted_phi, Nm[k]);
+            }
+            for (int c = 0; c < 2; ++c) {
+                dual PN = mul(weighted_phi, normal[c]);
+                for (int k = 0; k < 2; ++k) {
+                    accumulate(&Dn[j][k][c], PN, N[k]);
+                    accumulate(&Mn[j][k][c], PN, Nm[k]);
+                }
+            }
+        }
+    }
+    /* gap_j = sum_kc Mn_jkc x^m_kc - Dn_jkc x^s_kc */
+    for (int j = 0; j < 2; ++j) {
+        dual inner[2];
+        for (int k = 0; k < 2; ++k) {
+            dual term[2];
+            for (int c = 0; c < 2; ++c)
+                term[c] = sub(mul(Mn[j][k][c], X[8 + 2 * k + c]), mul(Dn[j][k][c], X[2 + 2 * k + c]));
+            inner[k] = add(term[0], term[1]);
+        }
+        gap[j] = add(inner[0], inner[1]);
+    }
+    store(&D[0][0], 4, o->D + 4 * p, o->gD ? o->gD + 4 * NV * r : NULL);
+    store(&M[0][0], 4, o->M + 4 * p, o->gM ? o->gM + 4 * NV * r : NULL);
+    store(&Dn[0][0][0], 8, o->Dn + 8 * p, o->gDn + 8 * NV * r);
+    store(&Mn[0][0][0], 8, o->Mn + 8 * p, o->gMn + 8 * NV * r);
+    store(area, 2, o->area + 2 * p, o->garea + 2 * NV * r);
+    store(gap, 2, o->gap + 2 * p, o->ggap + 2 * NV * r);
+    return 1;
+}
+
+/* The pairs rows[0 .. num_rows - 1] of x (n, 12), has_neighbour (n, 2), crosspoint (n, 2) or
+ * NULL; on_master (n, g), element-based only (which Gauss points count). dual_basis: the 2 x 2
+ * coefficients A (Phi = A N) or NULL (standard basis). Values D, M (n, 2, 2), Dn, Mn
+ * (n, 2, 2, 2), area, gap (n, 2) are written at the pair's index (the caller zeroes the
+ * others), gradients (num_rows, ..., 12) at the row's; gD, gM may be NULL. contributes[r]:
+ * segment-based, 0 where a Gauss point sees the master parallel to the normal (then the pair's
+ * values and gradients are zero). */
+void line2_integrate(long num_rows, const long *rows, const double *x,
+                     const unsigned char *has_neighbour, const unsigned char *crosspoint,
+                     const unsigned char *on_master, int normals, int element, int num_points,
+                     const double *points, const double *weights, const double *dual_basis,
+                     unsigned char *contributes,
+                     double *D, double *M, double *Dn, double *Mn, double *gap, double *area,
+                     double *gD, double *gM, double *gDn, double *gMn, double *ggap,
+                     double *garea) {
+    outputs_t o = {D, M, Dn, Mn, gap, area, gD, gM, gDn, gMn, ggap, garea};
+    for (long r = 0; r < num_rows; ++r) {
+        long p = rows[r];
+        contributes[r] = (unsigned char)integrate(
+            x + NV * p, has_neighbour + 2 * p, crosspoint ? crosspoint + 2 * p : NULL,
+            on_master ? on_master + (long)num_points * p : NULL, normals, element, num_points,
+            points, weights, dual_basis, &o, p, r);
+        if (!contributes[r]) {
+            memset(D + 4 * p, 0, 4 * sizeof(double)); memset(M + 4 * p, 0, 4 * sizeof(double));
+            memset(Dn + 8 * p, 0, 8 * sizeof(double)); memset(Mn + 8 * p, 0, 8 * sizeof(double));
+            memset(area + 2 * p, 0, 2 * sizeof(double)); memset(gap + 2 * p, 0, 2 * sizeof(double));
+            if (gD) memset(gD + 4 * NV * r, 0, 4 * NV * sizeof(double));
+            if (gM) memset(gM + 4 * NV * r, 0, 4 * NV * sizeof(double));
+            memset(gDn + 8 * NV * r, 0, 8 * NV * sizeof(double));
+            memset(gMn + 8 * NV * r, 0, 8 * NV * sizeof(double));
+            memset(ggap + 2 * NV * r, 0, 2 * NV * sizeof(double));
+            memset(garea + 2 * NV * r, 0, 2 * NV * sizeof(double));
+        }
+    }
+}
