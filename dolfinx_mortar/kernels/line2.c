@@ -7,8 +7,8 @@
  *  - line2_screen, values only, every pair: facing test, and segment-based the projections of
  *    c and d onto the slave facet (the overlap length), element-based the master parameter eta
  *    of each slave Gauss point (the caller gives each point to one master facet);
- *  - line2_integrate, the contributing pairs only: D, M, Dn, Mn, the areas and the gaps in
- *    forward-mode dual numbers over the 12 pair variables, per pair on the stack.
+ *  - line2_integrate, the contributing pairs only: D, M, Dn, Mn, the areas and the gaps with
+ *    their gradients over the 12 pair variables, per pair on the stack (see integrate).
  * Values follow the numpy kernel's operation order, so that the discrete decisions (facing,
  * projection found, parallel, overlap) are taken on the same bits.
  */
@@ -167,7 +167,6 @@ static inline dual root(dual a) {
     for (int i = 0; i < NV; ++i) r.d[i] = a.d[i] * f;
     return r;
 }
-static inline void accumulate(dual *sum, dual a, dual b) { *sum = add(*sum, mul(a, b)); }
 
 static void unit_normal_dual(dual tx, dual ty, dual *n) {
     dual inverse = reciprocal(root(add(mul(tx, tx), mul(ty, ty))));
@@ -226,15 +225,17 @@ typedef struct {
     double *gD, *gM, *gDn, *gMn, *ggap, *garea;    /* gradients, at the row's index */
 } outputs_t;
 
-static void store(const dual *value, int count, double *values, double *gradients) {
-    for (int o = 0; o < count; ++o) {
-        values[o] = value[o].v;
-        if (gradients) memcpy(gradients + NV * o, value[o].d, NV * sizeof(double));
-    }
-}
-
 /* the integrals of pair p (row r); returns 0 if a Gauss point sees the master parallel to the
- * normal (segment-based: the pair contributes nothing) */
+ * normal (segment-based: the pair contributes nothing).
+ *
+ * The pair-level quantities (nodal normals, segment limits low and length, facet Jacobian J)
+ * are dual numbers over the 12 variables. The Gauss points are plain numbers: each output's
+ * derivative is gathered, as the numpy kernel does, as coefficients on those pair-level
+ * gradients (through xi, the weight and the normal) plus direct terms on a, b, c, d (through
+ * the master parameter eta), and expanded once per output at the end.
+ * Outputs o: Dn 0-7 (4 j + 2 k + c), Mn 8-15 (8 + 4 j + 2 l + c), area 16-17, D 18-21
+ * (2 j + k), M 22-25 (2 j + l); the gaps are formed from Dn and Mn. */
+#define NO 26
 static int integrate(const double *x, const unsigned char *has, const unsigned char *cross,
                      const unsigned char *on_master, int normals, int element, int num_points,
                      const double *points, const double *weights, const double *dual_basis,
@@ -243,103 +244,199 @@ static int integrate(const double *x, const unsigned char *has, const unsigned c
     for (int i = 0; i < NV; ++i) { X[i] = constant(x[i]); X[i].d[i] = 1.0; }
     dual na[2], nb[2];
     normal_duals(X, has, normals, na, nb);
-    dual s1[2] = {scale(sub(X[4], X[2]), 0.5), scale(sub(X[5], X[3]), 0.5)};
-    dual n1[2] = {scale(sub(nb[0], na[0]), 0.5), scale(sub(nb[1], na[1]), 0.5)};
-    dual jacobian = root(add(mul(s1[0], s1[0]), mul(s1[1], s1[1])));
-    dual low, length;
+    dual s1d[2] = {scale(sub(X[4], X[2]), 0.5), scale(sub(X[5], X[3]), 0.5)};
+    dual n1d[2] = {scale(sub(nb[0], na[0]), 0.5), scale(sub(nb[1], na[1]), 0.5)};
+    dual jacobian = root(add(mul(s1d[0], s1d[0]), mul(s1d[1], s1d[1])));
+    dual low = constant(0.0), length = constant(0.0);
     if (!element) {
         dual s0[2] = {scale(add(X[2], X[4]), 0.5), scale(add(X[3], X[5]), 0.5)};
         dual n0[2] = {scale(add(na[0], nb[0]), 0.5), scale(add(na[1], nb[1]), 0.5)};
-        dual xi_c = project_dual(s0, s1, n0, n1, X[8], X[9]);
-        dual xi_d = project_dual(s0, s1, n0, n1, X[10], X[11]);
+        dual xi_c = project_dual(s0, s1d, n0, n1d, X[8], X[9]);
+        dual xi_d = project_dual(s0, s1d, n0, n1d, X[10], X[11]);
         dual lower = xi_c.v <= xi_d.v ? xi_c : xi_d;
         low = -1.0 >= lower.v ? constant(-1.0) : lower;
         dual upper = xi_c.v >= xi_d.v ? xi_c : xi_d;
         dual high = 1.0 <= upper.v ? constant(1.0) : upper;
         length = sub(high, low);
     }
-    dual m0[2] = {scale(add(X[8], X[10]), 0.5), scale(add(X[9], X[11]), 0.5)};
-    dual m1[2] = {scale(sub(X[10], X[8]), 0.5), scale(sub(X[11], X[9]), 0.5)};
-    double m1_length = sqrt(m1[0].v * m1[0].v + m1[1].v * m1[1].v);
-    dual D[2][2], M[2][2], Dn[2][2][2], Mn[2][2][2], area[2], gap[2];
-    dual zero = constant(0.0);
-    for (int j = 0; j < 2; ++j) {
-        area[j] = zero;
-        for (int k = 0; k < 2; ++k) {
-            D[j][k] = M[j][k] = zero;
-            for (int c = 0; c < 2; ++c) Dn[j][k][c] = Mn[j][k][c] = zero;
-        }
+    const double ax = x[2], ay = x[3], bx = x[4], by = x[5];
+    const double nav[2] = {na[0].v, na[1].v}, nbv[2] = {nb[0].v, nb[1].v};
+    const double s1[2] = {s1d[0].v, s1d[1].v}, n1[2] = {n1d[0].v, n1d[1].v};
+    const double m0[2] = {(x[8] + x[10]) * 0.5, (x[9] + x[11]) * 0.5};
+    const double m1[2] = {(x[10] - x[8]) * 0.5, (x[11] - x[9]) * 0.5};
+    const double m1_length = sqrt(m1[0] * m1[0] + m1[1] * m1[1]);
+    /* the multiplier basis Phi_j = B_j0 N0 + B_j1 N1 and its derivative in xi */
+    double dphi[2];
+    if (dual_basis) {
+        for (int j = 0; j < 2; ++j) dphi[j] = -0.5 * dual_basis[2 * j] + 0.5 * dual_basis[2 * j + 1];
+    } else {
+        dphi[0] = -0.5; dphi[1] = 0.5;
     }
+    int crossed = cross && (cross[0] || cross[1]);
+    if (crossed) {
+        double total = dphi[0] + dphi[1], d0 = dphi[0], d1 = dphi[1];
+        dphi[0] = cross[0] ? 0.0 : (cross[1] ? total : d0);
+        dphi[1] = cross[1] ? 0.0 : (cross[0] ? total : d1);
+    }
+    static const double dN[2] = {-0.5, 0.5};
+    double value[NO] = {0.0}, c_low[NO] = {0.0}, c_length[NO] = {0.0};
+    double Z[2][2][12] = {{{0.0}}}, ZM[2][12] = {{0.0}};  /* sum_g PN_jc (or w Phi_j) d eta */
+    double NS[2][2][2] = {{{0.0}}}, NSm[2][2][2] = {{{0.0}}}; /* sum_g w Phi_j N_m N_k, Nm_l */
     for (int g = 0; g < num_points; ++g) {
         if (element && !on_master[g]) continue;
-        dual xi, weight;
+        double xi, weight, half = 0.0;
         if (!element) {
-            dual half_length = scale(length, 0.5);
-            xi = add(low, scale(half_length, points[g] + 1.0));
-            weight = mul(scale(half_length, weights[g]), jacobian);
+            double half_length = length.v * 0.5;
+            half = points[g] + 1.0;
+            xi = low.v + half_length * half;
+            weight = (half_length * weights[g]) * jacobian.v;
         } else {
-            xi = constant(points[g]);
-            weight = scale(jacobian, weights[g]);
+            xi = points[g];
+            weight = weights[g] * jacobian.v;
         }
-        dual N[2] = {scale(from(1.0, xi), 0.5), scale(shift(xi, 1.0), 0.5)};
-        dual point[2] = {add(mul(N[0], X[2]), mul(N[1], X[4])), add(mul(N[0], X[3]), mul(N[1], X[5]))};
-        dual normal[2] = {add(mul(N[0], na[0]), mul(N[1], nb[0])), add(mul(N[0], na[1]), mul(N[1], nb[1]))};
-        dual cross_m1 = sub(mul(m1[0], normal[1]), mul(m1[1], normal[0]));
-        if (fabs(cross_m1.v) <= PARALLEL_TOLERANCE * m1_length) {
+        double N[2] = {(1.0 - xi) * 0.5, (xi + 1.0) * 0.5};
+        double point[2] = {N[0] * ax + N[1] * bx, N[0] * ay + N[1] * by};
+        double normal[2] = {N[0] * nav[0] + N[1] * nbv[0], N[0] * nav[1] + N[1] * nbv[1]};
+        double cross_m1 = m1[0] * normal[1] - m1[1] * normal[0];
+        if (fabs(cross_m1) <= PARALLEL_TOLERANCE * m1_length) {
             if (!element) return 0;
-            cross_m1 = constant(1.0);
+            cross_m1 = 1.0;
         }
-        dual relative[2] = {sub(m0[0], point[0]), sub(m0[1], point[1])};
-        dual eta = mul(neg(sub(mul(relative[0], normal[1]), mul(relative[1], normal[0]))),
-                       reciprocal(cross_m1));
-        dual Nm[2] = {scale(from(1.0, eta), 0.5), scale(shift(eta, 1.0), 0.5)};
-        dual phi[2];
+        double inverse = 1.0 / cross_m1;
+        double relative[2] = {m0[0] - point[0], m0[1] - point[1]};
+        double eta = -(relative[0] * normal[1] - relative[1] * normal[0]) * inverse;
+        double Nm[2] = {(1.0 - eta) * 0.5, (eta + 1.0) * 0.5};
+        double phi[2];
         if (dual_basis) {
-            for (int j = 0; j < 2; ++j)
-                phi[j] = add(scale(N[0], dual_basis[2 * j]), scale(N[1], dual_basis[2 * j + 1]));
+            for (int j = 0; j < 2; ++j) phi[j] = N[0] * dual_basis[2 * j] + N[1] * dual_basis[2 * j + 1];
         } else {
-            phi[0] = N[0];
-            phi[1] = N[1];
+            phi[0] = N[0]; phi[1] = N[1];
         }
-        if (cross && (cross[0] || cross[1])) {
-            /* the basis function of a crosspoint node moves onto the facet's other node */
-            dual total = add(phi[0], phi[1]);
-            phi[0] = cross[0] ? zero : (cross[1] ? total : phi[0]);
-            phi[1] = cross[1] ? zero : (cross[0] ? total : phi[1]);
+        if (crossed) {
+            double total = phi[0] + phi[1], p0 = phi[0], p1 = phi[1];
+            phi[0] = cross[0] ? 0.0 : (cross[1] ? total : p0);
+            phi[1] = cross[1] ? 0.0 : (cross[0] ? total : p1);
         }
+        /* d eta / d (n_a, n_b, x_a, x_b, x_c, x_d) at this point, and d eta / d xi */
+        double perp[2] = {-normal[1] * inverse, normal[0] * inverse};
+        double rr[2] = {relative[0] + eta * m1[0], relative[1] + eta * m1[1]};
+        double rperp[2] = {rr[1] * inverse, -rr[0] * inverse};
+        double partial[12] = {N[0] * rperp[0], N[0] * rperp[1], N[1] * rperp[0], N[1] * rperp[1],
+                              -N[0] * perp[0], -N[0] * perp[1], -N[1] * perp[0], -N[1] * perp[1],
+                              Nm[0] * perp[0], Nm[0] * perp[1], Nm[1] * perp[0], Nm[1] * perp[1]};
+        double eta_xi = -(perp[0] * s1[0] + perp[1] * s1[1]) + (rperp[0] * n1[0] + rperp[1] * n1[1]);
+        double xi_length = 0.5 * half;
         for (int j = 0; j < 2; ++j) {
-            dual weighted_phi = mul(phi[j], weight);
-            area[j] = add(area[j], weighted_phi);
-            for (int k = 0; k < 2; ++k) {
-                accumulate(&D[j][k], weighted_phi, N[k]);
-                accumulate(&M[j][k], weighted_phi, Nm[k]);
+            double wphi = phi[j] * weight;
+            double PN[2] = {wphi * normal[0], wphi * normal[1]};
+            value[16 + j] += wphi;
+            for (int e = 0; e < 12; ++e) {
+                ZM[j][e] += wphi * partial[e];
+                Z[j][0][e] += PN[0] * partial[e];
+                Z[j][1][e] += PN[1] * partial[e];
             }
-            for (int c = 0; c < 2; ++c) {
-                dual PN = mul(weighted_phi, normal[c]);
+            for (int m = 0; m < 2; ++m) {
+                double phi_N = wphi * N[m];
                 for (int k = 0; k < 2; ++k) {
-                    accumulate(&Dn[j][k][c], PN, N[k]);
-                    accumulate(&Mn[j][k][c], PN, Nm[k]);
+                    NS[j][k][m] += phi_N * N[k];
+                    NSm[j][k][m] += phi_N * Nm[k];
                 }
             }
+            for (int k = 0; k < 2; ++k) {
+                value[18 + 2 * j + k] += wphi * N[k];
+                value[22 + 2 * j + k] += wphi * Nm[k];
+                for (int c = 0; c < 2; ++c) {
+                    value[4 * j + 2 * k + c] += PN[c] * N[k];
+                    value[8 + 4 * j + 2 * k + c] += PN[c] * Nm[k];
+                }
+            }
+            if (element) continue;
+            /* d (point integrand) / d xi, gathered on low and length */
+            double X_xi[NO] = {0.0};
+            X_xi[16 + j] = weight * dphi[j];
+            for (int k = 0; k < 2; ++k) {
+                X_xi[18 + 2 * j + k] = weight * (dphi[j] * N[k] + phi[j] * dN[k]);
+                X_xi[22 + 2 * j + k] = weight * (dphi[j] * Nm[k] + phi[j] * dN[k] * eta_xi);
+            }
+            for (int c = 0; c < 2; ++c) {
+                double Q = weight * dphi[j] * normal[c] + wphi * n1[c];
+                for (int k = 0; k < 2; ++k) {
+                    X_xi[4 * j + 2 * k + c] = Q * N[k] + PN[c] * dN[k];
+                    X_xi[8 + 4 * j + 2 * k + c] = Q * Nm[k] + PN[c] * dN[k] * eta_xi;
+                }
+            }
+            for (int out = 0; out < NO; ++out) {
+                c_low[out] += X_xi[out];
+                c_length[out] += xi_length * X_xi[out];
+            }
+        }
+    }
+    /* every output is proportional to J, and (segment) through its weights to length */
+    double inverse_jacobian = 1.0 / jacobian.v, inverse_length = element ? 0.0 : 1.0 / length.v;
+    double c_normal[NO][4] = {{0.0}}, direct[NO][8] = {{0.0}};
+    for (int j = 0; j < 2; ++j)
+        for (int k = 0; k < 2; ++k) {
+            for (int c = 0; c < 2; ++c) {
+                int dn = 4 * j + 2 * k + c, mn = 8 + 4 * j + 2 * k + c;
+                c_normal[dn][c] = NS[j][k][0];
+                c_normal[dn][2 + c] = NS[j][k][1];
+                for (int e = 0; e < 4; ++e) c_normal[mn][e] = dN[k] * Z[j][c][e];
+                c_normal[mn][c] += NSm[j][k][0];
+                c_normal[mn][2 + c] += NSm[j][k][1];
+                for (int e = 0; e < 8; ++e) direct[mn][e] = dN[k] * Z[j][c][4 + e];
+            }
+            int m = 22 + 2 * j + k;
+            for (int e = 0; e < 4; ++e) c_normal[m][e] = dN[k] * ZM[j][e];
+            for (int e = 0; e < 8; ++e) direct[m][e] = dN[k] * ZM[j][4 + e];
+        }
+    const double *g_na0 = na[0].d, *g_na1 = na[1].d, *g_nb0 = nb[0].d, *g_nb1 = nb[1].d;
+    double grad[NO][NV];
+    for (int out = 0; out < NO; ++out) {
+        double cl = c_low[out], cL = c_length[out] + value[out] * inverse_length;
+        double cJ = value[out] * inverse_jacobian;
+        const double *cn = c_normal[out];
+        for (int v = 0; v < NV; ++v)
+            grad[out][v] = cl * low.d[v] + cL * length.d[v] + cJ * jacobian.d[v]
+                           + cn[0] * g_na0[v] + cn[1] * g_na1[v] + cn[2] * g_nb0[v] + cn[3] * g_nb1[v];
+        for (int e = 0; e < 4; ++e) {
+            grad[out][2 + e] += direct[out][e];
+            grad[out][8 + e] += direct[out][4 + e];
         }
     }
     /* gap_j = sum_kc Mn_jkc x^m_kc - Dn_jkc x^s_kc */
+    double gap[2], ggap[2][NV];
     for (int j = 0; j < 2; ++j) {
-        dual inner[2];
+        double inner[2];
         for (int k = 0; k < 2; ++k) {
-            dual term[2];
+            double term[2];
             for (int c = 0; c < 2; ++c)
-                term[c] = sub(mul(Mn[j][k][c], X[8 + 2 * k + c]), mul(Dn[j][k][c], X[2 + 2 * k + c]));
-            inner[k] = add(term[0], term[1]);
+                term[c] = value[8 + 4 * j + 2 * k + c] * x[8 + 2 * k + c] - value[4 * j + 2 * k + c] * x[2 + 2 * k + c];
+            inner[k] = term[0] + term[1];
         }
-        gap[j] = add(inner[0], inner[1]);
+        gap[j] = inner[0] + inner[1];
+        for (int v = 0; v < NV; ++v) {
+            double s = 0.0;
+            for (int kc = 0; kc < 4; ++kc)
+                s += grad[8 + 4 * j + kc][v] * x[8 + kc] - grad[4 * j + kc][v] * x[2 + kc];
+            ggap[j][v] = s;
+        }
+        for (int kc = 0; kc < 4; ++kc) {
+            ggap[j][8 + kc] += value[8 + 4 * j + kc];
+            ggap[j][2 + kc] -= value[4 * j + kc];
+        }
     }
-    store(&D[0][0], 4, o->D + 4 * p, o->gD ? o->gD + 4 * NV * r : NULL);
-    store(&M[0][0], 4, o->M + 4 * p, o->gM ? o->gM + 4 * NV * r : NULL);
-    store(&Dn[0][0][0], 8, o->Dn + 8 * p, o->gDn + 8 * NV * r);
-    store(&Mn[0][0][0], 8, o->Mn + 8 * p, o->gMn + 8 * NV * r);
-    store(area, 2, o->area + 2 * p, o->garea + 2 * NV * r);
-    store(gap, 2, o->gap + 2 * p, o->ggap + 2 * NV * r);
+    memcpy(o->Dn + 8 * p, value, 8 * sizeof(double));
+    memcpy(o->Mn + 8 * p, value + 8, 8 * sizeof(double));
+    memcpy(o->area + 2 * p, value + 16, 2 * sizeof(double));
+    memcpy(o->D + 4 * p, value + 18, 4 * sizeof(double));
+    memcpy(o->M + 4 * p, value + 22, 4 * sizeof(double));
+    memcpy(o->gap + 2 * p, gap, 2 * sizeof(double));
+    memcpy(o->gDn + 8 * NV * r, grad[0], 8 * NV * sizeof(double));
+    memcpy(o->gMn + 8 * NV * r, grad[8], 8 * NV * sizeof(double));
+    memcpy(o->garea + 2 * NV * r, grad[16], 2 * NV * sizeof(double));
+    if (o->gD) memcpy(o->gD + 4 * NV * r, grad[18], 4 * NV * sizeof(double));
+    if (o->gM) memcpy(o->gM + 4 * NV * r, grad[22], 4 * NV * sizeof(double));
+    memcpy(o->ggap + 2 * NV * r, ggap[0], 2 * NV * sizeof(double));
     return 1;
 }
 
