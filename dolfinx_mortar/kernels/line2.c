@@ -145,79 +145,141 @@ void line2_screen(long n, const double *x, const unsigned char *has_neighbour, i
     }
 }
 
-/* ---- dual numbers over the 12 pair variables ---- */
-typedef struct { double v, d[NV]; } dual;
+/* ---- pair-level gradients (12 variables), as the numpy kernel writes them out ---- */
 
-static inline dual constant(double v) { dual r; r.v = v; memset(r.d, 0, sizeof r.d); return r; }
-static inline dual add(dual a, dual b) { dual r; r.v = a.v + b.v; for (int i = 0; i < NV; ++i) r.d[i] = a.d[i] + b.d[i]; return r; }
-static inline dual sub(dual a, dual b) { dual r; r.v = a.v - b.v; for (int i = 0; i < NV; ++i) r.d[i] = a.d[i] - b.d[i]; return r; }
-static inline dual neg(dual a) { dual r; r.v = -a.v; for (int i = 0; i < NV; ++i) r.d[i] = -a.d[i]; return r; }
-static inline dual mul(dual a, dual b) { dual r; r.v = a.v * b.v; for (int i = 0; i < NV; ++i) r.d[i] = a.d[i] * b.v + b.d[i] * a.v; return r; }
-static inline dual scale(dual a, double s) { dual r; r.v = a.v * s; for (int i = 0; i < NV; ++i) r.d[i] = a.d[i] * s; return r; }
-static inline dual shift(dual a, double s) { a.v = a.v + s; return a; }
-static inline dual from(double s, dual a) { dual r; r.v = s - a.v; for (int i = 0; i < NV; ++i) r.d[i] = -a.d[i]; return r; }
-static inline dual reciprocal(dual a) {
-    dual r; r.v = 1.0 / a.v; double f = -r.v * r.v;
-    for (int i = 0; i < NV; ++i) r.d[i] = a.d[i] * f;
-    return r;
-}
-/* d sqrt(s) taken as 0 at s = 0, as the numpy kernel */
-static inline dual root(dual a) {
-    dual r; r.v = sqrt(a.v); double f = r.v > 0.0 ? 0.5 / r.v : 0.0;
-    for (int i = 0; i < NV; ++i) r.d[i] = a.d[i] * f;
-    return r;
+/* d n / d t of n = (t_y, -t_x)/|t| as the entries (00, 01, 10, 11) */
+static void unit_normal_jacobian(const double *n, double tx, double ty, double inverse, double *J) {
+    double ux = tx * inverse, uy = ty * inverse;
+    J[0] = (-ux * n[0]) * inverse; J[1] = (1.0 - uy * n[0]) * inverse;
+    J[2] = (-1.0 - ux * n[1]) * inverse; J[3] = (-uy * n[1]) * inverse;
 }
 
-static void unit_normal_dual(dual tx, dual ty, dual *n) {
-    dual inverse = reciprocal(root(add(mul(tx, tx), mul(ty, ty))));
-    n[0] = mul(ty, inverse);
-    n[1] = mul(neg(tx), inverse);
+/* d n / d v of n = v/|v| */
+static void normalize_jacobian(const double *n, double inverse, double *J) {
+    double off = (-n[0] * n[1]) * inverse;
+    J[0] = (1.0 - n[0] * n[0]) * inverse; J[1] = off; J[2] = off; J[3] = (1.0 - n[1] * n[1]) * inverse;
 }
 
-static void normal_duals(const dual *X, const unsigned char *has, int normals, dual *na,
-                         dual *nb) {
-    dual n[2];
+static void matmul2(const double *A, const double *B, double *C) {
+    C[0] = A[0] * B[0] + A[1] * B[2]; C[1] = A[0] * B[1] + A[1] * B[3];
+    C[2] = A[2] * B[0] + A[3] * B[2]; C[3] = A[2] * B[1] + A[3] * B[3];
+}
+
+/* grad (2 x 12) += factor J on the two variables of node (0..5 = p, a, b, q, c, d) */
+static void add_block(double grad[2][NV], int node, const double *J, double factor) {
+    for (int row = 0; row < 2; ++row)
+        for (int column = 0; column < 2; ++column)
+            grad[row][2 * node + column] += J[2 * row + column] * factor;
+}
+
+static void unit_normal_with_inverse(double tx, double ty, double *n, double *inverse) {
+    *inverse = 1.0 / sqrt(tx * tx + ty * ty);
+    n[0] = ty * *inverse;
+    n[1] = -tx * *inverse;
+}
+
+/* the nodal normals n_a, n_b (the values of normal_values) and their gradients */
+static void normal_field(const double *x, const unsigned char *has, int normals, double *na,
+                         double *nb, double grad_a[2][NV], double grad_b[2][NV]) {
+    memset(grad_a, 0, 2 * NV * sizeof(double));
+    memset(grad_b, 0, 2 * NV * sizeof(double));
+    double n[2], inverse, J[4];
     if (normals == MASTER) {
-        unit_normal_dual(sub(X[10], X[8]), sub(X[11], X[9]), n);
-        na[0] = nb[0] = neg(n[0]);
-        na[1] = nb[1] = neg(n[1]);
+        double tx = x[10] - x[8], ty = x[11] - x[9];
+        unit_normal_with_inverse(tx, ty, n, &inverse);
+        unit_normal_jacobian(n, tx, ty, inverse, J);
+        na[0] = nb[0] = -n[0];
+        na[1] = nb[1] = -n[1];
+        add_block(grad_a, 4, J, 1.0);
+        add_block(grad_a, 5, J, -1.0);
+        memcpy(grad_b, grad_a, 2 * NV * sizeof(double));
         return;
     }
-    unit_normal_dual(sub(X[4], X[2]), sub(X[5], X[3]), n);
+    double tx = x[4] - x[2], ty = x[5] - x[3], J_ab[4];
+    unit_normal_with_inverse(tx, ty, n, &inverse);
+    unit_normal_jacobian(n, tx, ty, inverse, J_ab);
     if (normals == SLAVE) {
         na[0] = nb[0] = n[0];
         na[1] = nb[1] = n[1];
+        add_block(grad_a, 1, J_ab, -1.0);
+        add_block(grad_a, 2, J_ab, 1.0);
+        memcpy(grad_b, grad_a, 2 * NV * sizeof(double));
         return;
     }
-    dual va[2] = {n[0], n[1]}, vb[2] = {n[0], n[1]}, m[2];
+    /* n_a = normalize(n(x_b - x_a) + n(x_a - x_p)), n_b = normalize(n(x_b - x_a) + n(x_q - x_b)),
+     * an absent neighbour's term left out */
+    double va[2] = {n[0], n[1]}, vb[2] = {n[0], n[1]}, m[2];
+    double J_pa[4] = {0.0}, J_bq[4] = {0.0};
     if (has[0]) {
-        unit_normal_dual(sub(X[2], X[0]), sub(X[3], X[1]), m);
-        va[0] = add(n[0], m[0]);
-        va[1] = add(n[1], m[1]);
+        double px = x[2] - x[0], py = x[3] - x[1];
+        unit_normal_with_inverse(px, py, m, &inverse);
+        unit_normal_jacobian(m, px, py, inverse, J_pa);
+        va[0] = n[0] + m[0];
+        va[1] = n[1] + m[1];
     }
     if (has[1]) {
-        unit_normal_dual(sub(X[6], X[4]), sub(X[7], X[5]), m);
-        vb[0] = add(n[0], m[0]);
-        vb[1] = add(n[1], m[1]);
+        double qx = x[6] - x[4], qy = x[7] - x[5];
+        unit_normal_with_inverse(qx, qy, m, &inverse);
+        unit_normal_jacobian(m, qx, qy, inverse, J_bq);
+        vb[0] = n[0] + m[0];
+        vb[1] = n[1] + m[1];
     }
-    dual inverse_a = reciprocal(root(add(mul(va[0], va[0]), mul(va[1], va[1]))));
-    dual inverse_b = reciprocal(root(add(mul(vb[0], vb[0]), mul(vb[1], vb[1]))));
-    na[0] = mul(va[0], inverse_a); na[1] = mul(va[1], inverse_a);
-    nb[0] = mul(vb[0], inverse_b); nb[1] = mul(vb[1], inverse_b);
+    double inverse_a = 1.0 / sqrt(va[0] * va[0] + va[1] * va[1]);
+    double inverse_b = 1.0 / sqrt(vb[0] * vb[0] + vb[1] * vb[1]);
+    na[0] = va[0] * inverse_a; na[1] = va[1] * inverse_a;
+    nb[0] = vb[0] * inverse_b; nb[1] = vb[1] * inverse_b;
+    double J_a[4], J_b[4], product[4], difference[4];
+    normalize_jacobian(na, inverse_a, J_a);
+    normalize_jacobian(nb, inverse_b, J_b);
+    matmul2(J_a, J_pa, product);
+    add_block(grad_a, 0, product, -1.0);
+    for (int e = 0; e < 4; ++e) difference[e] = J_pa[e] - J_ab[e];
+    matmul2(J_a, difference, product);
+    add_block(grad_a, 1, product, 1.0);
+    matmul2(J_a, J_ab, product);
+    add_block(grad_a, 2, product, 1.0);
+    matmul2(J_b, J_ab, product);
+    add_block(grad_b, 1, product, -1.0);
+    for (int e = 0; e < 4; ++e) difference[e] = J_ab[e] - J_bq[e];
+    matmul2(J_b, difference, product);
+    add_block(grad_b, 2, product, 1.0);
+    matmul2(J_b, J_bq, product);
+    add_block(grad_b, 3, product, 1.0);
 }
 
-static dual project_dual(const dual *s0, const dual *s1, const dual *n0, const dual *n1,
-                         dual px, dual py) {
-    dual offx = sub(s0[0], px), offy = sub(s0[1], py);
-    dual c = sub(mul(offx, n0[1]), mul(offy, n0[0]));
-    dual b = add(sub(mul(offx, n1[1]), mul(offy, n1[0])), sub(mul(s1[0], n0[1]), mul(s1[1], n0[0])));
-    dual a = sub(mul(s1[0], n1[1]), mul(s1[1], n1[0]));
-    dual discriminant = sub(mul(b, b), scale(mul(a, c), 4.0));
-    if (!(discriminant.v >= 0.0)) discriminant = constant(0.0);
-    dual r = root(discriminant);
-    double sign = b.v >= 0.0 ? 1.0 : -1.0;
-    dual denominator = add(b, scale(r, sign));
-    return mul(scale(c, -2.0), reciprocal(denominator));
+/* the projection xi of master node point_node (4: c, 5: d) and its gradient: project_value's
+ * xi = -2 c / (b + sign sqrt(b^2 - 4 a c)) differentiated in c, b, a, then in off = s0 - point,
+ * s1, n0 = (n_a + n_b)/2 and n1 = (n_b - n_a)/2 */
+static double projection(const double *x, const double *s0, const double *s1, const double *n0,
+                         const double *n1, double grad_a[2][NV], double grad_b[2][NV],
+                         int point_node, double *grad) {
+    double offx = s0[0] - x[2 * point_node], offy = s0[1] - x[2 * point_node + 1];
+    double c = offx * n0[1] - offy * n0[0];
+    double b = (offx * n1[1] - offy * n1[0]) + (s1[0] * n0[1] - s1[1] * n0[0]);
+    double a = s1[0] * n1[1] - s1[1] * n1[0];
+    double discriminant = b * b - a * c * 4.0;
+    double root = sqrt(discriminant >= 0.0 ? discriminant : 0.0);
+    double sign = b >= 0.0 ? 1.0 : -1.0;
+    double inverse = 1.0 / (b + root * sign);
+    double xi = c * -2.0 * inverse;
+    double sign_factor = root > 0.0 ? sign * 0.5 / root : 0.0;
+    double alpha_c = inverse * (-2.0 + 4.0 * xi * sign_factor * a);
+    double alpha_b = -inverse * xi * (1.0 + 2.0 * sign_factor * b);
+    double alpha_a = 4.0 * inverse * xi * sign_factor * c;
+    double g_off[2] = {alpha_c * n0[1] + alpha_b * n1[1], -(alpha_c * n0[0] + alpha_b * n1[0])};
+    double g_s1[2] = {alpha_b * n0[1] + alpha_a * n1[1], -(alpha_b * n0[0] + alpha_a * n1[0])};
+    double g_n0[2] = {-(alpha_c * offy + alpha_b * s1[1]), alpha_c * offx + alpha_b * s1[0]};
+    double g_n1[2] = {-(alpha_b * offy + alpha_a * s1[1]), alpha_b * offx + alpha_a * s1[0]};
+    double f_a0 = 0.5 * (g_n0[0] - g_n1[0]), f_a1 = 0.5 * (g_n0[1] - g_n1[1]);
+    double f_b0 = 0.5 * (g_n0[0] + g_n1[0]), f_b1 = 0.5 * (g_n0[1] + g_n1[1]);
+    for (int v = 0; v < NV; ++v)
+        grad[v] = f_a0 * grad_a[0][v] + f_a1 * grad_a[1][v] + f_b0 * grad_b[0][v] + f_b1 * grad_b[1][v];
+    for (int k = 0; k < 2; ++k) {
+        grad[2 + k] += 0.5 * (g_off[k] - g_s1[k]);
+        grad[4 + k] += 0.5 * (g_off[k] + g_s1[k]);
+        grad[2 * point_node + k] -= g_off[k];
+    }
+    return xi;
 }
 
 typedef struct {
@@ -228,10 +290,9 @@ typedef struct {
 /* the integrals of pair p (row r); returns 0 if a Gauss point sees the master parallel to the
  * normal (segment-based: the pair contributes nothing).
  *
- * The pair-level quantities (nodal normals, segment limits low and length, facet Jacobian J)
- * are dual numbers over the 12 variables. The Gauss points are plain numbers: each output's
- * derivative is gathered, as the numpy kernel does, as coefficients on those pair-level
- * gradients (through xi, the weight and the normal) plus direct terms on a, b, c, d (through
+ * As the numpy kernel: the gradients of a few pair-level quantities (nodal normals, segment
+ * limits low and length, facet Jacobian J) over the 12 variables, written out; each output's
+ * derivative gathered over the Gauss points as coefficients on those pair-level gradients (through xi, the weight and the normal) plus direct terms on a, b, c, d (through
  * the master parameter eta), and expanded once per output at the end.
  * Outputs o: Dn 0-7 (4 j + 2 k + c), Mn 8-15 (8 + 4 j + 2 l + c), area 16-17, D 18-21
  * (2 j + k), M 22-25 (2 j + l); the gaps are formed from Dn and Mn. */
@@ -240,28 +301,36 @@ static int integrate(const double *x, const unsigned char *has, const unsigned c
                      const unsigned char *on_master, int normals, int element, int num_points,
                      const double *points, const double *weights, const double *dual_basis,
                      const outputs_t *o, long p, long r) {
-    dual X[NV];
-    for (int i = 0; i < NV; ++i) { X[i] = constant(x[i]); X[i].d[i] = 1.0; }
-    dual na[2], nb[2];
-    normal_duals(X, has, normals, na, nb);
-    dual s1d[2] = {scale(sub(X[4], X[2]), 0.5), scale(sub(X[5], X[3]), 0.5)};
-    dual n1d[2] = {scale(sub(nb[0], na[0]), 0.5), scale(sub(nb[1], na[1]), 0.5)};
-    dual jacobian = root(add(mul(s1d[0], s1d[0]), mul(s1d[1], s1d[1])));
-    dual low = constant(0.0), length = constant(0.0);
-    if (!element) {
-        dual s0[2] = {scale(add(X[2], X[4]), 0.5), scale(add(X[3], X[5]), 0.5)};
-        dual n0[2] = {scale(add(na[0], nb[0]), 0.5), scale(add(na[1], nb[1]), 0.5)};
-        dual xi_c = project_dual(s0, s1d, n0, n1d, X[8], X[9]);
-        dual xi_d = project_dual(s0, s1d, n0, n1d, X[10], X[11]);
-        dual lower = xi_c.v <= xi_d.v ? xi_c : xi_d;
-        low = -1.0 >= lower.v ? constant(-1.0) : lower;
-        dual upper = xi_c.v >= xi_d.v ? xi_c : xi_d;
-        dual high = 1.0 <= upper.v ? constant(1.0) : upper;
-        length = sub(high, low);
-    }
+    double nav[2], nbv[2], grad_na[2][NV], grad_nb[2][NV];
+    normal_field(x, has, normals, nav, nbv, grad_na, grad_nb);
     const double ax = x[2], ay = x[3], bx = x[4], by = x[5];
-    const double nav[2] = {na[0].v, na[1].v}, nbv[2] = {nb[0].v, nb[1].v};
-    const double s1[2] = {s1d[0].v, s1d[1].v}, n1[2] = {n1d[0].v, n1d[1].v};
+    const double s1[2] = {(bx - ax) * 0.5, (by - ay) * 0.5};
+    const double n1[2] = {(nbv[0] - nav[0]) * 0.5, (nbv[1] - nav[1]) * 0.5};
+    double jacobian = sqrt(s1[0] * s1[0] + s1[1] * s1[1]);
+    double grad_jacobian[NV] = {0.0}, grad_low[NV] = {0.0}, grad_length[NV] = {0.0};
+    for (int k = 0; k < 2; ++k) {
+        grad_jacobian[2 + k] = -0.5 * s1[k] / jacobian;
+        grad_jacobian[4 + k] = 0.5 * s1[k] / jacobian;
+    }
+    double low = 0.0, length = 0.0;
+    if (!element) {
+        const double s0[2] = {(ax + bx) * 0.5, (ay + by) * 0.5};
+        const double n0[2] = {(nav[0] + nbv[0]) * 0.5, (nav[1] + nbv[1]) * 0.5};
+        double grad_c[NV], grad_d[NV];
+        double xi_c = projection(x, s0, s1, n0, n1, grad_na, grad_nb, 4, grad_c);
+        double xi_d = projection(x, s0, s1, n0, n1, grad_na, grad_nb, 5, grad_d);
+        /* low = max(-1, min(xi_c, xi_d)), high = min(1, max(xi_c, xi_d)) */
+        int take_c_low = xi_c <= xi_d, take_c_high = xi_c >= xi_d;
+        double lower = take_c_low ? xi_c : xi_d, upper = take_c_high ? xi_c : xi_d;
+        int clip_low = -1.0 >= lower, clip_high = 1.0 <= upper;
+        low = clip_low ? -1.0 : lower;
+        length = (clip_high ? 1.0 : upper) - low;
+        const double *g_low = take_c_low ? grad_c : grad_d, *g_high = take_c_high ? grad_c : grad_d;
+        for (int v = 0; v < NV; ++v) {
+            grad_low[v] = clip_low ? 0.0 : g_low[v];
+            grad_length[v] = (clip_high ? 0.0 : g_high[v]) - grad_low[v];
+        }
+    }
     const double m0[2] = {(x[8] + x[10]) * 0.5, (x[9] + x[11]) * 0.5};
     const double m1[2] = {(x[10] - x[8]) * 0.5, (x[11] - x[9]) * 0.5};
     const double m1_length = sqrt(m1[0] * m1[0] + m1[1] * m1[1]);
@@ -286,13 +355,13 @@ static int integrate(const double *x, const unsigned char *has, const unsigned c
         if (element && !on_master[g]) continue;
         double xi, weight, half = 0.0;
         if (!element) {
-            double half_length = length.v * 0.5;
+            double half_length = length * 0.5;
             half = points[g] + 1.0;
-            xi = low.v + half_length * half;
-            weight = (half_length * weights[g]) * jacobian.v;
+            xi = low + half_length * half;
+            weight = (half_length * weights[g]) * jacobian;
         } else {
             xi = points[g];
-            weight = weights[g] * jacobian.v;
+            weight = weights[g] * jacobian;
         }
         double N[2] = {(1.0 - xi) * 0.5, (xi + 1.0) * 0.5};
         double point[2] = {N[0] * ax + N[1] * bx, N[0] * ay + N[1] * by};
@@ -372,7 +441,7 @@ static int integrate(const double *x, const unsigned char *has, const unsigned c
         }
     }
     /* every output is proportional to J, and (segment) through its weights to length */
-    double inverse_jacobian = 1.0 / jacobian.v, inverse_length = element ? 0.0 : 1.0 / length.v;
+    double inverse_jacobian = 1.0 / jacobian, inverse_length = element ? 0.0 : 1.0 / length;
     double c_normal[NO][4] = {{0.0}}, direct[NO][8] = {{0.0}};
     for (int j = 0; j < 2; ++j)
         for (int k = 0; k < 2; ++k) {
@@ -389,14 +458,14 @@ static int integrate(const double *x, const unsigned char *has, const unsigned c
             for (int e = 0; e < 4; ++e) c_normal[m][e] = dN[k] * ZM[j][e];
             for (int e = 0; e < 8; ++e) direct[m][e] = dN[k] * ZM[j][4 + e];
         }
-    const double *g_na0 = na[0].d, *g_na1 = na[1].d, *g_nb0 = nb[0].d, *g_nb1 = nb[1].d;
+    const double *g_na0 = grad_na[0], *g_na1 = grad_na[1], *g_nb0 = grad_nb[0], *g_nb1 = grad_nb[1];
     double grad[NO][NV];
     for (int out = 0; out < NO; ++out) {
         double cl = c_low[out], cL = c_length[out] + value[out] * inverse_length;
         double cJ = value[out] * inverse_jacobian;
         const double *cn = c_normal[out];
         for (int v = 0; v < NV; ++v)
-            grad[out][v] = cl * low.d[v] + cL * length.d[v] + cJ * jacobian.d[v]
+            grad[out][v] = cl * grad_low[v] + cL * grad_length[v] + cJ * grad_jacobian[v]
                            + cn[0] * g_na0[v] + cn[1] * g_na1[v] + cn[2] * g_nb0[v] + cn[3] * g_nb1[v];
         for (int e = 0; e < 4; ++e) {
             grad[out][2 + e] += direct[out][e];
