@@ -459,14 +459,19 @@ static int integrate(const double *x, const unsigned char *has, const unsigned c
             for (int e = 0; e < 8; ++e) direct[m][e] = dN[k] * ZM[j][4 + e];
         }
     const double *g_na0 = grad_na[0], *g_na1 = grad_na[1], *g_nb0 = grad_nb[0], *g_nb1 = grad_nb[1];
+    /* the variables each nodal normal depends on: (p, a, b), (a, b, q); a, b; c, d */
+    int a_first = normals == AVERAGED ? 0 : (normals == SLAVE ? 2 : 8), a_last = a_first + (normals == AVERAGED ? 6 : 4);
+    int b_first = normals == AVERAGED ? 2 : a_first, b_last = b_first + (normals == AVERAGED ? 6 : 4);
     double grad[NO][NV];
     for (int out = 0; out < NO; ++out) {
         double cl = c_low[out], cL = c_length[out] + value[out] * inverse_length;
         double cJ = value[out] * inverse_jacobian;
         const double *cn = c_normal[out];
-        for (int v = 0; v < NV; ++v)
-            grad[out][v] = cl * grad_low[v] + cL * grad_length[v] + cJ * grad_jacobian[v]
-                           + cn[0] * g_na0[v] + cn[1] * g_na1[v] + cn[2] * g_nb0[v] + cn[3] * g_nb1[v];
+        double *gradient = grad[out];
+        for (int v = 0; v < NV; ++v) gradient[v] = cl * grad_low[v] + cL * grad_length[v];
+        for (int v = 2; v < 6; ++v) gradient[v] += cJ * grad_jacobian[v];
+        for (int v = a_first; v < a_last; ++v) gradient[v] += cn[0] * g_na0[v] + cn[1] * g_na1[v];
+        for (int v = b_first; v < b_last; ++v) gradient[v] += cn[2] * g_nb0[v] + cn[3] * g_nb1[v];
         for (int e = 0; e < 4; ++e) {
             grad[out][2 + e] += direct[out][e];
             grad[out][8 + e] += direct[out][4 + e];
