@@ -195,7 +195,9 @@ def interface_pairs(num_slave: int):
     """The pairs (x (n, 6, 2), has_neighbour) that mortar_scaling's interface hands the 2D kernel
     after its first search at ``num_slave`` slave facets."""
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    import dolfinx
     import mortar_scaling
+
     from dolfinx_mortar import MortarInterface
 
     calls = []
@@ -206,8 +208,6 @@ def interface_pairs(num_slave: int):
         return original(self, geometry, options, **keywords)
 
     mesh, tags, upper, lower, width = mortar_scaling.two_strips(num_slave)
-    import dolfinx
-
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
     u = mortar_scaling.displacement(V, upper, lower, width)
     line2.Line2Kernel.evaluate = recording

@@ -4,14 +4,16 @@ As FFCx compiles dolfinx's form kernels: each C source next to this file (``surf
 3D triangle kernel; ``line2.c``, the 2D kernel) is its own module, loaded with
 :func:`load` (``load("line2")``). Its source, declarations, the compiler flags and the cffi and
 Python versions are hashed into the module's name; the module is compiled once into a cache
-directory and loaded from there by every later process. The cache directory is ``$DOLFINX_MORTAR_CACHE_DIR`` if set, else
-``$XDG_CACHE_HOME/dolfinx_mortar``, else ``~/.cache/dolfinx_mortar``.
+directory and loaded from there by every later process. The cache directory is
+``$DOLFINX_MORTAR_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/dolfinx_mortar``, else
+``~/.cache/dolfinx_mortar``.
 
 Concurrent processes (MPI ranks starting on an empty cache) do not race: the first to take
 an exclusive ``fcntl`` lock on ``<module>.lock`` compiles into a temporary directory inside
 the cache and renames the extension module into place atomically; the others wait for the
-lock (one per module; at most ``DOLFINX_MORTAR_COMPILE_TIMEOUT`` seconds, default 600, then a RuntimeError
-naming the lock file) and find the module there. A reader never sees a half-written file.
+lock (one per module; at most ``DOLFINX_MORTAR_COMPILE_TIMEOUT`` seconds, default 600, then a
+RuntimeError naming the lock file) and find the module there. A reader never sees a
+half-written file.
 
 :func:`build_info` tells whether this process compiled a module (and how long it took) or
 loaded it from the cache.
