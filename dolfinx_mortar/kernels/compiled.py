@@ -1,19 +1,22 @@
 """Compiled mortar kernels: C source compiled at first use through cffi, cached across processes.
 
-As FFCx compiles dolfinx's form kernels: the C source (``surface3.c`` next to this file),
-the compiler flags and the cffi and Python versions are hashed into a module name; the
-module is compiled once into a cache directory and loaded from there by every later
-process. The cache directory is ``$DOLFINX_MORTAR_CACHE_DIR`` if set, else
-``$XDG_CACHE_HOME/dolfinx_mortar``, else ``~/.cache/dolfinx_mortar``.
+As FFCx compiles dolfinx's form kernels: each C source next to this file (``surface3.c``, the
+3D triangle kernel; ``line2.c``, the 2D kernel) is its own module, loaded with
+:func:`load` (``load("line2")``). Its source, declarations, the compiler flags and the cffi and
+Python versions are hashed into the module's name; the module is compiled once into a cache
+directory and loaded from there by every later process. The cache directory is
+``$DOLFINX_MORTAR_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/dolfinx_mortar``, else
+``~/.cache/dolfinx_mortar``.
 
 Concurrent processes (MPI ranks starting on an empty cache) do not race: the first to take
 an exclusive ``fcntl`` lock on ``<module>.lock`` compiles into a temporary directory inside
 the cache and renames the extension module into place atomically; the others wait for the
-lock (at most ``DOLFINX_MORTAR_COMPILE_TIMEOUT`` seconds, default 600, then a RuntimeError
-naming the lock file) and find the module there. A reader never sees a half-written file.
+lock (one per module; at most ``DOLFINX_MORTAR_COMPILE_TIMEOUT`` seconds, default 600, then a
+RuntimeError naming the lock file) and find the module there. A reader never sees a
+half-written file.
 
-:func:`build_info` tells whether this process compiled the module (and how long it took)
-or loaded it from the cache.
+:func:`build_info` tells whether this process compiled a module (and how long it took) or
+loaded it from the cache.
 
 Why cffi and C rather than numba: Debian's python3-numba pins one Python minor version
 (``python3 (<< 3.15), python3 (>= 3.14~)`` for 0.65), so it drops out of sid whenever sid moves
@@ -41,12 +44,12 @@ import time
 import numpy as np
 
 _LOG = logging.getLogger(__name__)
-_SOURCE_FILE = pathlib.Path(__file__).with_name("surface3.c")
-# -O3: 1.5x faster than -O2 on this kernel (benchmarks/compiled_kernel.py), portable (no
+# -O3: 1.5x faster than -O2 on the 3D kernel (benchmarks/compiled_kernel.py), portable (no
 # -march: the cache may be shared across machines); no FMA contraction, so that the values
-# (and the clip decisions made on them) follow the numpy kernel's operation order
+# (and the clip decisions made on them) follow the numpy kernels' operation order
 COMPILE_ARGS = ("-O3", "-ffp-contract=off", "-std=c99")
-_CDEF = """
+_CDEFS = {
+    "surface3": """
 int surface3_triangles(long n, const double *xs, const double *xm, const double *nn,
                        const unsigned char *crosspoint, int normals, int dual_basis, int rule,
                        unsigned char *valid, double *overlap,
@@ -69,11 +72,27 @@ int surface3_element(long n, int ns, int nm, const double *xs, const double *xm,
                      double *D, double *M, double *Dn, double *Mn, double *gap, double *area,
                      double *gD, double *gM, double *gDn, double *gMn, double *ggap,
                      double *garea);
-"""
+""",
+    "line2": """
+void line2_screen(long n, const double *x, const unsigned char *has_neighbour, int normals,
+                  int element, int num_points, const double *points, unsigned char *valid,
+                  double *screened);
+void line2_integrate(long num_rows, const long *rows, const double *x,
+                     const unsigned char *has_neighbour, const unsigned char *crosspoint,
+                     const unsigned char *on_master, int normals, int element, int num_points,
+                     const double *points, const double *weights, const double *dual_basis,
+                     unsigned char *contributes,
+                     double *D, double *M, double *Dn, double *Mn, double *gap, double *area,
+                     double *gD, double *gM, double *gDn, double *gMn, double *ggap,
+                     double *garea);
+""",
+}
+KERNELS = tuple(_CDEFS)
 NUM_VARIABLES = 27  # of a triangle pair; 3 (2 ns + nm) for ns slave and nm master nodes
+LINE2_NUM_VARIABLES = 12
 
-_module = None
-_info: dict = {}
+_modules: dict = {}
+_infos: dict = {}
 
 
 def cache_dir() -> pathlib.Path:
@@ -85,23 +104,29 @@ def cache_dir() -> pathlib.Path:
     return pathlib.Path(base) / "dolfinx_mortar"
 
 
-def module_name(compile_args=COMPILE_ARGS) -> str:
+def _source(kernel: str) -> str:
+    if kernel not in _CDEFS:
+        raise ValueError(f"unknown compiled kernel {kernel!r}; expected one of {KERNELS}")
+    return pathlib.Path(__file__).with_name(kernel + ".c").read_text()
+
+
+def module_name(compile_args=COMPILE_ARGS, kernel: str = "surface3") -> str:
     """The module's name: a hash of everything its binary depends on."""
     import cffi
 
-    key = "\n".join([_SOURCE_FILE.read_text(), _CDEF, " ".join(compile_args), cffi.__version__,
+    key = "\n".join([_source(kernel), _CDEFS[kernel], " ".join(compile_args), cffi.__version__,
                      sys.version, importlib.machinery.EXTENSION_SUFFIXES[0],
                      platform.machine()])
-    return "_dolfinx_mortar_surface3_" + hashlib.sha256(key.encode()).hexdigest()[:24]
+    return f"_dolfinx_mortar_{kernel}_" + hashlib.sha256(key.encode()).hexdigest()[:24]
 
 
-def _compile(name: str, directory: pathlib.Path, compile_args) -> pathlib.Path:
+def _compile(kernel: str, name: str, directory: pathlib.Path, compile_args) -> pathlib.Path:
     """Compile the module into ``directory``; returns the extension file's path."""
     import cffi
 
     ffi = cffi.FFI()
-    ffi.cdef(_CDEF)
-    ffi.set_source(name, _SOURCE_FILE.read_text(), extra_compile_args=list(compile_args),
+    ffi.cdef(_CDEFS[kernel])
+    ffi.set_source(name, _source(kernel), extra_compile_args=list(compile_args),
                    libraries=["m"])
     return pathlib.Path(ffi.compile(tmpdir=str(directory), verbose=False))
 
@@ -127,11 +152,12 @@ def _acquire(lock_file, timeout: float, path: pathlib.Path) -> None:
             time.sleep(0.05)
 
 
-def build(compile_args=COMPILE_ARGS, directory: pathlib.Path | None = None):
-    """The compiled module (``.ffi``, ``.lib``) for ``compile_args``: loaded from the cache,
-    compiled there first if absent. Returns (module, info)."""
+def build(compile_args=COMPILE_ARGS, directory: pathlib.Path | None = None,
+          kernel: str = "surface3"):
+    """The compiled module (``.ffi``, ``.lib``) of ``kernel`` for ``compile_args``: loaded from
+    the cache, compiled there first if absent. Returns (module, info)."""
     directory = pathlib.Path(directory) if directory is not None else cache_dir()
-    name = module_name(compile_args)
+    name = module_name(compile_args, kernel)
     target = directory / (name + importlib.machinery.EXTENSION_SUFFIXES[0])
     start = time.perf_counter()
     info = {"name": name, "path": str(target), "compiled": False}
@@ -145,7 +171,7 @@ def build(compile_args=COMPILE_ARGS, directory: pathlib.Path | None = None):
                 if not target.exists():  # nobody built it while we waited
                     work = pathlib.Path(tempfile.mkdtemp(prefix=name + "-", dir=directory))
                     try:
-                        built = _compile(name, work, compile_args)
+                        built = _compile(kernel, name, work, compile_args)
                         os.replace(built, target)  # atomic within one file system
                     finally:
                         shutil.rmtree(work, ignore_errors=True)
@@ -159,19 +185,24 @@ def build(compile_args=COMPILE_ARGS, directory: pathlib.Path | None = None):
     return module, info
 
 
+def load(kernel: str = "surface3"):
+    """The compiled module of ``kernel`` (``surface3`` or ``line2``), built or loaded from the
+    cache on this process's first use."""
+    if kernel not in _modules:
+        module, info = build(kernel=kernel)
+        _infos[kernel] = info
+        _modules[kernel] = module
+    return _modules[kernel]
+
+
 def _get():
-    global _module
-    if _module is None:
-        module, info = build()
-        _info.update(info)
-        _module = module
-    return _module
+    return load("surface3")
 
 
-def build_info() -> dict:
-    """How this process got the module: ``compiled`` (bool), ``seconds`` (compile or load),
-    ``path``; empty before the first use."""
-    return dict(_info)
+def build_info(kernel: str = "surface3") -> dict:
+    """How this process got the module of ``kernel``: ``compiled`` (bool), ``seconds`` (compile
+    or load), ``path``; empty before the first use."""
+    return dict(_infos.get(kernel, {}))
 
 
 def _pointer(ffi, array: np.ndarray | None, ctype: str):
@@ -325,4 +356,96 @@ def pair_quantities_compiled(slave_x, master_x, slave_normals, *, normals: str =
     if status != 0:
         raise RuntimeError(f"pair {-2 - status}: clip polygon with more than 8 vertices")
     out["valid"] = out["valid"].astype(bool)
+    return out
+
+
+_LINE2_NORMALS = {"averaged": 0, "slave": 1, "master": 2}
+
+
+def line2_pair_quantities_compiled(x, has_neighbour, *, normals: str = "averaged",
+                                   integration: str = "segment", basis: str = "standard",
+                                   num_gauss_points: int | None = None, crosspoint=None,
+                                   slave_facet=None, scalar_gradients: bool = False) -> dict:
+    """The 2D mortar integrals of every pair, compiled.
+
+    The same quantities as :func:`dolfinx_mortar.kernels.line2.pair_quantities` (the same
+    arguments: ``x`` (n, 6, 2) the nodes ``p, a, b, q, c, d``, ``has_neighbour`` (n, 2); the
+    default Gauss points those of :class:`~dolfinx_mortar.kernels.line2.Line2Kernel`), as plain
+    arrays: values ``D``, ``M`` (n, 2, 2), ``Dn``, ``Mn`` (n, 2, 2, 2), ``gap``, ``area``
+    (n, 2), ``valid`` (n,) bool, ``overlap`` (n,), zero where not valid; ``rows``, the pairs
+    that were integrated (the numpy kernel's ``rows``: outside them every output is zero), and
+    the gradients over the 12 pair variables of those rows only (the others' are zero, and most
+    candidate pairs do not overlap): ``Dn_grad``, ``Mn_grad`` (r, 2, 2, 2, 12), ``gap_grad``,
+    ``area_grad`` (r, 2, 12), ``D_grad`` (r, 2, 2, 12) (the covered dual basis needs it), and
+    with ``scalar_gradients`` ``M_grad`` (r, 2, 2, 12).
+    """
+    from . import line2
+    from .contract import KernelOptions
+
+    KernelOptions(normals=normals, integration=integration, basis=basis)  # (checks them)
+    element = integration == "element"
+    points, weights = line2.gauss_legendre(
+        num_gauss_points or line2.DEFAULT_GAUSS_POINTS[integration])
+    g = points.size
+    x = np.ascontiguousarray(np.asarray(x, dtype=np.float64).reshape(-1, 12))
+    n = x.shape[0]
+    has = np.ascontiguousarray(np.asarray(has_neighbour, dtype=bool).reshape(n, 2),
+                               dtype=np.uint8)
+    cross = None
+    if crosspoint is not None:
+        cross = np.ascontiguousarray(np.asarray(crosspoint, dtype=bool).reshape(n, 2),
+                                     dtype=np.uint8)
+    module = load("line2")
+    ffi, lib = module.ffi, module.lib
+    d, u8 = "double *", "unsigned char *"
+    normal_code = _LINE2_NORMALS[normals]
+
+    valid = np.zeros(n, dtype=np.uint8)
+    screened = np.empty((n, g) if element else n)
+    if n:
+        lib.line2_screen(n, _pointer(ffi, x, d), _pointer(ffi, has, u8), normal_code,
+                         int(element), g, _pointer(ffi, points, d), _pointer(ffi, valid, u8),
+                         _pointer(ffi, screened, d))
+    valid = valid.astype(bool)
+    on_master = None
+    if element:
+        facets = np.arange(n) if slave_facet is None else np.asarray(slave_facet).reshape(-1)
+        on_master = line2._one_master_facet_per_point(screened, valid, facets)
+        overlapping = on_master.any(axis=1)
+        overlap = np.where(on_master, weights, 0.0).sum(axis=1)
+        on_master = np.ascontiguousarray(on_master, dtype=np.uint8)
+    else:
+        overlapping = (screened > 0.0) & valid
+    rows = np.flatnonzero(overlapping).astype(np.int64)
+    r, nv = rows.size, LINE2_NUM_VARIABLES
+    out = {
+        "D": np.zeros((n, 2, 2)), "M": np.zeros((n, 2, 2)),
+        "Dn": np.zeros((n, 2, 2, 2)), "Mn": np.zeros((n, 2, 2, 2)),
+        "gap": np.zeros((n, 2)), "area": np.zeros((n, 2)), "rows": rows,
+        "Dn_grad": np.empty((r, 2, 2, 2, nv)), "Mn_grad": np.empty((r, 2, 2, 2, nv)),
+        "gap_grad": np.empty((r, 2, nv)), "area_grad": np.empty((r, 2, nv)),
+        "D_grad": np.empty((r, 2, 2, nv)),
+    }
+    if scalar_gradients:
+        out["M_grad"] = np.empty((r, 2, 2, nv))
+    contributes = np.ones(r, dtype=np.uint8)
+    if r:
+        dual = (np.ascontiguousarray(line2._DUAL_COEFFICIENTS, dtype=np.float64)
+                if basis == "dual" else None)
+        lib.line2_integrate(
+            r, ffi.cast("long *", ffi.from_buffer(rows)), _pointer(ffi, x, d),
+            _pointer(ffi, has, u8), _pointer(ffi, cross, u8), _pointer(ffi, on_master, u8),
+            normal_code, int(element), g, _pointer(ffi, points, d), _pointer(ffi, weights, d),
+            _pointer(ffi, dual, d), _pointer(ffi, contributes, u8),
+            *(_pointer(ffi, out[key], d) for key in ("D", "M", "Dn", "Mn", "gap", "area")),
+            _pointer(ffi, out["D_grad"], d), _pointer(ffi, out.get("M_grad"), d),
+            *(_pointer(ffi, out[key], d) for key in ("Dn_grad", "Mn_grad", "gap_grad",
+                                                      "area_grad")))
+    if not element:
+        parallel = rows[contributes == 0]
+        valid[parallel] = False
+        overlapping[parallel] = False
+        overlap = np.where(overlapping, screened, 0.0)
+    out["valid"] = valid & overlapping
+    out["overlap"] = overlap
     return out
