@@ -71,6 +71,32 @@ def test_kernel_equals_numpy(rule, basis, scalar_gradients):
             assert_close(a, b.grad[rows], what=("rows", index))
 
 
+def test_screened_candidates_are_far():
+    """The candidates the compiled evaluation does not give the kernel (projected bounding
+    discs apart) are not valid for the numpy kernel either; the others still reach it."""
+    slave, master, nodal, _ = random_pairs(2000, seed=6)
+    shift = np.random.default_rng(7).uniform(-2.0, 2.0, (2000, 1, 3))
+    master = master + shift
+    near = surface3_compiled._near(slave, master, nodal)
+    assert 100 < near.size < 1900
+    geometry = PairGeometry(slave, master, nodal)
+    expected = Surface3Kernel().evaluate(geometry, KernelOptions(kernels="numpy"))
+    assert np.isin(expected.rows, near).all() and expected.rows.size > 50
+    got = Surface3Kernel().evaluate(geometry, KernelOptions(kernels="compiled"))
+    np.testing.assert_array_equal(got.rows, expected.rows)
+
+
+def test_gradients_survive_later_requests():
+    """``grad`` of an output stays what it was when other rows were asked for since."""
+    slave, master, nodal, _ = random_pairs(100, seed=8)
+    first, second = (Surface3Kernel().evaluate(PairGeometry(slave, master, nodal),
+                                               KernelOptions(kernels="compiled"))
+                     for _ in range(2))
+    assert first.Dn.grad.any()  # every output's gradients made here
+    first.gradients_on_demand.gradients(first.rows[::-1])
+    np.testing.assert_array_equal(first.Mn.grad, second.Mn.grad)
+
+
 def test_uncovered_cases_stay_numpy():
     slave, master, nodal, _ = random_pairs(20, seed=1)
     kernel = Surface3Kernel()

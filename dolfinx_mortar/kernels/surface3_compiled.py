@@ -115,6 +115,8 @@ class CompiledGradients:
         return _GRADIENTS if self.scalar_gradients else _GRADIENTS[:4]
 
     def gradients(self, rows: np.ndarray) -> list[np.ndarray]:
+        """As :meth:`~.contract.GradientsOnDemand.gradients`; for up to :attr:`chunk`
+        contributing rows, views of the kernel's buffers, overwritten by the next call."""
         rows = np.asarray(rows)
         nv = compiled.NUM_VARIABLES
         shapes = {"Dn_grad": (3, 3, 3), "Mn_grad": (3, 3, 3), "area_grad": (3,),
@@ -122,17 +124,19 @@ class CompiledGradients:
         kept = self.rows
         position = np.minimum(np.searchsorted(kept, rows), max(kept.size - 1, 0))
         found = kept[position] == rows if kept.size else np.zeros(rows.shape, dtype=bool)
-        if found.all():
-            result = {name: np.empty((rows.size,) + shapes[name] + (nv,))
-                      for name in self._names()}
-        else:
-            result = {name: np.zeros((rows.size,) + shapes[name] + (nv,))
-                      for name in self._names()}
-        asked = np.flatnonzero(found)
-        if self._buffers is None and asked.size:
-            self._buffers = _Buffers(min(self.chunk, asked.size), self.scalar_gradients)
+        if self._buffers is None:
+            self._buffers = _Buffers(self.chunk, self.scalar_gradients)
         buffers = self._buffers
-        for start in range(0, asked.size, buffers.size if asked.size else 1):
+        if found.all() and rows.size <= buffers.size:
+            index = position
+            cross = None if self.crosspoint is None else self.crosspoint[index]
+            out = buffers.run(self.slave_x[index], self.master_x[index],
+                              self.slave_normals[index], cross, self.dual_basis, self.rule)
+            return [out[name] for name in self._names()]
+        result = {name: np.zeros((rows.size,) + shapes[name] + (nv,))
+                  for name in self._names()}
+        asked = np.flatnonzero(found)
+        for start in range(0, asked.size, buffers.size):
             part = asked[start:start + buffers.size]
             index = position[part]
             cross = None if self.crosspoint is None else self.crosspoint[index]
@@ -141,6 +145,30 @@ class CompiledGradients:
             for name in self._names():
                 result[name][part] = out[name]
         return [result[name] for name in self._names()]
+
+
+def _near(slave_x: np.ndarray, master_x: np.ndarray, slave_normals: np.ndarray) -> np.ndarray:
+    """The candidates whose facets may overlap on the auxiliary plane: the others' projected
+    bounding discs (centre the node mean, radius the farthest node) lie apart by a millionth
+    of their radii, far more than the kernel's separation tolerance, so the kernel would
+    find them separated. Spares the kernel most of a search's candidates."""
+    s, m = slave_x.transpose(1, 2, 0), master_x.transpose(1, 2, 0)  # (node, xyz, pair)
+    slave_centre, master_centre = (s[0] + s[1] + s[2]) / 3.0, (m[0] + m[1] + m[2]) / 3.0
+
+    def radius(nodes, centre):
+        return np.sqrt(np.maximum(np.maximum(((nodes[0] - centre) ** 2).sum(axis=0),
+                                             ((nodes[1] - centre) ** 2).sum(axis=0)),
+                                  ((nodes[2] - centre) ** 2).sum(axis=0)))
+
+    normals = slave_normals.transpose(1, 2, 0)
+    normal = normals[0] + normals[1] + normals[2]
+    length2 = (normal**2).sum(axis=0)
+    offset = master_centre - slave_centre
+    along = (offset * normal).sum(axis=0)
+    flat = np.where(length2 > 0.0, along**2 / np.where(length2 > 0.0, length2, 1.0), 0.0)
+    in_plane2 = (offset**2).sum(axis=0) - flat
+    reach = (radius(s, slave_centre) + radius(m, master_centre)) * (1.0 + 1e-6)
+    return np.flatnonzero((in_plane2 <= reach**2) | ~(length2 > 0.0))
 
 
 def evaluate(geometry: PairGeometry, options: KernelOptions,
@@ -158,14 +186,15 @@ def evaluate(geometry: PairGeometry, options: KernelOptions,
                                      dtype=np.uint8)
     rule = options.num_gauss_points or 7
     dual_basis = options.basis == "dual"
-    values = {name: np.empty((n,) + shape) for name, shape in (
+    values = {name: np.zeros((n,) + shape) for name, shape in (
         ("D", (3, 3)), ("M", (3, 3)), ("Dn", (3, 3, 3)), ("Mn", (3, 3, 3)), ("gap", (3,)),
         ("area", (3,)))}
     valid = np.zeros(n, dtype=bool)
     overlap = np.zeros(n)
-    buffers = _Buffers(min(EVALUATION_CHUNK, max(n, 1)), options.scalar_gradients)
-    for start in range(0, n, buffers.size):
-        part = slice(start, min(n, start + buffers.size))
+    near = _near(slave_x, master_x, slave_normals)
+    buffers = _Buffers(min(EVALUATION_CHUNK, max(near.size, 1)), options.scalar_gradients)
+    for start in range(0, near.size, buffers.size):
+        part = near[start:start + buffers.size]
         out = buffers.run(slave_x[part], master_x[part], slave_normals[part],
                           None if cross is None else cross[part], dual_basis, rule)
         for name in _VALUES:
@@ -181,7 +210,7 @@ def evaluate(geometry: PairGeometry, options: KernelOptions,
     def all_gradients(index: int):
         def make():
             if not cached:
-                cached.append(source.gradients(rows))
+                cached.append([np.array(grad) for grad in source.gradients(rows)])
             return cached[0][index]
         return make
 
