@@ -35,8 +35,8 @@ in x and y alike, the upper one pushed 0.1 w down and slid 0.3 w.
 
 ``--kernels numpy compiled`` measures each size with each kernel implementation in turn
 (``$DOLFINX_MORTAR_KERNELS``, :class:`dolfinx_mortar.kernels.KernelOptions`; default: the
-environment's). Per size and implementation the peak resident memory of the process
-(``VmHWM``, reset before the size where the kernel allows it) is reported too.
+environment's). Per size and implementation the peak resident memory of the process while
+it is measured (:class:`PeakMemory`: mesh, interface and the repeats) is reported too.
 
 Prints a markdown table, the log-log slope of the total against N (least
 squares over all N) and the total at the largest N. The goal is linear
@@ -59,6 +59,7 @@ import os
 import platform
 import statistics
 import sys
+import threading
 import time
 
 import basix.ufl
@@ -194,27 +195,37 @@ def displacement(V, upper, lower, width: float) -> dolfinx.fem.Function:
     return u
 
 
-def reset_peak_memory() -> bool:
-    """Reset the process's peak resident memory (Linux ``clear_refs``); False if not
-    allowed (the peak then covers everything before)."""
-    try:
-        with open("/proc/self/clear_refs", "w") as f:
-            f.write("5")
-        return True
-    except OSError:
-        return False
+class PeakMemory:
+    """The peak resident memory of the process while in the ``with`` block, sampled from
+    ``/proc/self/statm`` every ``interval`` seconds by a thread (``VmHWM`` cannot be reset
+    in every kernel, and would cover the sizes measured before)."""
 
+    def __init__(self, interval: float = 0.002):
+        self.interval, self.peak = interval, 0.0
+        self._stop = threading.Event()
+        self._page = os.sysconf("SC_PAGE_SIZE")
 
-def peak_memory() -> float:
-    """The process's peak resident memory in bytes (``VmHWM``; 0 where unknown)."""
-    try:
-        with open("/proc/self/status") as f:
-            for line in f:
-                if line.startswith("VmHWM:"):
-                    return 1024.0 * float(line.split()[1])
-    except OSError:
-        pass
-    return 0.0
+    def _resident(self) -> float:
+        try:
+            with open("/proc/self/statm") as f:
+                return float(f.read().split()[1]) * self._page
+        except OSError:
+            return 0.0
+
+    def _sample(self) -> None:
+        while not self._stop.is_set():
+            self.peak = max(self.peak, self._resident())
+            self._stop.wait(self.interval)
+
+    def __enter__(self) -> PeakMemory:
+        self._thread = threading.Thread(target=self._sample, daemon=True)
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.peak = max(self.peak, self._resident())
 
 
 def _assemble(interface: MortarInterface, z) -> None:
@@ -228,7 +239,6 @@ def _assemble(interface: MortarInterface, z) -> None:
 def measure(num_slave: int, repeats: int, normals: str, integration: str, dim: int = 2) -> dict:
     """Median times (seconds) of each phase at one size, and counters."""
     gc.collect()
-    peak_reset = reset_peak_memory()
     if dim == 3:
         mesh, tags, upper, lower, width = two_slabs(num_slave)
         V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (3,)))
@@ -280,7 +290,6 @@ def measure(num_slave: int, repeats: int, normals: str, integration: str, dim: i
         master_facets=interface.master.num_facets,
         pairs=stats.pairs,
         segments=stats.segments,
-        peak_memory=peak_memory(), peak_memory_of_size=peak_reset,
         kernels=kernels.contract.default_kernels(),
         weighted_gap_sum=float(interface.weighted_gap().sum()),
     )
@@ -356,14 +365,15 @@ def main(argv=None) -> int:
     for n in sizes:
         for implementation in implementations:
             os.environ[kernels.contract.KERNELS_VARIABLE] = implementation
-            result = measure(n, args.repeats, args.normals, args.integration, args.dim)
+            with PeakMemory() as memory:
+                result = measure(n, args.repeats, args.normals, args.integration, args.dim)
+            result["peak_memory"] = memory.peak
             by_kernels.setdefault(implementation, []).append(result)
             print(f"N={n} {implementation}: total {1e3 * result['total']:.1f} ms "
                   f"(search {1e3 * result['search']:.1f}, "
                   f"integration {1e3 * result['integration']:.1f}, "
                   f"assembly {1e3 * result['assembly']:.1f}); {result['pairs']} pairs; "
-                  f"peak memory {result['peak_memory'] / 1e9:.2f} GB"
-                  + ("" if result["peak_memory_of_size"] else " (since the start)"),
+                  f"peak memory {result['peak_memory'] / 1e9:.2f} GB",
                   file=sys.stderr, flush=True)
     for implementation in implementations[:-1]:
         results = by_kernels[implementation]
