@@ -33,6 +33,11 @@ With ``--dim 3`` the bodies are two slabs of tetrahedra one cell thick,
 [0, 1]^2 x [0, w] (slave, n cells per side, N = 2 n^2 triangle facets), bent
 in x and y alike, the upper one pushed 0.1 w down and slid 0.3 w.
 
+``--kernels numpy compiled`` measures each size with each kernel implementation in turn
+(``$DOLFINX_MORTAR_KERNELS``, :class:`dolfinx_mortar.kernels.KernelOptions`; default: the
+environment's). Per size and implementation the peak resident memory of the process while
+it is measured (:class:`PeakMemory`: mesh, interface and the repeats) is reported too.
+
 Prints a markdown table, the log-log slope of the total against N (least
 squares over all N) and the total at the largest N. The goal is linear
 growth (slope <= 1.1) and under a second for 1e5 slave facets.
@@ -41,6 +46,8 @@ growth (slope <= 1.1) and under a second for 1e5 slave facets.
     tools/run python3 benchmarks/mortar_scaling.py --sizes 1000 10000 --repeats 3 \\
         --json scratch/scaling.json --png scratch/scaling.png
     tools/run python3 benchmarks/mortar_scaling.py --dim 3 --repeats 3
+    tools/run python3 benchmarks/mortar_scaling.py --dim 3 --sizes 1000 10000 100000 \\
+        --kernels numpy compiled
 """
 
 from __future__ import annotations
@@ -48,9 +55,11 @@ from __future__ import annotations
 import argparse
 import gc
 import json
+import os
 import platform
 import statistics
 import sys
+import threading
 import time
 
 import basix.ufl
@@ -186,6 +195,39 @@ def displacement(V, upper, lower, width: float) -> dolfinx.fem.Function:
     return u
 
 
+class PeakMemory:
+    """The peak resident memory of the process while in the ``with`` block, sampled from
+    ``/proc/self/statm`` every ``interval`` seconds by a thread (``VmHWM`` cannot be reset
+    in every kernel, and would cover the sizes measured before)."""
+
+    def __init__(self, interval: float = 0.002):
+        self.interval, self.peak = interval, 0.0
+        self._stop = threading.Event()
+        self._page = os.sysconf("SC_PAGE_SIZE")
+
+    def _resident(self) -> float:
+        try:
+            with open("/proc/self/statm") as f:
+                return float(f.read().split()[1]) * self._page
+        except OSError:
+            return 0.0
+
+    def _sample(self) -> None:
+        while not self._stop.is_set():
+            self.peak = max(self.peak, self._resident())
+            self._stop.wait(self.interval)
+
+    def __enter__(self) -> PeakMemory:
+        self._thread = threading.Thread(target=self._sample, daemon=True)
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.peak = max(self.peak, self._resident())
+
+
 def _assemble(interface: MortarInterface, z) -> None:
     interface.mortar_matrices()
     interface.weighted_gap()
@@ -196,6 +238,7 @@ def _assemble(interface: MortarInterface, z) -> None:
 
 def measure(num_slave: int, repeats: int, normals: str, integration: str, dim: int = 2) -> dict:
     """Median times (seconds) of each phase at one size, and counters."""
+    gc.collect()
     if dim == 3:
         mesh, tags, upper, lower, width = two_slabs(num_slave)
         V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (3,)))
@@ -247,6 +290,7 @@ def measure(num_slave: int, repeats: int, normals: str, integration: str, dim: i
         master_facets=interface.master.num_facets,
         pairs=stats.pairs,
         segments=stats.segments,
+        kernels=kernels.contract.default_kernels(),
         weighted_gap_sum=float(interface.weighted_gap().sum()),
     )
     z.destroy()
@@ -308,24 +352,43 @@ def main(argv=None) -> int:
     parser.add_argument("--integration", default="segment", choices=kernels.INTEGRATION_OPTIONS)
     parser.add_argument("--dim", type=int, default=2, choices=(2, 3),
                         help="2: strips of quadrilaterals; 3: slabs of tetrahedra (default 2)")
+    parser.add_argument("--kernels", nargs="+", choices=kernels.contract.KERNELS_OPTIONS,
+                        help="kernel implementations to measure in turn, each size with each "
+                             "(default: $DOLFINX_MORTAR_KERNELS, else numpy)")
     args = parser.parse_args(argv)
     if MPI.COMM_WORLD.size != 1:
         parser.error("the benchmark is serial; run it without mpirun")
     sizes = [int(round(n)) for n in args.sizes]
-    results = []
+    implementations = args.kernels or [kernels.contract.default_kernels()]
     print(f"dimension {args.dim}", file=sys.stderr)
+    by_kernels = {}
     for n in sizes:
-        result = measure(n, args.repeats, args.normals, args.integration, args.dim)
-        results.append(result)
-        print(f"N={n}: total {1e3 * result['total']:.1f} ms "
-              f"(search {1e3 * result['search']:.1f}, "
-              f"integration {1e3 * result['integration']:.1f}, "
-              f"assembly {1e3 * result['assembly']:.1f}); {result['pairs']} pairs",
-              file=sys.stderr, flush=True)
+        for implementation in implementations:
+            os.environ[kernels.contract.KERNELS_VARIABLE] = implementation
+            with PeakMemory() as memory:
+                result = measure(n, args.repeats, args.normals, args.integration, args.dim)
+            result["peak_memory"] = memory.peak
+            by_kernels.setdefault(implementation, []).append(result)
+            print(f"N={n} {implementation}: total {1e3 * result['total']:.1f} ms "
+                  f"(search {1e3 * result['search']:.1f}, "
+                  f"integration {1e3 * result['integration']:.1f}, "
+                  f"assembly {1e3 * result['assembly']:.1f}); {result['pairs']} pairs; "
+                  f"peak memory {result['peak_memory'] / 1e9:.2f} GB",
+                  file=sys.stderr, flush=True)
+    for implementation in implementations[:-1]:
+        results = by_kernels[implementation]
+        print(f"\n{args.dim}D, kernels {implementation}, median times in ms\n")
+        print(markdown_table(results))
+        print("| peak memory [GB] | " + " | ".join(
+            f"{r['peak_memory'] / 1e9:.2f}" for r in results) + " | |")
+    results = by_kernels[implementations[-1]]
+    print(f"\nkernels {implementations[-1]}:")
     sizes = [r["N"] for r in results]
     print(f"\n{args.dim}D, median times in ms, {args.repeats} repeats, normals={args.normals}, "
           f"integration={args.integration}, dolfinx {dolfinx.__version__}\n")
     print(markdown_table(results))
+    print("| peak memory [GB] | " + " | ".join(
+        f"{r['peak_memory'] / 1e9:.2f}" for r in results) + " | |")
     summary = {}
     if len(results) > 1:
         summary["slope_total"] = loglog_slope(sizes, [r["total"] for r in results])
@@ -340,7 +403,8 @@ def main(argv=None) -> int:
                                    "integration": args.integration,
                                    "repeats": args.repeats, "dolfinx": dolfinx.__version__,
                                    "numpy": np.__version__, "python": platform.python_version()},
-                       "summary": summary, "results": results}, f, indent=1)
+                       "summary": summary, "results": results,
+                       "results_by_kernels": by_kernels}, f, indent=1)
     if args.png:
         plot(results, args.png)
     return 0

@@ -236,6 +236,7 @@ class PairStencil:
         starts = np.cumsum([0] + sizes[:-1])
         end = int(starts[-1]) + sizes[-1]
         gradients: dict[int, np.ndarray] = {}
+        on_demand: list[np.ndarray] = []  # the kernel's gradients of rows, made when needed
         result = np.zeros((len(terms), rows.size, nv))
         factorized = self._factorized_sums(q, rows, len(terms))
         for p, row in enumerate(terms):
@@ -253,8 +254,13 @@ class PairStencil:
                 if factorized is not None and factorized.add(p, part, index, weight, result):
                     continue
                 if part not in gradients:
-                    gradients[part] = _gradient_rows(outputs[part], rows).reshape(
-                        rows.size, sizes[part], nv)
+                    if q.gradients_on_demand is not None:
+                        if not on_demand:
+                            on_demand.extend(q.gradients_on_demand.gradients(rows))
+                        grad = on_demand[part]
+                    else:
+                        grad = _gradient_rows(outputs[part], rows)
+                    gradients[part] = grad.reshape(rows.size, sizes[part], nv)
                 result[p] += gradients[part][:, index, :] * weight
         if factorized is not None:
             factorized.finish(result)
@@ -445,6 +451,16 @@ class Surface3Stencil(PairStencil):
                                     slave_facet=self.slave_facets)
 
     def combined_gradients(self, q: PairQuantities, rows, terms) -> np.ndarray:
+        source = q.gradients_on_demand
+        if source is not None and rows.size > source.chunk:
+            # the kernel's gradients made again a chunk of rows at a time
+            result = np.empty((len(terms), 3 * self.width, rows.size))
+            for start in range(0, rows.size, source.chunk):
+                stop = min(rows.size, start + source.chunk)
+                part = [[(o, w if np.ndim(w) == 0 else w[start:stop]) for o, w in row]
+                        for row in terms]
+                result[:, :, start:stop] = self.combined_gradients(q, rows[start:stop], part)
+            return result
         kernel = self._row_gradients(q, rows, terms)  # (T, rows, nv)
         direct = 3 * (self.ns + self.nm)
         chain = bool(self.max_star) and self._normal_jacobian is not None

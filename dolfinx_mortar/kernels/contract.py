@@ -13,6 +13,7 @@ them nothing knows the dimension.
 from __future__ import annotations
 
 import dataclasses
+import os
 import typing
 
 import numpy as np
@@ -23,10 +24,20 @@ from .factors import AffineFactors, PairGradients
 NormalOption = typing.Literal["averaged", "slave", "master"]
 IntegrationOption = typing.Literal["segment", "element"]
 BasisOption = typing.Literal["standard", "dual"]
+KernelsOption = typing.Literal["numpy", "compiled"]
 
 NORMAL_OPTIONS: tuple[str, ...] = typing.get_args(NormalOption)
 INTEGRATION_OPTIONS: tuple[str, ...] = typing.get_args(IntegrationOption)
 BASIS_OPTIONS: tuple[str, ...] = typing.get_args(BasisOption)
+KERNELS_OPTIONS: tuple[str, ...] = typing.get_args(KernelsOption)
+KERNELS_VARIABLE = "DOLFINX_MORTAR_KERNELS"
+
+
+def default_kernels() -> str:
+    """The kernels' implementation when none is given: ``$DOLFINX_MORTAR_KERNELS``
+    (``numpy`` or ``compiled``), else ``numpy``; read when the options are made, so that
+    one process can measure both."""
+    return os.environ.get(KERNELS_VARIABLE, "") or "numpy"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -43,6 +54,10 @@ class KernelOptions:
         scalar_gradients: also keep the gradients of D and M (``D_dual``, ``M_dual``;
             friction's 3D tangent frames and the covered dual basis need them). The 2D
             kernel's factorized gradients always hold those of D and ignore it.
+        kernels: ``numpy`` (vectorized) or ``compiled`` (C through cffi,
+            :mod:`.surface3_compiled`) for the pairs the compiled kernel covers (3D triangle
+            on triangle, segment-based, averaged normals); every other case stays numpy.
+            Default: :func:`default_kernels`.
     """
 
     normals: NormalOption = "averaged"
@@ -50,11 +65,13 @@ class KernelOptions:
     basis: BasisOption = "standard"
     num_gauss_points: int | None = None
     scalar_gradients: bool = False
+    kernels: KernelsOption = dataclasses.field(default_factory=default_kernels)
 
     def __post_init__(self):
         for value, allowed, what in ((self.normals, NORMAL_OPTIONS, "normal option"),
                                      (self.integration, INTEGRATION_OPTIONS, "integration"),
-                                     (self.basis, BASIS_OPTIONS, "multiplier basis")):
+                                     (self.basis, BASIS_OPTIONS, "multiplier basis"),
+                                     (self.kernels, KERNELS_OPTIONS, "kernels")):
             if value not in allowed:
                 raise ValueError(f"unknown {what} {value!r}; expected one of {allowed}")
 
@@ -86,6 +103,21 @@ class PairGeometry:
         return self.slave_x.shape[0]
 
 
+class GradientsOnDemand(typing.Protocol):
+    """The gradients of a kernel's outputs, made again for the pairs a consumer asks for
+    rather than kept for every pair (a 3D pair's are ~1,700 numbers)."""
+
+    chunk: int
+    """Pairs asked for at once by the stencils (their gradients then live together)."""
+
+    def gradients(self, rows: np.ndarray) -> list[np.ndarray]:
+        """The gradients of the pairs ``rows`` (any pairs of the evaluation; zero outside
+        the contributing ones) over the kernel variables, one array per output in the
+        order of :meth:`PairQuantities.outputs`, each (len(rows), output shape...,
+        num_variables)."""
+        ...
+
+
 @dataclasses.dataclass
 class PairQuantities:
     """The mortar contributions of a batch of pairs (arrays lead with the pair axis).
@@ -111,6 +143,8 @@ class PairQuantities:
         affine_factors: the 3D kernel's factorized gradients of Dn, Mn and the areas of
             triangle pairs (:class:`~.factors.AffineFactors`), when it kept them so; their
             ``grad`` is then expanded only on first use.
+        gradients_on_demand: the compiled kernel keeps no gradients: it recomputes those of
+            the pairs a consumer asks for (:class:`GradientsOnDemand`), a chunk at a time.
     """
 
     D: np.ndarray
@@ -127,6 +161,7 @@ class PairQuantities:
     normals_vary: bool = True
     segment_gradients: PairGradients | None = None
     affine_factors: AffineFactors | None = None
+    gradients_on_demand: GradientsOnDemand | None = None
 
     @property
     def rows(self) -> np.ndarray:
@@ -146,7 +181,7 @@ class PairQuantities:
         the kernel's own outputs, are dropped unless given."""
         fields = {field.name: getattr(self, field.name)
                   for field in dataclasses.fields(PairQuantities)}
-        fields.update(segment_gradients=None, affine_factors=None)
+        fields.update(segment_gradients=None, affine_factors=None, gradients_on_demand=None)
         fields.update(changes)
         return PairQuantities(**fields)
 

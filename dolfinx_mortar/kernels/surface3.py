@@ -48,6 +48,7 @@ import numpy as np
 
 from .. import dual
 from ..dual import Dual, RowSubsetDual
+from . import surface3_compiled
 from .contract import (
     KernelOptions,
     PairGeometry,
@@ -419,7 +420,9 @@ def pair_quantities(
 class Surface3Kernel:
     """The 3D kernel behind the contract (:class:`~.contract.MortarKernel`): takes the
     slave nodal normals of :class:`~.contract.PairGeometry` as variables (zeros will do
-    for the ``slave`` and ``master`` normal options); no neighbours."""
+    for the ``slave`` and ``master`` normal options); no neighbours. With
+    ``options.kernels == "compiled"`` the pairs the compiled kernel covers go to it
+    (:mod:`.surface3_compiled`: values now, gradients on demand)."""
 
     gdim = 3
     default_gauss_points = {"segment": DEFAULT_GAUSS_POINTS, "element": DEFAULT_GAUSS_POINTS}
@@ -427,6 +430,8 @@ class Surface3Kernel:
     def evaluate(self, geometry: PairGeometry, options: KernelOptions, *,
                  crosspoint: np.ndarray | None = None,
                  slave_facet: np.ndarray | None = None) -> PairQuantities:
+        if options.kernels == "compiled" and surface3_compiled.covers(geometry, options):
+            return surface3_compiled.evaluate(geometry, options, crosspoint)
         slave_normals = geometry.slave_normals
         if slave_normals is None:
             slave_normals = np.zeros_like(geometry.slave_x)
