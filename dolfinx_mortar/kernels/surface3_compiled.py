@@ -76,7 +76,8 @@ class _Buffers:
 
         status = module.lib.surface3_triangles(
             m, pointer(slave_x), pointer(master_x), pointer(slave_normals),
-            pointer(crosspoint, "unsigned char *"), int(dual_basis), rule,
+            pointer(crosspoint, "unsigned char *"), compiled._NORMAL_FIELDS["averaged"],
+            int(dual_basis), rule,
             pointer(out["valid"], "unsigned char *"), pointer(out["overlap"]),
             *(pointer(out[name]) for name in _VALUES),
             pointer(out["D_grad"]), pointer(out["M_grad"]),
