@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import importlib
+import logging
 import os
 import sys
 import warnings
@@ -27,8 +28,49 @@ def stacklevel_outside() -> int:
 
 
 def warn_deprecated(message: str) -> None:
-    """A :class:`DeprecationWarning` attributed to the first caller outside this package."""
-    warnings.warn(message, DeprecationWarning, stacklevel=stacklevel_outside())
+    """A :class:`DeprecationWarning` attributed to the first caller outside this package,
+    shown as :func:`show` shows warnings (Python's filters decide whether it is)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.warn(message, DeprecationWarning, stacklevel=stacklevel_outside())
+    show(caught)
+
+
+_logging_showwarning = getattr(logging, "_showwarning", None)
+
+
+def show(caught: list[warnings.WarningMessage]) -> None:
+    """Show warnings that passed the filters (recorded by ``catch_warnings(record=True)``).
+
+    Shown means written to stderr even where :mod:`logging` captures warnings: FFCx calls
+    ``logging.captureWarnings(True)`` when it is imported, which routes every warning to
+    the ``py.warnings`` logger, and an unconfigured logger prints nothing. So when
+    warnings are captured and no handler of that logger would print one, the text goes
+    to stderr directly; otherwise it takes the usual path (:func:`warnings.showwarning`:
+    the user's logging, pytest's recorder, a custom hook).
+    """
+    for w in caught:
+        if warnings.showwarning is _logging_showwarning and not _logger_prints_warnings(
+            logging.getLogger("py.warnings")
+        ):
+            sys.stderr.write(warnings.formatwarning(w.message, w.category, w.filename, w.lineno))
+            sys.stderr.flush()
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno, w.file, w.line)
+
+
+def _logger_prints_warnings(logger: logging.Logger) -> bool:
+    """Would a record of level WARNING sent to ``logger`` reach a handler that shows it?"""
+    if not logger.isEnabledFor(logging.WARNING):
+        return False
+    current: logging.Logger | None = logger
+    while current is not None:
+        for handler in current.handlers:
+            if not isinstance(handler, logging.NullHandler) and handler.level <= logging.WARNING:
+                return True
+        if not current.propagate:
+            break
+        current = current.parent
+    return False
 
 
 def moved(module: str, names: dict[str, str]):

@@ -27,14 +27,13 @@ All functions that take a communicator are collective.
 from __future__ import annotations
 
 import dataclasses
-import logging
-import sys
 import warnings
 
 import numpy as np
 from mpi4py import MPI
 from scipy.spatial import cKDTree
 
+from .deprecation import show
 from .normals import facet_normals
 
 FIXED_POINT_NOT_SETTLED = -100
@@ -84,44 +83,14 @@ def warn(comm: MPI.Intracomm, message: str, stacklevel: int = 2) -> None:
     it. The texts are built from collective results, so the counts in them are
     global and the same on every rank.
 
-    Shown means written to stderr even where :mod:`logging` captures warnings:
-    FFCx calls ``logging.captureWarnings(True)`` when it is imported, which routes
-    every warning to the ``py.warnings`` logger, and an unconfigured logger prints
-    nothing. So when warnings are captured and no handler of that logger would
-    print a warning, the text goes to stderr directly; otherwise it takes the
-    usual path (:func:`warnings.showwarning`: the user's logging, pytest's
-    recorder, a custom hook).
+    Shown as :func:`~dolfinx_mortar.deprecation.show` shows it: on stderr even where
+    :mod:`logging` captures warnings and nothing would print them.
     """
     with warnings.catch_warnings(record=True) as caught:
         warnings.warn(message, ContactWarning, stacklevel=stacklevel + 1)
     if comm.rank != 0:
         return
-    for w in caught:
-        if warnings.showwarning is _logging_showwarning and not _logger_prints_warnings(
-            logging.getLogger("py.warnings")
-        ):
-            sys.stderr.write(warnings.formatwarning(w.message, w.category, w.filename, w.lineno))
-            sys.stderr.flush()
-        else:
-            warnings.showwarning(w.message, w.category, w.filename, w.lineno, w.file, w.line)
-
-
-_logging_showwarning = getattr(logging, "_showwarning", None)
-
-
-def _logger_prints_warnings(logger: logging.Logger) -> bool:
-    """Would a record of level WARNING sent to ``logger`` reach a handler that shows it?"""
-    if not logger.isEnabledFor(logging.WARNING):
-        return False
-    current: logging.Logger | None = logger
-    while current is not None:
-        for handler in current.handlers:
-            if not isinstance(handler, logging.NullHandler) and handler.level <= logging.WARNING:
-                return True
-        if not current.propagate:
-            break
-        current = current.parent
-    return False
+    show(caught)
 
 
 def _enum_name(enum, value: int, prefixes: tuple[str, ...] = ("CONVERGED", "DIVERGED")) -> str:

@@ -147,3 +147,16 @@ def test_slave_marker_is_the_deprecated_name_of_slave(tmp_path):
         MortarInterface(V, tags, slave=1, slave_marker=1, master=2)
     signature = inspect.signature(MeshTying.__init__)
     assert "slave" in signature.parameters and "slave_marker" not in signature.parameters
+
+
+def test_a_deprecation_reaches_the_screen_of_a_plain_script(tmp_path):
+    """FFCx routes warnings to an unconfigured logger (logging.captureWarnings): a user's
+    script must still see the deprecation on stderr, at its own line."""
+    script = tmp_path / "user.py"
+    script.write_text(
+        "import ffcx  # noqa: F401 (captures warnings into logging)\n"
+        "from dolfinx_mortar.options import contact_options\n"
+        "contact_options(None, {'multipliers': 'standard'})\n")
+    result = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                            check=True)
+    assert f"{script}:3: DeprecationWarning: the option multipliers= is deprecated" in result.stderr
