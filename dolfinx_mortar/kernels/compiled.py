@@ -253,6 +253,22 @@ def _points_on_master(score: np.ndarray, slave_facet: np.ndarray) -> np.ndarray:
     return (winner & np.isfinite(flat)).reshape(n, q)
 
 
+def _checked_surface3_options(normals: str, basis: str, integration: str,
+                              num_gauss_points: int | None) -> int:
+    """The Gauss rule of 3D pair options, after refusing unknown ones."""
+    if basis not in ("standard", "dual"):
+        raise ValueError(f"unknown multiplier basis {basis!r}; expected standard or dual")
+    if normals not in _NORMAL_FIELDS:
+        raise ValueError(f"unknown normal field {normals!r}; expected one of "
+                         f"{sorted(_NORMAL_FIELDS)}")
+    if integration not in ("segment", "element"):
+        raise ValueError(f"unknown integration {integration!r}; expected segment or element")
+    rule = num_gauss_points or 7
+    if integration == "segment" and rule not in (1, 3, 7):
+        raise ValueError(f"3D segments take 1, 3 or 7 Gauss points per cell, got {rule}")
+    return rule
+
+
 def pair_quantities_compiled(slave_x, master_x, slave_normals, *, normals: str = "averaged",
                              basis: str = "standard", crosspoint=None,
                              num_gauss_points: int | None = None,
@@ -275,16 +291,7 @@ def pair_quantities_compiled(slave_x, master_x, slave_normals, *, normals: str =
     unless ``pointwise``; quadrilaterals are integrated at every Gauss point (numpy's
     pointwise path).
     """
-    if basis not in ("standard", "dual"):
-        raise ValueError(f"unknown multiplier basis {basis!r}; expected standard or dual")
-    if normals not in _NORMAL_FIELDS:
-        raise ValueError(f"unknown normal field {normals!r}; expected one of "
-                         f"{sorted(_NORMAL_FIELDS)}")
-    if integration not in ("segment", "element"):
-        raise ValueError(f"unknown integration {integration!r}; expected segment or element")
-    rule = num_gauss_points or 7
-    if integration == "segment" and rule not in (1, 3, 7):
-        raise ValueError(f"3D segments take 1, 3 or 7 Gauss points per cell, got {rule}")
+    rule = _checked_surface3_options(normals, basis, integration, num_gauss_points)
     slave_x = np.ascontiguousarray(slave_x, dtype=np.float64)
     master_x = np.ascontiguousarray(master_x, dtype=np.float64)
     slave_normals = np.ascontiguousarray(slave_normals, dtype=np.float64)
