@@ -285,7 +285,26 @@ static double projection(const double *x, const double *s0, const double *s1, co
 typedef struct {
     double *D, *M, *Dn, *Mn, *gap, *area;          /* values, at the pair's index */
     double *gD, *gM, *gDn, *gMn, *ggap, *garea;    /* gradients, at the row's index */
+    double *G;          /* or all gradients output-major (kept, NV, stride), at the row's index */
+    long stride;
+    int kept;           /* outputs in G: 24 (Dn, Mn, area, gap, D) or 28 (and M) */
 } outputs_t;
+
+/* the stencils' output numbering (Dn, Mn, area, gap, D, M) of the kernel's outputs below: the
+ * kernel's output of each, -1 and -2 for the two gaps */
+static const int STENCIL_OUTPUTS[28] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15,
+                                        16, 17, -1, -2, 18, 19, 20, 21, 22, 23, 24, 25};
+
+/* gradients grad (kernel outputs) and ggap into column r of the output-major G (zero if NULL) */
+static void put_major(const outputs_t *o, long r, const double (*grad)[NV],
+                      const double (*ggap)[NV]) {
+    for (int out = 0; out < o->kept; ++out) {
+        double *column = o->G + (long)out * NV * o->stride + r;
+        int source = STENCIL_OUTPUTS[out];
+        const double *g = grad ? (source >= 0 ? grad[source] : ggap[-1 - source]) : NULL;
+        for (int v = 0; v < NV; ++v) column[(long)v * o->stride] = g ? g[v] : 0.0;
+    }
+}
 
 /* the integrals of pair p (row r); returns 0 if a Gauss point sees the master parallel to the
  * normal (segment-based: the pair contributes nothing).
@@ -505,6 +524,10 @@ static int integrate(const double *x, const unsigned char *has, const unsigned c
     memcpy(o->D + 4 * p, value + 18, 4 * sizeof(double));
     memcpy(o->M + 4 * p, value + 22, 4 * sizeof(double));
     memcpy(o->gap + 2 * p, gap, 2 * sizeof(double));
+    if (o->G) {
+        put_major(o, r, (const double (*)[NV])grad, (const double (*)[NV])ggap);
+        return 1;
+    }
     memcpy(o->gDn + 8 * NV * r, grad[0], 8 * NV * sizeof(double));
     memcpy(o->gMn + 8 * NV * r, grad[8], 8 * NV * sizeof(double));
     memcpy(o->garea + 2 * NV * r, grad[16], 2 * NV * sizeof(double));
@@ -529,7 +552,7 @@ void line2_integrate(long num_rows, const long *rows, const double *x,
                      double *D, double *M, double *Dn, double *Mn, double *gap, double *area,
                      double *gD, double *gM, double *gDn, double *gMn, double *ggap,
                      double *garea) {
-    outputs_t o = {D, M, Dn, Mn, gap, area, gD, gM, gDn, gMn, ggap, garea};
+    outputs_t o = {D, M, Dn, Mn, gap, area, gD, gM, gDn, gMn, ggap, garea, NULL, 0, 0};
     for (long r = 0; r < num_rows; ++r) {
         long p = rows[r];
         contributes[r] = (unsigned char)integrate(
@@ -548,4 +571,39 @@ void line2_integrate(long num_rows, const long *rows, const double *x,
             memset(garea + 2 * NV * r, 0, 2 * NV * sizeof(double));
         }
     }
+}
+
+static void zero_values(long p, double *D, double *M, double *Dn, double *Mn, double *gap,
+                        double *area) {
+    memset(D + 4 * p, 0, 4 * sizeof(double)); memset(M + 4 * p, 0, 4 * sizeof(double));
+    memset(Dn + 8 * p, 0, 8 * sizeof(double)); memset(Mn + 8 * p, 0, 8 * sizeof(double));
+    memset(area + 2 * p, 0, 2 * sizeof(double)); memset(gap + 2 * p, 0, 2 * sizeof(double));
+}
+
+/* line2_integrate with the gradients output-major: G (kept, 12, num_rows), the outputs in the
+ * stencils' numbering (Dn 0-7, Mn 8-15, area 16-17, gap 18-19, D 20-23, with kept 28 also M
+ * 24-27), so that a linear combination of outputs is a sum of contiguous (12, num_rows)
+ * blocks. Returns -1 for a bad kept. */
+int line2_integrate_major(long num_rows, const long *rows, const double *x,
+                          const unsigned char *has_neighbour, const unsigned char *crosspoint,
+                          const unsigned char *on_master, int normals, int element,
+                          int num_points, const double *points, const double *weights,
+                          const double *dual_basis, unsigned char *contributes,
+                          double *D, double *M, double *Dn, double *Mn, double *gap,
+                          double *area, int kept, double *G) {
+    if (kept != 24 && kept != 28) return -1;
+    outputs_t o = {D, M, Dn, Mn, gap, area, NULL, NULL, NULL, NULL, NULL, NULL, G, num_rows,
+                   kept};
+    for (long r = 0; r < num_rows; ++r) {
+        long p = rows[r];
+        contributes[r] = (unsigned char)integrate(
+            x + NV * p, has_neighbour + 2 * p, crosspoint ? crosspoint + 2 * p : NULL,
+            on_master ? on_master + (long)num_points * p : NULL, normals, element, num_points,
+            points, weights, dual_basis, &o, p, r);
+        if (!contributes[r]) {
+            zero_values(p, D, M, Dn, Mn, gap, area);
+            put_major(&o, r, NULL, NULL);
+        }
+    }
+    return 0;
 }

@@ -1,0 +1,120 @@
+"""The compiled 2D kernel behind the contract: values and gradients at evaluation, kept.
+
+The C kernel (``line2.c`` through :mod:`.compiled`) integrates every 2D option (normals
+averaged, slave or master; segment- or element-based; standard or dual basis; any Gauss
+rule; crosspoints). Unlike the 3D glue (:mod:`.surface3_compiled`) it keeps the gradients of
+the contributing pairs from the evaluation rather than making them again on demand: a 2D
+pair's are 288 numbers (Dn, Mn, the areas, the gaps and D over 12 variables; 336 with M),
+fewer than the numpy kernel's factorized form keeps (:class:`~.factors.PairGradients`), and
+the one C pass that makes the values makes them for a few percent more time, where a second
+pass per Jacobian would cost the whole kernel again.
+
+They are kept output-major, ``(outputs, 12, rows)`` in the stencils' output numbering
+(:class:`FullGradients`): a linear combination of outputs, what every consumer asks for
+(:meth:`FullGradients.combine`, as :meth:`.factors.PairGradients.combine`), is then a sum of
+contiguous blocks, and comes out in the stencils' layout ``(terms, 12, rows)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..dual import RowSubsetDual
+from . import compiled
+from .contract import KernelOptions, PairGeometry, PairQuantities
+from .factors import PairGradients
+
+NUM_VARIABLES = compiled.LINE2_NUM_VARIABLES
+_SHAPES = {"Dn": (2, 2, 2), "Mn": (2, 2, 2), "area": (2,), "gap": (2,), "D": (2, 2),
+           "M": (2, 2)}
+_FIRST = {"Dn": 0, "Mn": 8, "area": 16, "gap": 18, "D": 20, "M": 24}
+
+
+class FullGradients(PairGradients):
+    """Every kept output's gradient of the contributing pairs, as the compiled kernel made
+    them: ``grad`` (outputs, 12, rows), outputs numbered as :class:`~.factors.PairGradients`
+    numbers them (Dn 0-7, Mn 8-15, area 16-17, gap 18-19, D 20-23) and, when kept, M 24-27."""
+
+    def __init__(self, grad: np.ndarray):
+        super().__init__(grad.shape[2], [], [])
+        self.grad = grad
+
+    @property
+    def num_outputs(self) -> int:
+        return self.grad.shape[0]
+
+    def combine(self, terms) -> np.ndarray:
+        """(len(terms), 12, n): row p sums weight * d output / dx over (output, weight) in
+        terms[p] (a weight is a number or an (n,) array)."""
+        result = np.zeros((len(terms), NUM_VARIABLES, self.num_pairs))
+        scratch = np.empty((NUM_VARIABLES, self.num_pairs))
+        for p, row in enumerate(terms):
+            for o, weight in row:
+                if not 0 <= o < self.num_outputs:
+                    raise ValueError(f"output {o} was not kept by the compiled 2D kernel")
+                np.multiply(self.grad[o], weight, out=scratch)
+                result[p] += scratch
+        return result
+
+    def outputs(self, start: int, stop: int) -> np.ndarray:
+        """(n, stop - start, 12): the gradients of outputs start .. stop - 1."""
+        return np.ascontiguousarray(self.grad[start:stop].transpose(2, 0, 1))
+
+    def rows_of(self, name: str) -> np.ndarray:
+        """The gradients of output family ``name`` as ``RowSubsetDual.grad_rows`` holds them,
+        (n, shape..., 12) (a view)."""
+        shape = _SHAPES[name]
+        start = _FIRST[name]
+        block = self.grad[start:start + int(np.prod(shape))]
+        return np.moveaxis(block, 2, 0).reshape((self.num_pairs,) + shape + (NUM_VARIABLES,))
+
+
+def pair_coordinates(geometry: PairGeometry) -> np.ndarray:
+    """(n, 12) the pairs' variables ``p, a, b, q, c, d`` (:mod:`.line2`), pair-major as the C
+    kernel reads them."""
+    if geometry.neighbour_x is None or geometry.has_neighbour is None:
+        raise ValueError("the 2D kernel takes the slave facets' neighbours "
+                         "(PairGeometry.neighbour_x, has_neighbour)")
+    x = np.empty((geometry.num_pairs, 6, 2))
+    x[:, 0] = geometry.neighbour_x[:, 0]
+    x[:, 1:3] = geometry.slave_x
+    x[:, 3] = geometry.neighbour_x[:, 1]
+    x[:, 4:6] = geometry.master_x
+    return x.reshape(-1, NUM_VARIABLES)
+
+
+def evaluate(geometry: PairGeometry, options: KernelOptions, num_gauss_points: int,
+             crosspoint: np.ndarray | None = None,
+             slave_facet: np.ndarray | None = None) -> PairQuantities:
+    """The pairs' quantities by the compiled kernel, with the gradients of the contributing
+    pairs (``segment_gradients``, a :class:`FullGradients`; with ``scalar_gradients`` also
+    ``D_dual`` and ``M_dual``)."""
+    screening = compiled.Line2Screening(
+        pair_coordinates(geometry), geometry.has_neighbour, normals=options.normals,
+        integration=options.integration, basis=options.basis,
+        num_gauss_points=num_gauss_points, crosspoint=crosspoint, slave_facet=slave_facet)
+    n, rows = screening.num_pairs, screening.rows
+    values = {name: np.zeros((n,) + shape) for name, shape in _SHAPES.items()}
+    kept = 28 if options.scalar_gradients else 24
+    grad = np.empty((kept, NUM_VARIABLES, rows.size))
+    contributes = np.ones(rows.size, dtype=np.uint8)
+    if rows.size:
+        ffi = screening.module.ffi
+        pointers = [compiled._pointer(ffi, values[name], "double *")
+                    for name in ("D", "M", "Dn", "Mn", "gap", "area")]
+        status = screening.module.lib.line2_integrate_major(
+            *screening.arguments(), compiled._pointer(ffi, contributes, "unsigned char *"),
+            *pointers, kept, compiled._pointer(ffi, grad, "double *"))
+        if status != 0:
+            raise RuntimeError(f"compiled 2D kernel failed (status {status})")
+    valid, overlap = screening.finish(contributes)
+    gradients = FullGradients(grad)
+    duals = {name: RowSubsetDual(values[name], rows, gradients.rows_of(name))
+             for name in ("Dn", "Mn", "area", "gap")}
+    if options.scalar_gradients:
+        duals.update({name: RowSubsetDual(values[name], rows, gradients.rows_of(name))
+                      for name in ("D", "M")})
+    return PairQuantities(
+        D=values["D"], M=values["M"], Dn=duals["Dn"], Mn=duals["Mn"], gap=duals["gap"],
+        area=duals["area"], valid=valid, overlap=overlap, num_variables=NUM_VARIABLES,
+        D_dual=duals.get("D"), M_dual=duals.get("M"), segment_gradients=gradients)
