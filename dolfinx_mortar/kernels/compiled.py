@@ -88,13 +88,16 @@ void line2_integrate(long num_rows, const long *rows, const double *x,
                      double *D, double *M, double *Dn, double *Mn, double *gap, double *area,
                      double *gD, double *gM, double *gDn, double *gMn, double *ggap,
                      double *garea);
-int line2_integrate_major(long num_rows, const long *rows, const double *x,
-                          const unsigned char *has_neighbour, const unsigned char *crosspoint,
-                          const unsigned char *on_master, int normals, int element,
-                          int num_points, const double *points, const double *weights,
-                          const double *dual_basis, unsigned char *contributes,
-                          double *D, double *M, double *Dn, double *Mn, double *gap,
-                          double *area, int kept, double *G);
+int line2_integrate_rows(long num_rows, const long *rows, const double *x,
+                         const unsigned char *has_neighbour, const unsigned char *crosspoint,
+                         const unsigned char *on_master, int normals, int element,
+                         int num_points, const double *points, const double *weights,
+                         const double *dual_basis, unsigned char *contributes,
+                         double *D, double *M, double *Dn, double *Mn, double *gap,
+                         double *area, int kept, double *G);
+int line2_combine(long num_rows, int kept, const double *G, int num_terms,
+                  const int *term_start, const int *output, const long *weight_start,
+                  const int *weight_step, const double *weights, double *out);
 """,
 }
 KERNELS = tuple(_CDEFS)

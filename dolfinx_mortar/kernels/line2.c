@@ -285,8 +285,7 @@ static double projection(const double *x, const double *s0, const double *s1, co
 typedef struct {
     double *D, *M, *Dn, *Mn, *gap, *area;          /* values, at the pair's index */
     double *gD, *gM, *gDn, *gMn, *ggap, *garea;    /* gradients, at the row's index */
-    double *G;          /* or all gradients output-major (kept, NV, stride), at the row's index */
-    long stride;
+    double *G;          /* or all gradients in one array (rows, kept, NV), at the row's index */
     int kept;           /* outputs in G: 24 (Dn, Mn, area, gap, D) or 28 (and M) */
 } outputs_t;
 
@@ -295,14 +294,18 @@ typedef struct {
 static const int STENCIL_OUTPUTS[28] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15,
                                         16, 17, -1, -2, 18, 19, 20, 21, 22, 23, 24, 25};
 
-/* gradients grad (kernel outputs) and ggap into column r of the output-major G (zero if NULL) */
-static void put_major(const outputs_t *o, long r, const double (*grad)[NV],
-                      const double (*ggap)[NV]) {
+/* gradients grad (kernel outputs) and ggap into row r of G (zero if grad is NULL) */
+static void put_row(const outputs_t *o, long r, const double (*grad)[NV],
+                    const double (*ggap)[NV]) {
+    double *row = o->G + (long)o->kept * NV * r;
+    if (!grad) {
+        memset(row, 0, (size_t)o->kept * NV * sizeof(double));
+        return;
+    }
     for (int out = 0; out < o->kept; ++out) {
-        double *column = o->G + (long)out * NV * o->stride + r;
         int source = STENCIL_OUTPUTS[out];
-        const double *g = grad ? (source >= 0 ? grad[source] : ggap[-1 - source]) : NULL;
-        for (int v = 0; v < NV; ++v) column[(long)v * o->stride] = g ? g[v] : 0.0;
+        memcpy(row + out * NV, source >= 0 ? grad[source] : ggap[-1 - source],
+               NV * sizeof(double));
     }
 }
 
@@ -525,7 +528,7 @@ static int integrate(const double *x, const unsigned char *has, const unsigned c
     memcpy(o->M + 4 * p, value + 22, 4 * sizeof(double));
     memcpy(o->gap + 2 * p, gap, 2 * sizeof(double));
     if (o->G) {
-        put_major(o, r, (const double (*)[NV])grad, (const double (*)[NV])ggap);
+        put_row(o, r, (const double (*)[NV])grad, (const double (*)[NV])ggap);
         return 1;
     }
     memcpy(o->gDn + 8 * NV * r, grad[0], 8 * NV * sizeof(double));
@@ -552,7 +555,7 @@ void line2_integrate(long num_rows, const long *rows, const double *x,
                      double *D, double *M, double *Dn, double *Mn, double *gap, double *area,
                      double *gD, double *gM, double *gDn, double *gMn, double *ggap,
                      double *garea) {
-    outputs_t o = {D, M, Dn, Mn, gap, area, gD, gM, gDn, gMn, ggap, garea, NULL, 0, 0};
+    outputs_t o = {D, M, Dn, Mn, gap, area, gD, gM, gDn, gMn, ggap, garea, NULL, 0};
     for (long r = 0; r < num_rows; ++r) {
         long p = rows[r];
         contributes[r] = (unsigned char)integrate(
@@ -580,20 +583,18 @@ static void zero_values(long p, double *D, double *M, double *Dn, double *Mn, do
     memset(area + 2 * p, 0, 2 * sizeof(double)); memset(gap + 2 * p, 0, 2 * sizeof(double));
 }
 
-/* line2_integrate with the gradients output-major: G (kept, 12, num_rows), the outputs in the
- * stencils' numbering (Dn 0-7, Mn 8-15, area 16-17, gap 18-19, D 20-23, with kept 28 also M
- * 24-27), so that a linear combination of outputs is a sum of contiguous (12, num_rows)
- * blocks. Returns -1 for a bad kept. */
-int line2_integrate_major(long num_rows, const long *rows, const double *x,
-                          const unsigned char *has_neighbour, const unsigned char *crosspoint,
-                          const unsigned char *on_master, int normals, int element,
-                          int num_points, const double *points, const double *weights,
-                          const double *dual_basis, unsigned char *contributes,
-                          double *D, double *M, double *Dn, double *Mn, double *gap,
-                          double *area, int kept, double *G) {
+/* line2_integrate with the gradients of each row together: G (num_rows, kept, 12), the
+ * outputs in the stencils' numbering (Dn 0-7, Mn 8-15, area 16-17, gap 18-19, D 20-23, with
+ * kept 28 also M 24-27). Returns -1 for a bad kept. */
+int line2_integrate_rows(long num_rows, const long *rows, const double *x,
+                         const unsigned char *has_neighbour, const unsigned char *crosspoint,
+                         const unsigned char *on_master, int normals, int element,
+                         int num_points, const double *points, const double *weights,
+                         const double *dual_basis, unsigned char *contributes,
+                         double *D, double *M, double *Dn, double *Mn, double *gap,
+                         double *area, int kept, double *G) {
     if (kept != 24 && kept != 28) return -1;
-    outputs_t o = {D, M, Dn, Mn, gap, area, NULL, NULL, NULL, NULL, NULL, NULL, G, num_rows,
-                   kept};
+    outputs_t o = {D, M, Dn, Mn, gap, area, NULL, NULL, NULL, NULL, NULL, NULL, G, kept};
     for (long r = 0; r < num_rows; ++r) {
         long p = rows[r];
         contributes[r] = (unsigned char)integrate(
@@ -602,7 +603,33 @@ int line2_integrate_major(long num_rows, const long *rows, const double *x,
             points, weights, dual_basis, &o, p, r);
         if (!contributes[r]) {
             zero_values(p, D, M, Dn, Mn, gap, area);
-            put_major(&o, r, NULL, NULL);
+            put_row(&o, r, NULL, NULL);
+        }
+    }
+    return 0;
+}
+
+/* Linear combinations of the gradients G (num_rows, kept, 12) of line2_integrate_rows, in the
+ * stencils' layout: out (num_terms, 12, num_rows), term t the sum over its entries e in
+ * [term_start[t], term_start[t + 1]) of weight_e[r] * G[r, output[e], :], where weight_e[r] is
+ * weights[weight_start[e] + r * weight_step[e]] (step 0: one number for every row). Returns -1
+ * for an output outside G. */
+int line2_combine(long num_rows, int kept, const double *G, int num_terms,
+                  const int *term_start, const int *output, const long *weight_start,
+                  const int *weight_step, const double *weights, double *out) {
+    for (int e = 0; e < term_start[num_terms]; ++e)
+        if (output[e] < 0 || output[e] >= kept) return -1;
+    for (long r = 0; r < num_rows; ++r) {
+        const double *row = G + (long)kept * NV * r;
+        for (int t = 0; t < num_terms; ++t) {
+            double sum[NV] = {0.0};
+            for (int e = term_start[t]; e < term_start[t + 1]; ++e) {
+                double w = weights[weight_start[e] + r * weight_step[e]];
+                const double *g = row + output[e] * NV;
+                for (int v = 0; v < NV; ++v) sum[v] += w * g[v];
+            }
+            double *column = out + (long)t * NV * num_rows + r;
+            for (int v = 0; v < NV; ++v) column[(long)v * num_rows] = sum[v];
         }
     }
     return 0;

@@ -9,10 +9,11 @@ fewer than the numpy kernel's factorized form keeps (:class:`~.factors.PairGradi
 the one C pass that makes the values makes them for a few percent more time, where a second
 pass per Jacobian would cost the whole kernel again.
 
-They are kept output-major, ``(outputs, 12, rows)`` in the stencils' output numbering
-(:class:`FullGradients`): a linear combination of outputs, what every consumer asks for
-(:meth:`FullGradients.combine`, as :meth:`.factors.PairGradients.combine`), is then a sum of
-contiguous blocks, and comes out in the stencils' layout ``(terms, 12, rows)``.
+They are kept row by row, ``(rows, outputs, 12)`` in the stencils' output numbering
+(:class:`FullGradients`), as the kernel writes them; a linear combination of outputs, what
+every consumer asks for (:meth:`FullGradients.combine`, as
+:meth:`.factors.PairGradients.combine`), is one C pass over them (``line2_combine``) that
+writes the stencils' layout ``(terms, 12, rows)``.
 """
 
 from __future__ import annotations
@@ -32,41 +33,60 @@ _FIRST = {"Dn": 0, "Mn": 8, "area": 16, "gap": 18, "D": 20, "M": 24}
 
 class FullGradients(PairGradients):
     """Every kept output's gradient of the contributing pairs, as the compiled kernel made
-    them: ``grad`` (outputs, 12, rows), outputs numbered as :class:`~.factors.PairGradients`
+    them: ``grad`` (rows, outputs, 12), outputs numbered as :class:`~.factors.PairGradients`
     numbers them (Dn 0-7, Mn 8-15, area 16-17, gap 18-19, D 20-23) and, when kept, M 24-27."""
 
     def __init__(self, grad: np.ndarray):
-        super().__init__(grad.shape[2], [], [])
+        super().__init__(grad.shape[0], [], [])
         self.grad = grad
 
     @property
     def num_outputs(self) -> int:
-        return self.grad.shape[0]
+        return self.grad.shape[1]
 
     def combine(self, terms) -> np.ndarray:
         """(len(terms), 12, n): row p sums weight * d output / dx over (output, weight) in
-        terms[p] (a weight is a number or an (n,) array)."""
-        result = np.zeros((len(terms), NUM_VARIABLES, self.num_pairs))
-        scratch = np.empty((NUM_VARIABLES, self.num_pairs))
-        for p, row in enumerate(terms):
-            for o, weight in row:
-                if not 0 <= o < self.num_outputs:
-                    raise ValueError(f"output {o} was not kept by the compiled 2D kernel")
-                np.multiply(self.grad[o], weight, out=scratch)
-                result[p] += scratch
+        terms[p] (a weight is a number or an (n,) array); one C pass over the rows."""
+        n = self.num_pairs
+        result = np.empty((len(terms), NUM_VARIABLES, n))
+        entries = [entry for row in terms for entry in row]
+        term_start = np.cumsum([0] + [len(row) for row in terms], dtype=np.intc)
+        output = np.array([o for o, _ in entries], dtype=np.intc)
+        if np.any((output < 0) | (output >= self.num_outputs)):
+            raise ValueError(f"outputs {output[(output < 0) | (output >= self.num_outputs)]} "
+                             "were not kept by the compiled 2D kernel")
+        step = np.array([np.ndim(w) != 0 for _, w in entries], dtype=np.intc)
+        sizes = np.where(step == 1, n, 1)
+        weight_start = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+        weights = np.empty(int(sizes.sum()))
+        for e, (_, w) in enumerate(entries):
+            weights[weight_start[e]:weight_start[e] + sizes[e]] = w
+        if n == 0 or not terms:
+            return np.zeros_like(result)
+        module = compiled.load("line2")
+        ffi = module.ffi
+
+        def pointer(array, ctype="double *"):
+            return compiled._pointer(ffi, array, ctype)
+
+        grad = np.ascontiguousarray(self.grad)
+        module.lib.line2_combine(
+            n, self.num_outputs, pointer(grad), len(terms), pointer(term_start, "int *"),
+            pointer(output, "int *"), pointer(weight_start, "long *"), pointer(step, "int *"),
+            pointer(weights), pointer(result))
         return result
 
     def outputs(self, start: int, stop: int) -> np.ndarray:
         """(n, stop - start, 12): the gradients of outputs start .. stop - 1."""
-        return np.ascontiguousarray(self.grad[start:stop].transpose(2, 0, 1))
+        return np.ascontiguousarray(self.grad[:, start:stop])
 
     def rows_of(self, name: str) -> np.ndarray:
         """The gradients of output family ``name`` as ``RowSubsetDual.grad_rows`` holds them,
         (n, shape..., 12) (a view)."""
         shape = _SHAPES[name]
         start = _FIRST[name]
-        block = self.grad[start:start + int(np.prod(shape))]
-        return np.moveaxis(block, 2, 0).reshape((self.num_pairs,) + shape + (NUM_VARIABLES,))
+        block = self.grad[:, start:start + int(np.prod(shape))]
+        return block.reshape((self.num_pairs,) + shape + (NUM_VARIABLES,))
 
 
 def pair_coordinates(geometry: PairGeometry) -> np.ndarray:
@@ -96,13 +116,13 @@ def evaluate(geometry: PairGeometry, options: KernelOptions, num_gauss_points: i
     n, rows = screening.num_pairs, screening.rows
     values = {name: np.zeros((n,) + shape) for name, shape in _SHAPES.items()}
     kept = 28 if options.scalar_gradients else 24
-    grad = np.empty((kept, NUM_VARIABLES, rows.size))
+    grad = np.empty((rows.size, kept, NUM_VARIABLES))
     contributes = np.ones(rows.size, dtype=np.uint8)
     if rows.size:
         ffi = screening.module.ffi
         pointers = [compiled._pointer(ffi, values[name], "double *")
                     for name in ("D", "M", "Dn", "Mn", "gap", "area")]
-        status = screening.module.lib.line2_integrate_major(
+        status = screening.module.lib.line2_integrate_rows(
             *screening.arguments(), compiled._pointer(ffi, contributes, "unsigned char *"),
             *pointers, kept, compiled._pointer(ffi, grad, "double *"))
         if status != 0:
