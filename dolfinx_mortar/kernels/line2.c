@@ -484,8 +484,10 @@ static int integrate(const double *x, const unsigned char *has, const unsigned c
     /* the variables each nodal normal depends on: (p, a, b), (a, b, q); a, b; c, d */
     int a_first = normals == AVERAGED ? 0 : (normals == SLAVE ? 2 : 8), a_last = a_first + (normals == AVERAGED ? 6 : 4);
     int b_first = normals == AVERAGED ? 2 : a_first, b_last = b_first + (normals == AVERAGED ? 6 : 4);
+    /* M's gradients (the last 4 outputs) only where kept */
+    int with_m = o->G ? o->kept == 28 : o->gM != NULL;
     double grad[NO][NV];
-    for (int out = 0; out < NO; ++out) {
+    for (int out = 0; out < (with_m ? NO : NO - 4); ++out) {
         double cl = c_low[out], cL = c_length[out] + value[out] * inverse_length;
         double cJ = value[out] * inverse_jacobian;
         const double *cn = c_normal[out];
