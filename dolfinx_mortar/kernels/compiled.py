@@ -77,10 +77,12 @@ int surface3_element(long n, int ns, int nm, const double *xs, const double *xm,
                      double *garea);
 """,
     "line2": """
-void line2_screen(long n, const double *x, const unsigned char *has_neighbour, int normals,
-                  int element, int num_points, const double *points, unsigned char *valid,
+void line2_screen(long n, const double *slave, const double *master, const double *neighbour,
+                  const unsigned char *has_neighbour, int normals, int element,
+                  int num_points, const double *points, unsigned char *valid,
                   double *screened);
-void line2_integrate(long num_rows, const long *rows, const double *x,
+void line2_integrate(long num_rows, const long *rows, const double *slave,
+                     const double *master, const double *neighbour,
                      const unsigned char *has_neighbour, const unsigned char *crosspoint,
                      const unsigned char *on_master, int normals, int element, int num_points,
                      const double *points, const double *weights, const double *dual_basis,
@@ -88,7 +90,8 @@ void line2_integrate(long num_rows, const long *rows, const double *x,
                      double *D, double *M, double *Dn, double *Mn, double *gap, double *area,
                      double *gD, double *gM, double *gDn, double *gMn, double *ggap,
                      double *garea);
-int line2_integrate_rows(long num_rows, const long *rows, const double *x,
+int line2_integrate_rows(long num_rows, const long *rows, const double *slave,
+                         const double *master, const double *neighbour,
                          const unsigned char *has_neighbour, const unsigned char *crosspoint,
                          const unsigned char *on_master, int normals, int element,
                          int num_points, const double *points, const double *weights,
@@ -387,14 +390,18 @@ class Line2Screening:
     which pairs are integrated (``rows``), and element-based which Gauss points count
     (``on_master``). Holds the C arguments of the integration pass too."""
 
-    def __init__(self, x, has_neighbour, *, normals: str, integration: str, basis: str,
-                 num_gauss_points: int | None, crosspoint, slave_facet):
+    def __init__(self, slave_x, master_x, neighbour_x, has_neighbour, *, normals: str,
+                 integration: str, basis: str, num_gauss_points: int | None, crosspoint,
+                 slave_facet):
         KernelOptions(normals=normals, integration=integration, basis=basis)  # (checks them)
         self.element = integration == "element"
         self.points, self.weights = line2_rules.gauss_legendre(
             num_gauss_points or line2_rules.DEFAULT_GAUSS_POINTS[integration])
-        self.x = np.ascontiguousarray(np.asarray(x, dtype=np.float64).reshape(-1, 12))
-        n = self.num_pairs = self.x.shape[0]
+        n = self.num_pairs = slave_x.shape[0]
+        # (the C kernel gathers each pair's 12 variables from these: no copy of them all)
+        self.coordinates = [np.ascontiguousarray(np.asarray(array, dtype=np.float64)
+                                                 .reshape(n, 2, 2))
+                            for array in (slave_x, master_x, neighbour_x)]
         self.has = np.ascontiguousarray(np.asarray(has_neighbour, dtype=bool).reshape(n, 2),
                                         dtype=np.uint8)
         self.cross = None
@@ -411,7 +418,8 @@ class Line2Screening:
         screened = np.empty((n, g) if self.element else n)
         if n:
             module.lib.line2_screen(
-                n, _pointer(ffi, self.x, "double *"), _pointer(ffi, self.has, "unsigned char *"),
+                n, *(_pointer(ffi, array, "double *") for array in self.coordinates),
+                _pointer(ffi, self.has, "unsigned char *"),
                 self.normal_code, int(self.element), g, _pointer(ffi, self.points, "double *"),
                 _pointer(ffi, valid, "unsigned char *"), _pointer(ffi, screened, "double *"))
         self.valid = valid.astype(bool)
@@ -432,7 +440,8 @@ class Line2Screening:
         ffi = self.module.ffi
         u8, d = "unsigned char *", "double *"
         return (self.rows.size, ffi.cast("long *", ffi.from_buffer(self.rows)),
-                _pointer(ffi, self.x, d), _pointer(ffi, self.has, u8),
+                *(_pointer(ffi, array, d) for array in self.coordinates),
+                _pointer(ffi, self.has, u8),
                 _pointer(ffi, self.cross, u8), _pointer(ffi, self.on_master, u8),
                 self.normal_code, int(self.element), self.points.size,
                 _pointer(ffi, self.points, d), _pointer(ffi, self.weights, d),
@@ -468,7 +477,9 @@ def line2_pair_quantities_compiled(x, has_neighbour, *, normals: str = "averaged
     ``area_grad`` (r, 2, 12), ``D_grad`` (r, 2, 2, 12) (the covered dual basis needs it), and
     with ``scalar_gradients`` ``M_grad`` (r, 2, 2, 12).
     """
-    screening = Line2Screening(x, has_neighbour, normals=normals, integration=integration,
+    x = np.asarray(x, dtype=np.float64).reshape(-1, 6, 2)
+    screening = Line2Screening(x[:, 1:3], x[:, 4:6], x[:, [0, 3]], has_neighbour,
+                               normals=normals, integration=integration,
                                basis=basis, num_gauss_points=num_gauss_points,
                                crosspoint=crosspoint, slave_facet=slave_facet)
     n, rows = screening.num_pairs, screening.rows

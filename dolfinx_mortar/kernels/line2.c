@@ -114,14 +114,27 @@ static int eta_value(const double *x, const double *na, const double *nb, double
     return parallel;
 }
 
-/* n pairs x (n, 12), has_neighbour (n, 2). Segment-based (element == 0): valid (facing and
- * both projections found) and screened[p] = high - low. Element-based: valid (facing and no
- * Gauss point where the master is parallel to the normal) and screened (n, g) = eta. */
-void line2_screen(long n, const double *x, const unsigned char *has_neighbour, int normals,
+/* the 12 variables p, a, b, q, c, d of pair p from the contract's arrays: slave and master
+ * facet nodes (n, 2, 2) and the slave facets' neighbours p, q (n, 2, 2) */
+static void gather(const double *slave, const double *master, const double *neighbour, long p,
+                   double *x) {
+    const double *s = slave + 4 * p, *m = master + 4 * p, *e = neighbour + 4 * p;
+    x[0] = e[0]; x[1] = e[1]; x[2] = s[0]; x[3] = s[1];
+    x[4] = s[2]; x[5] = s[3]; x[6] = e[2]; x[7] = e[3];
+    x[8] = m[0]; x[9] = m[1]; x[10] = m[2]; x[11] = m[3];
+}
+
+/* n pairs (slave, master, neighbour: see gather), has_neighbour (n, 2). Segment-based
+ * (element == 0): valid (facing and both projections found) and screened[p] = high - low.
+ * Element-based: valid (facing and no Gauss point where the master is parallel to the normal)
+ * and screened (n, g) = eta. */
+void line2_screen(long n, const double *slave, const double *master, const double *neighbour,
+                  const unsigned char *has_neighbour, int normals,
                   int element, int num_points, const double *points, unsigned char *valid,
                   double *screened) {
     for (long p = 0; p < n; ++p) {
-        const double *xp = x + NV * p;
+        double xp[NV];
+        gather(slave, master, neighbour, p, xp);
         double na[2], nb[2];
         normal_values(xp, has_neighbour + 2 * p, normals, na, nb);
         int ok = facing(xp);
@@ -542,14 +555,15 @@ static int integrate(const double *x, const unsigned char *has, const unsigned c
     return 1;
 }
 
-/* The pairs rows[0 .. num_rows - 1] of x (n, 12), has_neighbour (n, 2), crosspoint (n, 2) or
- * NULL; on_master (n, g), element-based only (which Gauss points count). dual_basis: the 2 x 2
+/* The pairs rows[0 .. num_rows - 1] (coordinates as for line2_screen), has_neighbour (n, 2),
+ * crosspoint (n, 2) or NULL; on_master (n, g), element-based only (which Gauss points count). dual_basis: the 2 x 2
  * coefficients A (Phi = A N) or NULL (standard basis). Values D, M (n, 2, 2), Dn, Mn
  * (n, 2, 2, 2), area, gap (n, 2) are written at the pair's index (the caller zeroes the
  * others), gradients (num_rows, ..., 12) at the row's; gD, gM may be NULL. contributes[r]:
  * segment-based, 0 where a Gauss point sees the master parallel to the normal (then the pair's
  * values and gradients are zero). */
-void line2_integrate(long num_rows, const long *rows, const double *x,
+void line2_integrate(long num_rows, const long *rows, const double *slave,
+                     const double *master, const double *neighbour,
                      const unsigned char *has_neighbour, const unsigned char *crosspoint,
                      const unsigned char *on_master, int normals, int element, int num_points,
                      const double *points, const double *weights, const double *dual_basis,
@@ -560,8 +574,10 @@ void line2_integrate(long num_rows, const long *rows, const double *x,
     outputs_t o = {D, M, Dn, Mn, gap, area, gD, gM, gDn, gMn, ggap, garea, NULL, 0};
     for (long r = 0; r < num_rows; ++r) {
         long p = rows[r];
+        double x[NV];
+        gather(slave, master, neighbour, p, x);
         contributes[r] = (unsigned char)integrate(
-            x + NV * p, has_neighbour + 2 * p, crosspoint ? crosspoint + 2 * p : NULL,
+            x, has_neighbour + 2 * p, crosspoint ? crosspoint + 2 * p : NULL,
             on_master ? on_master + (long)num_points * p : NULL, normals, element, num_points,
             points, weights, dual_basis, &o, p, r);
         if (!contributes[r]) {
@@ -588,7 +604,8 @@ static void zero_values(long p, double *D, double *M, double *Dn, double *Mn, do
 /* line2_integrate with the gradients of each row together: G (num_rows, kept, 12), the
  * outputs in the stencils' numbering (Dn 0-7, Mn 8-15, area 16-17, gap 18-19, D 20-23, with
  * kept 28 also M 24-27). Returns -1 for a bad kept. */
-int line2_integrate_rows(long num_rows, const long *rows, const double *x,
+int line2_integrate_rows(long num_rows, const long *rows, const double *slave,
+                         const double *master, const double *neighbour,
                          const unsigned char *has_neighbour, const unsigned char *crosspoint,
                          const unsigned char *on_master, int normals, int element,
                          int num_points, const double *points, const double *weights,
@@ -599,8 +616,10 @@ int line2_integrate_rows(long num_rows, const long *rows, const double *x,
     outputs_t o = {D, M, Dn, Mn, gap, area, NULL, NULL, NULL, NULL, NULL, NULL, G, kept};
     for (long r = 0; r < num_rows; ++r) {
         long p = rows[r];
+        double x[NV];
+        gather(slave, master, neighbour, p, x);
         contributes[r] = (unsigned char)integrate(
-            x + NV * p, has_neighbour + 2 * p, crosspoint ? crosspoint + 2 * p : NULL,
+            x, has_neighbour + 2 * p, crosspoint ? crosspoint + 2 * p : NULL,
             on_master ? on_master + (long)num_points * p : NULL, normals, element, num_points,
             points, weights, dual_basis, &o, p, r);
         if (!contributes[r]) {

@@ -89,28 +89,18 @@ class FullGradients(PairGradients):
         return block.reshape((self.num_pairs,) + shape + (NUM_VARIABLES,))
 
 
-def pair_coordinates(geometry: PairGeometry) -> np.ndarray:
-    """(n, 12) the pairs' variables ``p, a, b, q, c, d`` (:mod:`.line2`), pair-major as the C
-    kernel reads them."""
-    if geometry.neighbour_x is None or geometry.has_neighbour is None:
-        raise ValueError("the 2D kernel takes the slave facets' neighbours "
-                         "(PairGeometry.neighbour_x, has_neighbour)")
-    x = np.empty((geometry.num_pairs, 6, 2))
-    x[:, 0] = geometry.neighbour_x[:, 0]
-    x[:, 1:3] = geometry.slave_x
-    x[:, 3] = geometry.neighbour_x[:, 1]
-    x[:, 4:6] = geometry.master_x
-    return x.reshape(-1, NUM_VARIABLES)
-
-
 def evaluate(geometry: PairGeometry, options: KernelOptions, num_gauss_points: int,
              crosspoint: np.ndarray | None = None,
              slave_facet: np.ndarray | None = None) -> PairQuantities:
     """The pairs' quantities by the compiled kernel, with the gradients of the contributing
     pairs (``segment_gradients``, a :class:`FullGradients`; with ``scalar_gradients`` also
     ``D_dual`` and ``M_dual``)."""
+    if geometry.neighbour_x is None or geometry.has_neighbour is None:
+        raise ValueError("the 2D kernel takes the slave facets' neighbours "
+                         "(PairGeometry.neighbour_x, has_neighbour)")
     screening = compiled.Line2Screening(
-        pair_coordinates(geometry), geometry.has_neighbour, normals=options.normals,
+        geometry.slave_x, geometry.master_x, geometry.neighbour_x, geometry.has_neighbour,
+        normals=options.normals,
         integration=options.integration, basis=options.basis,
         num_gauss_points=num_gauss_points, crosspoint=crosspoint, slave_facet=slave_facet)
     n, rows = screening.num_pairs, screening.rows
