@@ -145,3 +145,43 @@ def test_swept_pairs_of_a_body_moving_away_are_dropped():
         brute = brute_force_pairs(moved, facets, master_x, facets, margin,
                                   slave_previous=touching, master_previous=master_x)
         assert brute.shape[0] == expected
+
+
+@pytest.mark.parametrize("gdim", [2, 3])
+def test_boxes_swept_across_the_surface_stay_a_narrow_search(gdim):
+    """A flat slave surface of n facets swept across its normal by 10^3 facet lengths (the
+    first update of benchmarks/mortar_scaling.py from the undeformed surface): the pairs
+    are the brute-force ones, and the k-d trees' centre pairs are few per facet (a ball
+    around the centres as wide as the sweep took ~10^3 per facet)."""
+    rng = np.random.default_rng(3)
+    n, margin = 400, 2e-3
+    h = 1.0 / n
+    if gdim == 2:
+        slave_x = np.column_stack([np.linspace(0.0, 1.0, n + 1), np.zeros(n + 1)])
+        slave_facets = np.column_stack([np.arange(n), np.arange(1, n + 1)])
+        master_x = np.column_stack([np.linspace(1.0, 0.0, 301), np.full(301, -0.1 * h)])
+        master_facets = np.column_stack([np.arange(300), np.arange(1, 301)])
+    else:
+        grid = np.linspace(0.0, 1.0, 21)
+        X, Y = np.meshgrid(grid, grid, indexing="ij")
+        slave_x = np.column_stack([X.ravel(), Y.ravel(), np.zeros(X.size)])
+        corner = (np.arange(20)[:, None] * 21 + np.arange(20)[None, :]).ravel()
+        slave_facets = np.concatenate([
+            np.column_stack([corner, corner + 21, corner + 22]),
+            np.column_stack([corner, corner + 22, corner + 1])])
+        master_x = slave_x * [1.0, 1.0, 0.0] + [0.013, 0.007, -0.1 * h]
+        master_facets = slave_facets[:, ::-1].copy()
+        h = 1.0 / 20
+    slave_previous = slave_x.copy()
+    slave_previous[:, -1] += 1e3 * h * rng.uniform(0.5, 1.0, slave_x.shape[0])
+    arguments = (slave_x, slave_facets, master_x, master_facets, margin)
+    options = {"slave_previous": slave_previous, "master_previous": master_x}
+    found = search.candidate_pairs(*arguments, **options)
+    slave_lower, slave_upper = search.facet_boxes(slave_x, slave_facets, slave_previous)
+    master_lower, master_upper = search.facet_boxes(master_x, master_facets)
+    overlap = search.boxes_overlap(slave_lower[:, None], slave_upper[:, None],
+                                   master_lower[None], master_upper[None], margin)
+    assert found.tolist() == np.argwhere(overlap).tolist()  # (all near now: none dropped)
+    close, _ = search._close_centres(slave_lower, slave_upper, master_lower, master_upper,
+                                     margin)
+    assert found.shape[0] <= close.size <= 3 * found.shape[0]

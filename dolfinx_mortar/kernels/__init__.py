@@ -33,13 +33,8 @@ from .contract import (
     PairQuantities,
 )
 from .factors import AffineFactors, PairGradients
-from .line2 import (
-    NUM_PAIR_VARIABLES,
-    Line2Kernel,
-    dual_basis_coefficients,
-    gauss_legendre,
-    pair_quantities,
-)
+from .line2 import NUM_PAIR_VARIABLES, Line2Kernel, pair_quantities
+from .line2_rules import dual_basis_coefficients, gauss_legendre
 from .surface3 import Surface3Kernel
 
 __all__ = [

@@ -43,6 +43,9 @@ import time
 
 import numpy as np
 
+from . import line2_rules
+from .contract import KernelOptions
+
 _LOG = logging.getLogger(__name__)
 # -O3: 1.5x faster than -O2 on the 3D kernel (benchmarks/compiled_kernel.py), portable (no
 # -march: the cache may be shared across machines); no FMA contraction, so that the values
@@ -74,10 +77,12 @@ int surface3_element(long n, int ns, int nm, const double *xs, const double *xm,
                      double *garea);
 """,
     "line2": """
-void line2_screen(long n, const double *x, const unsigned char *has_neighbour, int normals,
-                  int element, int num_points, const double *points, unsigned char *valid,
+void line2_screen(long n, const double *slave, const double *master, const double *neighbour,
+                  const unsigned char *has_neighbour, int normals, int element,
+                  int num_points, const double *points, unsigned char *valid,
                   double *screened);
-void line2_integrate(long num_rows, const long *rows, const double *x,
+void line2_integrate(long num_rows, const long *rows, const double *slave,
+                     const double *master, const double *neighbour,
                      const unsigned char *has_neighbour, const unsigned char *crosspoint,
                      const unsigned char *on_master, int normals, int element, int num_points,
                      const double *points, const double *weights, const double *dual_basis,
@@ -85,6 +90,17 @@ void line2_integrate(long num_rows, const long *rows, const double *x,
                      double *D, double *M, double *Dn, double *Mn, double *gap, double *area,
                      double *gD, double *gM, double *gDn, double *gMn, double *ggap,
                      double *garea);
+int line2_integrate_rows(long num_rows, const long *rows, const double *slave,
+                         const double *master, const double *neighbour,
+                         const unsigned char *has_neighbour, const unsigned char *crosspoint,
+                         const unsigned char *on_master, int normals, int element,
+                         int num_points, const double *points, const double *weights,
+                         const double *dual_basis, unsigned char *contributes,
+                         double *D, double *M, double *Dn, double *Mn, double *gap,
+                         double *area, int kept, double *G);
+int line2_combine(long num_rows, int kept, const double *G, int num_terms,
+                  const int *term_start, const int *output, const long *weight_start,
+                  const int *weight_step, const double *weights, double *out);
 """,
 }
 KERNELS = tuple(_CDEFS)
@@ -369,6 +385,81 @@ def pair_quantities_compiled(slave_x, master_x, slave_normals, *, normals: str =
 _LINE2_NORMALS = {"averaged": 0, "slave": 1, "master": 2}
 
 
+class Line2Screening:
+    """The values-only pass of the compiled 2D kernel over every pair and what it decides:
+    which pairs are integrated (``rows``), and element-based which Gauss points count
+    (``on_master``). Holds the C arguments of the integration pass too."""
+
+    def __init__(self, slave_x, master_x, neighbour_x, has_neighbour, *, normals: str,
+                 integration: str, basis: str, num_gauss_points: int | None, crosspoint,
+                 slave_facet):
+        KernelOptions(normals=normals, integration=integration, basis=basis)  # (checks them)
+        self.element = integration == "element"
+        self.points, self.weights = line2_rules.gauss_legendre(
+            num_gauss_points or line2_rules.DEFAULT_GAUSS_POINTS[integration])
+        n = self.num_pairs = slave_x.shape[0]
+        # (the C kernel gathers each pair's 12 variables from these: no copy of them all)
+        self.coordinates = [np.ascontiguousarray(np.asarray(array, dtype=np.float64)
+                                                 .reshape(n, 2, 2))
+                            for array in (slave_x, master_x, neighbour_x)]
+        self.has = np.ascontiguousarray(np.asarray(has_neighbour, dtype=bool).reshape(n, 2),
+                                        dtype=np.uint8)
+        self.cross = None
+        if crosspoint is not None:
+            self.cross = np.ascontiguousarray(np.asarray(crosspoint, dtype=bool).reshape(n, 2),
+                                              dtype=np.uint8)
+        self.normal_code = _LINE2_NORMALS[normals]
+        self.dual = (np.ascontiguousarray(line2_rules.DUAL_COEFFICIENTS, dtype=np.float64)
+                     if basis == "dual" else None)
+        self.module = module = load("line2")
+        ffi = module.ffi
+        g = self.points.size
+        valid = np.zeros(n, dtype=np.uint8)
+        screened = np.empty((n, g) if self.element else n)
+        if n:
+            module.lib.line2_screen(
+                n, *(_pointer(ffi, array, "double *") for array in self.coordinates),
+                _pointer(ffi, self.has, "unsigned char *"),
+                self.normal_code, int(self.element), g, _pointer(ffi, self.points, "double *"),
+                _pointer(ffi, valid, "unsigned char *"), _pointer(ffi, screened, "double *"))
+        self.valid = valid.astype(bool)
+        self.screened = screened
+        self.on_master = None
+        if self.element:
+            facets = np.arange(n) if slave_facet is None else np.asarray(slave_facet).reshape(-1)
+            on_master = line2_rules.one_master_facet_per_point(screened, self.valid, facets)
+            self.overlapping = on_master.any(axis=1)
+            self.overlap = np.where(on_master, self.weights, 0.0).sum(axis=1)
+            self.on_master = np.ascontiguousarray(on_master, dtype=np.uint8)
+        else:
+            self.overlapping = (screened > 0.0) & self.valid
+        self.rows = np.flatnonzero(self.overlapping).astype(np.int64)
+
+    def arguments(self) -> tuple:
+        """The integration pass's arguments from ``rows`` to ``dual_basis`` (C pointers)."""
+        ffi = self.module.ffi
+        u8, d = "unsigned char *", "double *"
+        return (self.rows.size, ffi.cast("long *", ffi.from_buffer(self.rows)),
+                *(_pointer(ffi, array, d) for array in self.coordinates),
+                _pointer(ffi, self.has, u8),
+                _pointer(ffi, self.cross, u8), _pointer(ffi, self.on_master, u8),
+                self.normal_code, int(self.element), self.points.size,
+                _pointer(ffi, self.points, d), _pointer(ffi, self.weights, d),
+                _pointer(ffi, self.dual, d))
+
+    def finish(self, contributes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(valid, overlap) of every pair once the integrated ones said whether they
+        contribute (segment-based: not where the master is parallel to the normal at a Gauss
+        point)."""
+        valid, overlapping = self.valid, self.overlapping
+        if not self.element:
+            parallel = self.rows[contributes == 0]
+            valid[parallel] = False
+            overlapping[parallel] = False
+            self.overlap = np.where(overlapping, self.screened, 0.0)
+        return valid & overlapping, self.overlap
+
+
 def line2_pair_quantities_compiled(x, has_neighbour, *, normals: str = "averaged",
                                    integration: str = "segment", basis: str = "standard",
                                    num_gauss_points: int | None = None, crosspoint=None,
@@ -386,44 +477,12 @@ def line2_pair_quantities_compiled(x, has_neighbour, *, normals: str = "averaged
     ``area_grad`` (r, 2, 12), ``D_grad`` (r, 2, 2, 12) (the covered dual basis needs it), and
     with ``scalar_gradients`` ``M_grad`` (r, 2, 2, 12).
     """
-    from . import line2
-    from .contract import KernelOptions
-
-    KernelOptions(normals=normals, integration=integration, basis=basis)  # (checks them)
-    element = integration == "element"
-    points, weights = line2.gauss_legendre(
-        num_gauss_points or line2.DEFAULT_GAUSS_POINTS[integration])
-    g = points.size
-    x = np.ascontiguousarray(np.asarray(x, dtype=np.float64).reshape(-1, 12))
-    n = x.shape[0]
-    has = np.ascontiguousarray(np.asarray(has_neighbour, dtype=bool).reshape(n, 2),
-                               dtype=np.uint8)
-    cross = None
-    if crosspoint is not None:
-        cross = np.ascontiguousarray(np.asarray(crosspoint, dtype=bool).reshape(n, 2),
-                                     dtype=np.uint8)
-    module = load("line2")
-    ffi, lib = module.ffi, module.lib
-    d, u8 = "double *", "unsigned char *"
-    normal_code = _LINE2_NORMALS[normals]
-
-    valid = np.zeros(n, dtype=np.uint8)
-    screened = np.empty((n, g) if element else n)
-    if n:
-        lib.line2_screen(n, _pointer(ffi, x, d), _pointer(ffi, has, u8), normal_code,
-                         int(element), g, _pointer(ffi, points, d), _pointer(ffi, valid, u8),
-                         _pointer(ffi, screened, d))
-    valid = valid.astype(bool)
-    on_master = None
-    if element:
-        facets = np.arange(n) if slave_facet is None else np.asarray(slave_facet).reshape(-1)
-        on_master = line2._one_master_facet_per_point(screened, valid, facets)
-        overlapping = on_master.any(axis=1)
-        overlap = np.where(on_master, weights, 0.0).sum(axis=1)
-        on_master = np.ascontiguousarray(on_master, dtype=np.uint8)
-    else:
-        overlapping = (screened > 0.0) & valid
-    rows = np.flatnonzero(overlapping).astype(np.int64)
+    x = np.asarray(x, dtype=np.float64).reshape(-1, 6, 2)
+    screening = Line2Screening(x[:, 1:3], x[:, 4:6], x[:, [0, 3]], has_neighbour,
+                               normals=normals, integration=integration,
+                               basis=basis, num_gauss_points=num_gauss_points,
+                               crosspoint=crosspoint, slave_facet=slave_facet)
+    n, rows = screening.num_pairs, screening.rows
     r, nv = rows.size, LINE2_NUM_VARIABLES
     out = {
         "D": np.zeros((n, 2, 2)), "M": np.zeros((n, 2, 2)),
@@ -437,22 +496,13 @@ def line2_pair_quantities_compiled(x, has_neighbour, *, normals: str = "averaged
         out["M_grad"] = np.empty((r, 2, 2, nv))
     contributes = np.ones(r, dtype=np.uint8)
     if r:
-        dual = (np.ascontiguousarray(line2._DUAL_COEFFICIENTS, dtype=np.float64)
-                if basis == "dual" else None)
-        lib.line2_integrate(
-            r, ffi.cast("long *", ffi.from_buffer(rows)), _pointer(ffi, x, d),
-            _pointer(ffi, has, u8), _pointer(ffi, cross, u8), _pointer(ffi, on_master, u8),
-            normal_code, int(element), g, _pointer(ffi, points, d), _pointer(ffi, weights, d),
-            _pointer(ffi, dual, d), _pointer(ffi, contributes, u8),
+        ffi = screening.module.ffi
+        d = "double *"
+        screening.module.lib.line2_integrate(
+            *screening.arguments(), _pointer(ffi, contributes, "unsigned char *"),
             *(_pointer(ffi, out[key], d) for key in ("D", "M", "Dn", "Mn", "gap", "area")),
             _pointer(ffi, out["D_grad"], d), _pointer(ffi, out.get("M_grad"), d),
             *(_pointer(ffi, out[key], d) for key in ("Dn_grad", "Mn_grad", "gap_grad",
                                                       "area_grad")))
-    if not element:
-        parallel = rows[contributes == 0]
-        valid[parallel] = False
-        overlapping[parallel] = False
-        overlap = np.where(overlapping, screened, 0.0)
-    out["valid"] = valid & overlapping
-    out["overlap"] = overlap
+    out["valid"], out["overlap"] = screening.finish(contributes)
     return out

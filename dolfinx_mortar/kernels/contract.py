@@ -53,11 +53,13 @@ class KernelOptions:
         num_gauss_points: per segment or integration cell; None: the kernel's default.
         scalar_gradients: also keep the gradients of D and M (``D_dual``, ``M_dual``;
             friction's 3D tangent frames and the covered dual basis need them). The 2D
-            kernel's factorized gradients always hold those of D and ignore it.
-        kernels: ``numpy`` (vectorized) or ``compiled`` (C through cffi,
-            :mod:`.surface3_compiled`) for the pairs the compiled kernel covers (3D triangle
-            on triangle, segment-based, averaged normals); every other case stays numpy.
-            Default: :func:`default_kernels`.
+            kernels' gradients (``segment_gradients``) always hold those of D; the numpy
+            one ignores it, the compiled one then also keeps M's and fills ``D_dual``,
+            ``M_dual``.
+        kernels: ``numpy`` (vectorized) or ``compiled`` (C through cffi) for the pairs the
+            compiled kernels cover: in 2D every option (:mod:`.line2_compiled`), in 3D
+            triangle on triangle, segment-based, averaged normals (:mod:`.surface3_compiled`);
+            every other case stays numpy. Default: :func:`default_kernels`.
     """
 
     normals: NormalOption = "averaged"
@@ -138,7 +140,8 @@ class PairQuantities:
         normals_vary: whether the nodal normal variables follow the coordinates (False
             for integrals frozen in the reference configuration).
         segment_gradients: the 2D kernel's factorized gradients of Dn, Mn, area, gap and
-            D (:class:`~.factors.PairGradients`), over the pairs ``rows``; None once an
+            D (:class:`~.factors.PairGradients`; the compiled kernel's are kept in full,
+            :class:`~.line2_compiled.FullGradients`), over the pairs ``rows``; None once an
             output was replaced (:meth:`replaced`).
         affine_factors: the 3D kernel's factorized gradients of Dn, Mn and the areas of
             triangle pairs (:class:`~.factors.AffineFactors`), when it kept them so; their

@@ -114,14 +114,27 @@ static int eta_value(const double *x, const double *na, const double *nb, double
     return parallel;
 }
 
-/* n pairs x (n, 12), has_neighbour (n, 2). Segment-based (element == 0): valid (facing and
- * both projections found) and screened[p] = high - low. Element-based: valid (facing and no
- * Gauss point where the master is parallel to the normal) and screened (n, g) = eta. */
-void line2_screen(long n, const double *x, const unsigned char *has_neighbour, int normals,
+/* the 12 variables p, a, b, q, c, d of pair p from the contract's arrays: slave and master
+ * facet nodes (n, 2, 2) and the slave facets' neighbours p, q (n, 2, 2) */
+static void gather(const double *slave, const double *master, const double *neighbour, long p,
+                   double *x) {
+    const double *s = slave + 4 * p, *m = master + 4 * p, *e = neighbour + 4 * p;
+    x[0] = e[0]; x[1] = e[1]; x[2] = s[0]; x[3] = s[1];
+    x[4] = s[2]; x[5] = s[3]; x[6] = e[2]; x[7] = e[3];
+    x[8] = m[0]; x[9] = m[1]; x[10] = m[2]; x[11] = m[3];
+}
+
+/* n pairs (slave, master, neighbour: see gather), has_neighbour (n, 2). Segment-based
+ * (element == 0): valid (facing and both projections found) and screened[p] = high - low.
+ * Element-based: valid (facing and no Gauss point where the master is parallel to the normal)
+ * and screened (n, g) = eta. */
+void line2_screen(long n, const double *slave, const double *master, const double *neighbour,
+                  const unsigned char *has_neighbour, int normals,
                   int element, int num_points, const double *points, unsigned char *valid,
                   double *screened) {
     for (long p = 0; p < n; ++p) {
-        const double *xp = x + NV * p;
+        double xp[NV];
+        gather(slave, master, neighbour, p, xp);
         double na[2], nb[2];
         normal_values(xp, has_neighbour + 2 * p, normals, na, nb);
         int ok = facing(xp);
@@ -285,7 +298,29 @@ static double projection(const double *x, const double *s0, const double *s1, co
 typedef struct {
     double *D, *M, *Dn, *Mn, *gap, *area;          /* values, at the pair's index */
     double *gD, *gM, *gDn, *gMn, *ggap, *garea;    /* gradients, at the row's index */
+    double *G;          /* or all gradients in one array (rows, kept, NV), at the row's index */
+    int kept;           /* outputs in G: 24 (Dn, Mn, area, gap, D) or 28 (and M) */
 } outputs_t;
+
+/* the stencils' output numbering (Dn, Mn, area, gap, D, M) of the kernel's outputs below: the
+ * kernel's output of each, -1 and -2 for the two gaps */
+static const int STENCIL_OUTPUTS[28] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15,
+                                        16, 17, -1, -2, 18, 19, 20, 21, 22, 23, 24, 25};
+
+/* gradients grad (kernel outputs) and ggap into row r of G (zero if grad is NULL) */
+static void put_row(const outputs_t *o, long r, const double (*grad)[NV],
+                    const double (*ggap)[NV]) {
+    double *row = o->G + (long)o->kept * NV * r;
+    if (!grad) {
+        memset(row, 0, (size_t)o->kept * NV * sizeof(double));
+        return;
+    }
+    for (int out = 0; out < o->kept; ++out) {
+        int source = STENCIL_OUTPUTS[out];
+        memcpy(row + out * NV, source >= 0 ? grad[source] : ggap[-1 - source],
+               NV * sizeof(double));
+    }
+}
 
 /* the integrals of pair p (row r); returns 0 if a Gauss point sees the master parallel to the
  * normal (segment-based: the pair contributes nothing).
@@ -462,8 +497,10 @@ static int integrate(const double *x, const unsigned char *has, const unsigned c
     /* the variables each nodal normal depends on: (p, a, b), (a, b, q); a, b; c, d */
     int a_first = normals == AVERAGED ? 0 : (normals == SLAVE ? 2 : 8), a_last = a_first + (normals == AVERAGED ? 6 : 4);
     int b_first = normals == AVERAGED ? 2 : a_first, b_last = b_first + (normals == AVERAGED ? 6 : 4);
+    /* M's gradients (the last 4 outputs) only where kept */
+    int with_m = o->G ? o->kept == 28 : o->gM != NULL;
     double grad[NO][NV];
-    for (int out = 0; out < NO; ++out) {
+    for (int out = 0; out < (with_m ? NO : NO - 4); ++out) {
         double cl = c_low[out], cL = c_length[out] + value[out] * inverse_length;
         double cJ = value[out] * inverse_jacobian;
         const double *cn = c_normal[out];
@@ -505,6 +542,10 @@ static int integrate(const double *x, const unsigned char *has, const unsigned c
     memcpy(o->D + 4 * p, value + 18, 4 * sizeof(double));
     memcpy(o->M + 4 * p, value + 22, 4 * sizeof(double));
     memcpy(o->gap + 2 * p, gap, 2 * sizeof(double));
+    if (o->G) {
+        put_row(o, r, (const double (*)[NV])grad, (const double (*)[NV])ggap);
+        return 1;
+    }
     memcpy(o->gDn + 8 * NV * r, grad[0], 8 * NV * sizeof(double));
     memcpy(o->gMn + 8 * NV * r, grad[8], 8 * NV * sizeof(double));
     memcpy(o->garea + 2 * NV * r, grad[16], 2 * NV * sizeof(double));
@@ -514,14 +555,15 @@ static int integrate(const double *x, const unsigned char *has, const unsigned c
     return 1;
 }
 
-/* The pairs rows[0 .. num_rows - 1] of x (n, 12), has_neighbour (n, 2), crosspoint (n, 2) or
- * NULL; on_master (n, g), element-based only (which Gauss points count). dual_basis: the 2 x 2
+/* The pairs rows[0 .. num_rows - 1] (coordinates as for line2_screen), has_neighbour (n, 2),
+ * crosspoint (n, 2) or NULL; on_master (n, g), element-based only (which Gauss points count). dual_basis: the 2 x 2
  * coefficients A (Phi = A N) or NULL (standard basis). Values D, M (n, 2, 2), Dn, Mn
  * (n, 2, 2, 2), area, gap (n, 2) are written at the pair's index (the caller zeroes the
  * others), gradients (num_rows, ..., 12) at the row's; gD, gM may be NULL. contributes[r]:
  * segment-based, 0 where a Gauss point sees the master parallel to the normal (then the pair's
  * values and gradients are zero). */
-void line2_integrate(long num_rows, const long *rows, const double *x,
+void line2_integrate(long num_rows, const long *rows, const double *slave,
+                     const double *master, const double *neighbour,
                      const unsigned char *has_neighbour, const unsigned char *crosspoint,
                      const unsigned char *on_master, int normals, int element, int num_points,
                      const double *points, const double *weights, const double *dual_basis,
@@ -529,11 +571,13 @@ void line2_integrate(long num_rows, const long *rows, const double *x,
                      double *D, double *M, double *Dn, double *Mn, double *gap, double *area,
                      double *gD, double *gM, double *gDn, double *gMn, double *ggap,
                      double *garea) {
-    outputs_t o = {D, M, Dn, Mn, gap, area, gD, gM, gDn, gMn, ggap, garea};
+    outputs_t o = {D, M, Dn, Mn, gap, area, gD, gM, gDn, gMn, ggap, garea, NULL, 0};
     for (long r = 0; r < num_rows; ++r) {
         long p = rows[r];
+        double x[NV];
+        gather(slave, master, neighbour, p, x);
         contributes[r] = (unsigned char)integrate(
-            x + NV * p, has_neighbour + 2 * p, crosspoint ? crosspoint + 2 * p : NULL,
+            x, has_neighbour + 2 * p, crosspoint ? crosspoint + 2 * p : NULL,
             on_master ? on_master + (long)num_points * p : NULL, normals, element, num_points,
             points, weights, dual_basis, &o, p, r);
         if (!contributes[r]) {
@@ -548,4 +592,66 @@ void line2_integrate(long num_rows, const long *rows, const double *x,
             memset(garea + 2 * NV * r, 0, 2 * NV * sizeof(double));
         }
     }
+}
+
+static void zero_values(long p, double *D, double *M, double *Dn, double *Mn, double *gap,
+                        double *area) {
+    memset(D + 4 * p, 0, 4 * sizeof(double)); memset(M + 4 * p, 0, 4 * sizeof(double));
+    memset(Dn + 8 * p, 0, 8 * sizeof(double)); memset(Mn + 8 * p, 0, 8 * sizeof(double));
+    memset(area + 2 * p, 0, 2 * sizeof(double)); memset(gap + 2 * p, 0, 2 * sizeof(double));
+}
+
+/* line2_integrate with the gradients of each row together: G (num_rows, kept, 12), the
+ * outputs in the stencils' numbering (Dn 0-7, Mn 8-15, area 16-17, gap 18-19, D 20-23, with
+ * kept 28 also M 24-27). Returns -1 for a bad kept. */
+int line2_integrate_rows(long num_rows, const long *rows, const double *slave,
+                         const double *master, const double *neighbour,
+                         const unsigned char *has_neighbour, const unsigned char *crosspoint,
+                         const unsigned char *on_master, int normals, int element,
+                         int num_points, const double *points, const double *weights,
+                         const double *dual_basis, unsigned char *contributes,
+                         double *D, double *M, double *Dn, double *Mn, double *gap,
+                         double *area, int kept, double *G) {
+    if (kept != 24 && kept != 28) return -1;
+    outputs_t o = {D, M, Dn, Mn, gap, area, NULL, NULL, NULL, NULL, NULL, NULL, G, kept};
+    for (long r = 0; r < num_rows; ++r) {
+        long p = rows[r];
+        double x[NV];
+        gather(slave, master, neighbour, p, x);
+        contributes[r] = (unsigned char)integrate(
+            x, has_neighbour + 2 * p, crosspoint ? crosspoint + 2 * p : NULL,
+            on_master ? on_master + (long)num_points * p : NULL, normals, element, num_points,
+            points, weights, dual_basis, &o, p, r);
+        if (!contributes[r]) {
+            zero_values(p, D, M, Dn, Mn, gap, area);
+            put_row(&o, r, NULL, NULL);
+        }
+    }
+    return 0;
+}
+
+/* Linear combinations of the gradients G (num_rows, kept, 12) of line2_integrate_rows, in the
+ * stencils' layout: out (num_terms, 12, num_rows), term t the sum over its entries e in
+ * [term_start[t], term_start[t + 1]) of weight_e[r] * G[r, output[e], :], where weight_e[r] is
+ * weights[weight_start[e] + r * weight_step[e]] (step 0: one number for every row). Returns -1
+ * for an output outside G. */
+int line2_combine(long num_rows, int kept, const double *G, int num_terms,
+                  const int *term_start, const int *output, const long *weight_start,
+                  const int *weight_step, const double *weights, double *out) {
+    for (int e = 0; e < term_start[num_terms]; ++e)
+        if (output[e] < 0 || output[e] >= kept) return -1;
+    for (long r = 0; r < num_rows; ++r) {
+        const double *row = G + (long)kept * NV * r;
+        for (int t = 0; t < num_terms; ++t) {
+            double sum[NV] = {0.0};
+            for (int e = term_start[t]; e < term_start[t + 1]; ++e) {
+                double w = weights[weight_start[e] + r * weight_step[e]];
+                const double *g = row + output[e] * NV;
+                for (int v = 0; v < NV; ++v) sum[v] += w * g[v];
+            }
+            double *column = out + (long)t * NV * num_rows + r;
+            for (int v = 0; v < NV; ++v) column[(long)v * num_rows] = sum[v];
+        }
+    }
+    return 0;
 }

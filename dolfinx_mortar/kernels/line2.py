@@ -29,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..dual import RowSubsetDual
+from . import line2_compiled
 from .contract import (
     NORMAL_OPTIONS,
     BasisOption,
@@ -39,19 +40,14 @@ from .contract import (
     PairQuantities,
 )
 from .factors import PairGradients
+from .line2_rules import DEFAULT_GAUSS_POINTS, gauss_legendre
+from .line2_rules import DUAL_COEFFICIENTS as _DUAL_COEFFICIENTS
+from .line2_rules import one_master_facet_per_point as _one_master_facet_per_point
 
 NUM_PAIR_VARIABLES = 12
-DEFAULT_GAUSS_POINTS = {"segment": 3, "element": 4}
 
 _FACING_TOLERANCE = 1e-8
 _PARALLEL_TOLERANCE = 1e-10
-
-
-def gauss_legendre(num_points: int) -> tuple[np.ndarray, np.ndarray]:
-    """Points and weights on [-1, 1]; exact for polynomials of degree 2 n - 1."""
-    if num_points < 1:
-        raise ValueError(f"number of Gauss points must be >= 1, got {num_points}")
-    return np.polynomial.legendre.leggauss(num_points)
 
 
 # -- the batched kernel --------------------------------------------------------------------
@@ -471,7 +467,7 @@ def pair_quantities(
             ``element`` uses fixed Gauss points on the slave facet and keeps
             those whose projection lands on the master facet ("concentrated").
         basis: multiplier basis Phi; ``dual`` is biorthogonal to N on the
-            whole slave facet (see :func:`dual_basis_coefficients`), pair by pair;
+            whole slave facet (see :func:`.line2_rules.dual_basis_coefficients`), pair by pair;
             :class:`~dolfinx_mortar.mortar.MortarInterface` instead builds it over the
             covered part of each slave facet from this kernel's standard outputs
             (:mod:`dolfinx_mortar.covered`).
@@ -504,7 +500,10 @@ def pair_quantities(
 class Line2Kernel:
     """The 2D kernel behind the contract (:class:`~.contract.MortarKernel`): the
     neighbours p, q of :class:`~.contract.PairGeometry` (``neighbour_x``,
-    ``has_neighbour``) enter the averaged normals; no ``slave_normals``."""
+    ``has_neighbour``) enter the averaged normals; no ``slave_normals``. With
+    ``options.kernels == "compiled"`` every option runs the compiled kernel
+    (:mod:`.line2_compiled`: values and gradients kept, in :class:`~.line2_compiled.
+    FullGradients`)."""
 
     gdim = 2
     default_gauss_points = DEFAULT_GAUSS_POINTS
@@ -515,12 +514,15 @@ class Line2Kernel:
         if geometry.neighbour_x is None or geometry.has_neighbour is None:
             raise ValueError("the 2D kernel takes the slave facets' neighbours "
                              "(PairGeometry.neighbour_x, has_neighbour)")
+        points = options.num_gauss_points or self.default_gauss_points[options.integration]
+        if options.kernels == "compiled":
+            return line2_compiled.evaluate(geometry, options, points, crosspoint=crosspoint,
+                                           slave_facet=slave_facet)
         slave, master, neighbour = geometry.slave_x, geometry.master_x, geometry.neighbour_x
         X = np.empty((NUM_PAIR_VARIABLES, geometry.num_pairs))
         for node, (x, i) in enumerate([(neighbour, 0), (slave, 0), (slave, 1), (neighbour, 1),
                                        (master, 0), (master, 1)]):
             X[2 * node:2 * node + 2] = x[:, i].T
-        points = options.num_gauss_points or self.default_gauss_points[options.integration]
         return _pair_quantities(
             X, geometry.has_neighbour, normals=options.normals,
             integration=options.integration, basis=options.basis, num_gauss_points=points,
@@ -639,47 +641,3 @@ def _pair_quantities(X, has_neighbour, *, normals, integration, basis, num_gauss
         valid=valid & overlapping, overlap=overlap, num_variables=NUM_PAIR_VARIABLES,
         segment_gradients=gradients,
     )
-
-
-def dual_basis_coefficients(jacobian_at_points=None, num_gauss_points: int = 2) -> np.ndarray:
-    """Coefficients A with Phi = A N, biorthogonal on the whole slave facet.
-
-    A = D_e M_e^-1 with D_e = diag(int N_k) and M_e = int N N^T over the full
-    facet. For a linear facet the Jacobian is constant and cancels, so A is
-    the same for every facet, long or short: [[2, -1], [-1, 2]]
-    (Phi_1 = (1 - 3 xi)/2, Phi_2 = (1 + 3 xi)/2). The coefficients are taken
-    on the whole facet, not on the part in contact, so they do not depend on
-    the contact state; on a partly covered facet D keeps off-diagonal terms
-    and a nodal weight can be <= 0 (the interface uses the covered version of
-    :mod:`dolfinx_mortar.covered` instead).
-    """
-    points, weights = gauss_legendre(num_gauss_points)
-    if jacobian_at_points is None:
-        jacobian = np.ones_like(points)
-    else:
-        jacobian = np.asarray(jacobian_at_points)
-    N = np.stack([(1.0 - points) / 2.0, (1.0 + points) / 2.0], axis=-1)
-    w = weights * jacobian
-    mass = np.einsum("g,gj,gk->jk", w, N, N)
-    lumped = np.diag(np.einsum("g,gk->k", w, N))
-    return lumped @ np.linalg.inv(mass)
-
-
-_DUAL_COEFFICIENTS = dual_basis_coefficients()
-
-
-def _one_master_facet_per_point(
-    eta: np.ndarray, valid: np.ndarray, slave_facet: np.ndarray
-) -> np.ndarray:
-    """(n, g) mask: each Gauss point of a slave facet goes to the master facet it
-    projects into most centrally (smallest |eta|, within 1e-12 of [-1, 1])."""
-    num_pairs, num_points = eta.shape
-    score = np.where((np.abs(eta) <= 1.0 + 1e-12) & valid[:, None], np.abs(eta), np.inf).ravel()
-    key = np.repeat(slave_facet * num_points, num_points)
-    key += np.tile(np.arange(num_points), num_pairs)
-    order = np.lexsort((score, key))
-    first = np.ones(order.size, dtype=bool)
-    first[1:] = key[order][1:] != key[order][:-1]
-    winner = np.zeros(order.size, dtype=bool)
-    winner[order[first]] = True
-    return (winner & np.isfinite(score)).reshape(num_pairs, num_points)
