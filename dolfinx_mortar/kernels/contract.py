@@ -54,10 +54,9 @@ class KernelOptions:
         scalar_gradients: also keep the gradients of D and M (``D_dual``, ``M_dual``;
             friction's 3D tangent frames and the covered dual basis need them). The 2D
             kernel's factorized gradients always hold those of D and ignore it.
-        kernels: ``numpy`` (vectorized) or ``compiled`` (C through cffi,
-            :mod:`.surface3_compiled`) for the pairs the compiled kernel covers (3D triangle
-            on triangle, segment-based, averaged normals); every other case stays numpy.
-            Default: :func:`default_kernels`.
+        kernels: ``numpy`` (vectorized) or ``compiled`` (C through cffi; 3D: every
+            configuration, :mod:`.surface3_compiled`; 2D stays numpy). Default:
+            :func:`default_kernels`.
     """
 
     normals: NormalOption = "averaged"
