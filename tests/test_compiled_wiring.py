@@ -227,6 +227,26 @@ def test_evaluation_keeps_no_gradients():
     assert peak < chunk + 20000 * 1500, peak
 
 
+@pytest.mark.parametrize("integration", ["segment", "element"])
+def test_quadrilateral_evaluation_keeps_no_gradients(integration):
+    """The same for quadrilateral pairs (~39 kB of gradients a pair with those of D and M):
+    the buffers hold as many gradient numbers as the triangles' (fewer pairs), the rest is
+    the values, the contributing pairs' coordinates and (element-based) their Gauss points."""
+    slave, master, nodal, _ = random_facets(12000, 4, 4, seed=9, noise=0.04)
+    geometry = PairGeometry(slave, master, nodal)
+    options = KernelOptions(kernels="compiled", integration=integration, scalar_gradients=True)
+    kernel = Surface3Kernel()
+    tracemalloc.start()
+    q = kernel.evaluate(geometry, options)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    assert q.rows.size > 4000
+    nv = 36
+    pairs = surface3_compiled._pairs_per_call(surface3_compiled.EVALUATION_CHUNK, nv)
+    buffers = pairs * (2 * 4 * 4 * 3 + 2 * 4 * 4 + 2 * 4) * (nv + 1) * 8
+    assert peak < buffers + 12000 * 2500, peak
+
+
 def _matrices(mortar, z) -> dict:
     D, M = mortar.mortar_matrices()
     arrays = {"D": D, "M": M, "G": mortar.gap_jacobian(), "B": mortar.constraint_matrix(),
