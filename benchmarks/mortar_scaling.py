@@ -31,7 +31,8 @@ search), then, ``--repeats`` times (medians reported):
 With ``--dim 3`` the bodies are two slabs of tetrahedra one cell thick,
 [0, 1]^2 x [-w, 0] (master, ``round(n / 1.37)`` cells per side) and
 [0, 1]^2 x [0, w] (slave, n cells per side, N = 2 n^2 triangle facets), bent
-in x and y alike, the upper one pushed 0.1 w down and slid 0.3 w.
+in x and y alike, the upper one pushed 0.1 w down and slid 0.3 w. With
+``--cell hexahedron`` the slabs are of hexahedra (N = n^2 quadrilateral facets).
 
 ``--kernels numpy compiled`` measures each size with each kernel implementation in turn
 (``$DOLFINX_MORTAR_KERNELS``, :class:`dolfinx_mortar.kernels.KernelOptions`; default: the
@@ -47,6 +48,8 @@ growth (slope <= 1.1) and under a second for 1e5 slave facets.
         --json scratch/scaling.json --png scratch/scaling.png
     tools/run python3 benchmarks/mortar_scaling.py --dim 3 --repeats 3
     tools/run python3 benchmarks/mortar_scaling.py --dim 3 --sizes 1000 10000 100000 \\
+        --kernels numpy compiled
+    tools/run python3 benchmarks/mortar_scaling.py --dim 3 --cell hexahedron --sizes 1000 10000 \\
         --kernels numpy compiled
 """
 
@@ -115,31 +118,32 @@ def two_strips(num_slave: int, comm: MPI.Intracomm = MPI.COMM_WORLD):
     return _tag_interface(mesh, width, axis=1)
 
 
-def _slab(cells_per_side: int, z0: float, z1: float, first_node: int):
-    """Nodes and tetrahedra (six per cube, dolfinx's create_box split) of a slab one cell thick."""
+def _slab(cells_per_side: int, z0: float, z1: float, first_node: int, cell: str = "tetrahedron"):
+    """Nodes and cells of a slab one cell thick: tetrahedra (six per cube, dolfinx's
+    create_box split) or hexahedra."""
     box = dolfinx.mesh.create_box(MPI.COMM_SELF, [[0.0, 0.0, z0], [1.0, 1.0, z1]],
                                   [cells_per_side, cells_per_side, 1],
-                                  dolfinx.mesh.CellType.tetrahedron)
+                                  getattr(dolfinx.mesh.CellType, cell))
     from dolfinx_mortar import compat
 
     return box.geometry.x.copy(), first_node + compat.geometry_dofmap(box).astype(np.int64)
 
 
-def two_slabs(num_slave: int, comm: MPI.Intracomm = MPI.COMM_WORLD):
-    """Mesh, facet tags and cell masks (upper, lower) of two slabs of tetrahedra; the slave
-    surface has about ``num_slave`` triangles (2 n^2)."""
-    n = max(1, round(np.sqrt(num_slave / 2.0)))
+def two_slabs(num_slave: int, comm: MPI.Intracomm = MPI.COMM_WORLD, cell: str = "tetrahedron"):
+    """Mesh, facet tags and cell masks (upper, lower) of two slabs of tetrahedra (the slave
+    surface has about ``num_slave`` triangles, 2 n^2) or hexahedra (quadrilaterals, n^2)."""
+    n = max(1, round(np.sqrt(num_slave / (2.0 if cell == "tetrahedron" else 1.0))))
     n_master = max(1, round(n / RATIO))
     width = 1.0 / n
     if comm.rank == 0:
-        lower_x, lower_cells = _slab(n_master, -width, 0.0, 0)
-        upper_x, upper_cells = _slab(n, 0.0, width, lower_x.shape[0])
+        lower_x, lower_cells = _slab(n_master, -width, 0.0, 0, cell)
+        upper_x, upper_cells = _slab(n, 0.0, width, lower_x.shape[0], cell)
         x = np.vstack([lower_x, upper_x])
         cells = np.vstack([lower_cells, upper_cells])
     else:
         x = np.zeros((0, 3))
-        cells = np.zeros((0, 4), dtype=np.int64)
-    domain = ufl.Mesh(basix.ufl.element("Lagrange", "tetrahedron", 1, shape=(3,)))
+        cells = np.zeros((0, 4 if cell == "tetrahedron" else 8), dtype=np.int64)
+    domain = ufl.Mesh(basix.ufl.element("Lagrange", cell, 1, shape=(3,)))
     mesh = dolfinx.mesh.create_mesh(comm, cells=cells, x=x, e=domain)
     return _tag_interface(mesh, width, axis=2)
 
@@ -236,11 +240,13 @@ def _assemble(interface: MortarInterface, z) -> None:
     interface.force_jacobian(z)
 
 
-def measure(num_slave: int, repeats: int, normals: str, integration: str, dim: int = 2) -> dict:
-    """Median times (seconds) of each phase at one size, and counters."""
+def measure(num_slave: int, repeats: int, normals: str, integration: str, dim: int = 2,
+            cell: str = "tetrahedron") -> dict:
+    """Median times (seconds) of each phase at one size, and counters (``cell``: of the 3D
+    slabs)."""
     gc.collect()
     if dim == 3:
-        mesh, tags, upper, lower, width = two_slabs(num_slave)
+        mesh, tags, upper, lower, width = two_slabs(num_slave, cell=cell)
         V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (3,)))
         u = displacement3d(V, upper, lower, width)
     else:
@@ -351,7 +357,9 @@ def main(argv=None) -> int:
     parser.add_argument("--normals", default="averaged", choices=kernels.NORMAL_OPTIONS)
     parser.add_argument("--integration", default="segment", choices=kernels.INTEGRATION_OPTIONS)
     parser.add_argument("--dim", type=int, default=2, choices=(2, 3),
-                        help="2: strips of quadrilaterals; 3: slabs of tetrahedra (default 2)")
+                        help="2: strips of quadrilaterals; 3: slabs of --cell (default 2)")
+    parser.add_argument("--cell", default="tetrahedron", choices=("tetrahedron", "hexahedron"),
+                        help="3D: the slabs' cells (triangle or quadrilateral interface)")
     parser.add_argument("--kernels", nargs="+", choices=kernels.contract.KERNELS_OPTIONS,
                         help="kernel implementations to measure in turn, each size with each "
                              "(default: $DOLFINX_MORTAR_KERNELS, else numpy)")
@@ -360,13 +368,15 @@ def main(argv=None) -> int:
         parser.error("the benchmark is serial; run it without mpirun")
     sizes = [int(round(n)) for n in args.sizes]
     implementations = args.kernels or [kernels.contract.default_kernels()]
-    print(f"dimension {args.dim}", file=sys.stderr)
+    print(f"dimension {args.dim}" + (f", {args.cell}" if args.dim == 3 else ""),
+          file=sys.stderr)
     by_kernels = {}
     for n in sizes:
         for implementation in implementations:
             os.environ[kernels.contract.KERNELS_VARIABLE] = implementation
             with PeakMemory() as memory:
-                result = measure(n, args.repeats, args.normals, args.integration, args.dim)
+                result = measure(n, args.repeats, args.normals, args.integration, args.dim,
+                                 args.cell)
             result["peak_memory"] = memory.peak
             by_kernels.setdefault(implementation, []).append(result)
             print(f"N={n} {implementation}: total {1e3 * result['total']:.1f} ms "
@@ -384,8 +394,10 @@ def main(argv=None) -> int:
     results = by_kernels[implementations[-1]]
     print(f"\nkernels {implementations[-1]}:")
     sizes = [r["N"] for r in results]
-    print(f"\n{args.dim}D, median times in ms, {args.repeats} repeats, normals={args.normals}, "
-          f"integration={args.integration}, dolfinx {dolfinx.__version__}\n")
+    cell = f" ({args.cell})" if args.dim == 3 else ""
+    print(f"\n{args.dim}D{cell}, median times in ms, {args.repeats} repeats, "
+          f"normals={args.normals}, integration={args.integration}, "
+          f"dolfinx {dolfinx.__version__}\n")
     print(markdown_table(results))
     print("| peak memory [GB] | " + " | ".join(
         f"{r['peak_memory'] / 1e9:.2f}" for r in results) + " | |")
@@ -399,7 +411,7 @@ def main(argv=None) -> int:
     print(f"total at N = {sizes[-1]}: {results[-1]['total']:.3f} s")
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"options": {"dim": args.dim, "normals": args.normals,
+            json.dump({"options": {"dim": args.dim, "cell": args.cell, "normals": args.normals,
                                    "integration": args.integration,
                                    "repeats": args.repeats, "dolfinx": dolfinx.__version__,
                                    "numpy": np.__version__, "python": platform.python_version()},

@@ -16,6 +16,7 @@ import pytest
 from test_kernel_surface3_speedpath import random_pairs
 
 from dolfinx_mortar.kernels import compiled, surface3
+from dolfinx_mortar.kernels.contract import KERNELS_VARIABLE
 
 TOLERANCE = 1e-13
 VALUES = ("D", "M", "Dn", "Mn", "gap", "area")
@@ -164,6 +165,7 @@ def test_mesh_interface_pairs(cell, sizes, monkeypatch):
         calls.append((slave_x, master_x, slave_normals, options))
         return original(slave_x, master_x, slave_normals, **options)
 
+    monkeypatch.setenv(KERNELS_VARIABLE, "numpy")  # (the pairs the numpy kernel is handed)
     monkeypatch.setattr(surface3, "pair_quantities", recording)
     tagged = two_blocks(cell, *sizes)
     for u in (None, bent_displacement(tagged)):
@@ -384,6 +386,7 @@ def test_element_based_mesh_pairs(cell, sizes, monkeypatch):
         calls.append((slave_x, master_x, slave_normals, options))
         return original(slave_x, master_x, slave_normals, **options)
 
+    monkeypatch.setenv(KERNELS_VARIABLE, "numpy")  # (the pairs the numpy kernel is handed)
     monkeypatch.setattr(surface3, "pair_quantities", recording)
     tagged = two_blocks(cell, *sizes)
     for u in (None, bent_displacement(tagged)):

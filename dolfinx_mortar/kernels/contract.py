@@ -56,10 +56,9 @@ class KernelOptions:
             kernels' gradients (``segment_gradients``) always hold those of D; the numpy
             one ignores it, the compiled one then also keeps M's and fills ``D_dual``,
             ``M_dual``.
-        kernels: ``numpy`` (vectorized) or ``compiled`` (C through cffi) for the pairs the
-            compiled kernels cover: in 2D every option (:mod:`.line2_compiled`), in 3D
-            triangle on triangle, segment-based, averaged normals (:mod:`.surface3_compiled`);
-            every other case stays numpy. Default: :func:`default_kernels`.
+        kernels: ``numpy`` (vectorized) or ``compiled`` (C through cffi) for every 2D
+            option (:mod:`.line2_compiled`) and every 3D configuration
+            (:mod:`.surface3_compiled`). Default: :func:`default_kernels`.
     """
 
     normals: NormalOption = "averaged"

@@ -421,8 +421,9 @@ class Surface3Kernel:
     """The 3D kernel behind the contract (:class:`~.contract.MortarKernel`): takes the
     slave nodal normals of :class:`~.contract.PairGeometry` as variables (zeros will do
     for the ``slave`` and ``master`` normal options); no neighbours. With
-    ``options.kernels == "compiled"`` the pairs the compiled kernel covers go to it
-    (:mod:`.surface3_compiled`: values now, gradients on demand)."""
+    ``options.kernels == "compiled"`` the pairs go to the compiled kernel
+    (:mod:`.surface3_compiled`: values now, gradients on demand), which covers every
+    configuration this one takes (a Gauss rule neither takes stays here, which raises)."""
 
     gdim = 3
     default_gauss_points = {"segment": DEFAULT_GAUSS_POINTS, "element": DEFAULT_GAUSS_POINTS}
@@ -431,7 +432,7 @@ class Surface3Kernel:
                  crosspoint: np.ndarray | None = None,
                  slave_facet: np.ndarray | None = None) -> PairQuantities:
         if options.kernels == "compiled" and surface3_compiled.covers(geometry, options):
-            return surface3_compiled.evaluate(geometry, options, crosspoint)
+            return surface3_compiled.evaluate(geometry, options, crosspoint, slave_facet)
         slave_normals = geometry.slave_normals
         if slave_normals is None:
             slave_normals = np.zeros_like(geometry.slave_x)

@@ -1,21 +1,30 @@
-"""The compiled 3D triangle kernel behind the contract: values at evaluation, gradients on demand.
+"""The compiled 3D kernel behind the contract: values at evaluation, gradients on demand.
 
-The C kernel (``surface3.c`` through :mod:`.compiled`) integrates one triangle pair in a few
-microseconds, values and gradients over the pair's 27 variables together. Kept for every
-pair of an evaluation, the gradients would be the evaluation's memory (~1,700 numbers a
-pair); so :func:`evaluate` keeps the values only (D, M, Dn, Mn, gaps, areas, valid, overlap)
-and the coordinates of the contributing pairs, and :class:`CompiledGradients` runs the
-kernel again on the pairs a consumer asks for (the stencils, a chunk at a time), hands
-over their gradients and forgets them. The values and gradients are the same bits as the
-first run's: the kernel is deterministic per pair.
+The C kernel (``surface3.c`` through :mod:`.compiled`) integrates one pair in a few
+microseconds, values and gradients over the pair's 3 (2 ns + nm) variables together. Kept for
+every pair of an evaluation, the gradients would be the evaluation's memory (~1,700 numbers a
+triangle pair, ~4,900 a quadrilateral pair); so :func:`evaluate` keeps the values only (D, M,
+Dn, Mn, gaps, areas, valid, overlap) and the coordinates of the contributing pairs, and
+:class:`CompiledGradients` runs the kernel again on the pairs a consumer asks for (the
+stencils, a chunk at a time), hands over their gradients and forgets them. The values and
+gradients are the same bits as the first run's: the kernel is deterministic per pair.
 
-Covered (:func:`covers`): triangle on triangle, segment-based, averaged normals (the
-default 3D path), standard or dual basis, crosspoints, 1, 3 or 7 Gauss points per cell;
-the covered dual basis runs it with the standard basis. Everything else stays with the
-numpy kernel (:mod:`.surface3`).
+Covered (:func:`covers`): every 3D pair the numpy kernel (:mod:`.surface3`) takes: triangle
+and quadrilateral slave and master facets (a triangle on a triangle by the C corner-value
+path, as numpy's ``_affine_integrals``; the others at every Gauss point), segment- or
+element-based integration, the averaged, slave or master normal field, the standard or the
+dual basis, crosspoints, every Gauss rule the numpy kernel accepts (a rule it refuses goes to
+it, which raises). The covered dual basis runs it with the standard basis.
+
+Element-based integration gives each Gauss point of a slave facet to one of its pairs (the
+master facet it lands on most centrally, :func:`.compiled._points_on_master`): decided once, at
+evaluation, from the C kernel's scores, and kept for the contributing pairs, so that the
+gradients made again later are those of the same assignment as the values.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
@@ -24,64 +33,125 @@ from . import compiled
 from .contract import KernelOptions, PairGeometry, PairQuantities
 
 EVALUATION_CHUNK = 2048
-"""Candidate pairs per kernel call at evaluation (their discarded gradients live together)."""
+"""Candidate triangle pairs per kernel call at evaluation (their discarded gradients live
+together); fewer quadrilateral pairs, as many gradient numbers (:func:`_pairs_per_call`)."""
 GRADIENT_CHUNK = 2048
-"""Pairs whose gradients a consumer gets at once (:attr:`CompiledGradients.chunk`)."""
-_RULES = (1, 3, 7)
+"""Triangle pairs whose gradients a consumer gets at once (:attr:`CompiledGradients.chunk`)."""
+_SEGMENT_RULES = (1, 3, 7)
+_ELEMENT_RULES = {3: (1, 3, 7), 4: (1, 3, 4, 7, 9)}
 _VALUES = ("D", "M", "Dn", "Mn", "gap", "area")
 _GRADIENTS = ("Dn_grad", "Mn_grad", "area_grad", "gap_grad", "D_grad", "M_grad")
 
 
 def covers(geometry: PairGeometry, options: KernelOptions) -> bool:
-    """Whether the compiled kernel integrates these pairs with these options."""
-    return (options.integration == "segment" and options.normals == "averaged"
-            and geometry.slave_normals is not None
-            and geometry.slave_x.shape[1:] == (3, 3) and geometry.master_x.shape[1:] == (3, 3)
-            and (options.num_gauss_points or 7) in _RULES)
+    """Whether the compiled kernel integrates these pairs with these options: every 3D pair
+    of triangles or quadrilaterals with a Gauss rule the numpy kernel takes."""
+    slave_x, master_x = geometry.slave_x, geometry.master_x
+    if slave_x.ndim != 3 or master_x.ndim != 3 or slave_x.shape[2] != 3:
+        return False
+    ns, nm = slave_x.shape[1], master_x.shape[1]
+    if ns not in (3, 4) or nm not in (3, 4) or master_x.shape[2] != 3:
+        return False
+    if geometry.slave_normals is not None and geometry.slave_normals.shape != slave_x.shape:
+        return False
+    rule = options.num_gauss_points or 7
+    if options.integration == "element":
+        return rule in _ELEMENT_RULES[ns]
+    return rule in _SEGMENT_RULES
+
+
+def _pairs_per_call(chunk: int, num_variables: int) -> int:
+    """Pairs of ``num_variables`` variables with as many gradient numbers as ``chunk``
+    triangle pairs (the gradients grow with the square of the variables)."""
+    return max(1, chunk * compiled.NUM_VARIABLES**2 // num_variables**2)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Call:
+    """What the C kernel is called with besides the pairs: the facets' nodes, the options,
+    and for element-based integration the slave facet's Gauss points and weights."""
+
+    ns: int
+    nm: int
+    normals: int
+    dual_basis: bool
+    rule: int
+    scalar_gradients: bool
+    points: np.ndarray | None = None
+    point_weights: np.ndarray | None = None
+
+    @classmethod
+    def of(cls, ns: int, nm: int, options: KernelOptions) -> _Call:
+        rule = options.num_gauss_points or 7
+        points = weights = None
+        if options.integration == "element":
+            points, weights = (np.ascontiguousarray(a) for a in compiled._facet_rule(ns, rule))
+        return cls(ns, nm, compiled._NORMAL_FIELDS[options.normals], options.basis == "dual",
+                   rule, options.scalar_gradients, points, weights)
+
+    @property
+    def element(self) -> bool:
+        return self.points is not None
+
+    @property
+    def num_variables(self) -> int:
+        return 3 * (2 * self.ns + self.nm)
+
+    def shapes(self) -> dict[str, tuple]:
+        """The per-pair shapes of the values and of the gradients kept."""
+        ns, nm, nv = self.ns, self.nm, self.num_variables
+        values = {"D": (ns, ns), "M": (ns, nm), "Dn": (ns, ns, 3), "Mn": (ns, nm, 3),
+                  "gap": (ns,), "area": (ns,)}
+        grads = {name + "_grad": values[name] + (nv,) for name in ("Dn", "Mn", "area", "gap")}
+        if self.scalar_gradients:
+            grads.update(D_grad=values["D"] + (nv,), M_grad=values["M"] + (nv,))
+        return {**values, **grads}
 
 
 class _Buffers:
     """The kernel's output arrays for up to ``size`` pairs, reused from call to call (fresh
     arrays of this size would be mapped and faulted in at every call)."""
 
-    def __init__(self, size: int, scalar_gradients: bool):
-        nv = compiled.NUM_VARIABLES
+    def __init__(self, size: int, call: _Call):
         self.size = size
-        self.arrays = {
-            "valid": np.zeros(size, dtype=np.uint8), "overlap": np.empty(size),
-            "D": np.empty((size, 3, 3)), "M": np.empty((size, 3, 3)),
-            "Dn": np.empty((size, 3, 3, 3)), "Mn": np.empty((size, 3, 3, 3)),
-            "gap": np.empty((size, 3)), "area": np.empty((size, 3)),
-            "Dn_grad": np.empty((size, 3, 3, 3, nv)), "Mn_grad": np.empty((size, 3, 3, 3, nv)),
-            "gap_grad": np.empty((size, 3, nv)), "area_grad": np.empty((size, 3, nv)),
-            "D_grad": np.empty((size, 3, 3, nv)) if scalar_gradients else None,
-            "M_grad": np.empty((size, 3, 3, nv)) if scalar_gradients else None,
-        }
+        self.call = call
+        self.arrays = {"valid": np.zeros(size, dtype=np.uint8), "overlap": np.empty(size)}
+        self.arrays.update({name: np.empty((size,) + shape)
+                            for name, shape in call.shapes().items()})
 
-    def run(self, slave_x, master_x, slave_normals, crosspoint, dual_basis: bool,
-            rule: int) -> dict:
-        """The kernel on up to ``size`` pairs (contiguous float64 (m, 3, 3) arrays;
-        crosspoint (m, 3) uint8 or None); returns views of the first m rows."""
+    def run(self, slave_x, master_x, slave_normals, crosspoint, on_master=None) -> dict:
+        """The kernel on up to ``size`` pairs (contiguous float64 (m, ns or nm, 3) arrays;
+        crosspoint (m, ns) uint8 or None; element-based: on_master (m, q) uint8, the Gauss
+        points given to each pair); returns views of the first m rows."""
         m = slave_x.shape[0]
-        out = {name: None if array is None else array[:m]
-               for name, array in self.arrays.items()}
+        out = {name: array[:m] for name, array in self.arrays.items()}
         if m == 0:
             return out
+        call = self.call
         module = compiled._get()
-        ffi = module.ffi
-        d = "double *"
+        ffi, lib = module.ffi, module.lib
 
-        def pointer(array, ctype=d):
+        def pointer(array, ctype="double *"):
             return compiled._pointer(ffi, array, ctype)
 
-        status = module.lib.surface3_triangles(
-            m, pointer(slave_x), pointer(master_x), pointer(slave_normals),
-            pointer(crosspoint, "unsigned char *"), compiled._NORMAL_FIELDS["averaged"],
-            int(dual_basis), rule,
-            pointer(out["valid"], "unsigned char *"), pointer(out["overlap"]),
-            *(pointer(out[name]) for name in _VALUES),
-            pointer(out["D_grad"]), pointer(out["M_grad"]),
-            *(pointer(out[name]) for name in ("Dn_grad", "Mn_grad", "gap_grad", "area_grad")))
+        pairs = (pointer(slave_x), pointer(master_x), pointer(slave_normals),
+                 pointer(crosspoint, "unsigned char *"))
+        results = (pointer(out["valid"], "unsigned char *"), pointer(out["overlap"]),
+                   *(pointer(out[name]) for name in _VALUES),
+                   pointer(out.get("D_grad")), pointer(out.get("M_grad")),
+                   *(pointer(out[name]) for name in ("Dn_grad", "Mn_grad", "gap_grad",
+                                                     "area_grad")))
+        if call.element:
+            status = lib.surface3_element(
+                m, call.ns, call.nm, *pairs, call.normals, int(call.dual_basis),
+                call.points.shape[0], pointer(call.points), pointer(call.point_weights),
+                pointer(on_master, "unsigned char *"), *results)
+        elif call.ns == 3 and call.nm == 3:
+            status = lib.surface3_triangles(m, *pairs, call.normals, int(call.dual_basis),
+                                            call.rule, *results)
+        else:
+            status = lib.surface3_pairs(m, call.ns, call.nm, *pairs, call.normals,
+                                        int(call.dual_basis), call.rule, *results)
         if status != 0:
             raise RuntimeError(f"compiled 3D kernel failed (status {status}): a clip polygon "
                                "outgrew its slots or a bad rule")
@@ -95,74 +165,96 @@ def _contiguous(array: np.ndarray) -> np.ndarray:
 class CompiledGradients:
     """The gradients of the contributing pairs of one compiled evaluation, made on demand
     (:class:`~.contract.GradientsOnDemand`): the kernel run again on the asked pairs'
-    coordinates (kept for the contributing pairs only)."""
+    coordinates (kept for the contributing pairs only, with their Gauss points when
+    element-based)."""
 
     chunk = GRADIENT_CHUNK
+    """Triangle pairs asked for at once; quadrilateral pairs fewer, as many numbers."""
 
-    def __init__(self, rows: np.ndarray, slave_x, master_x, slave_normals, crosspoint,
-                 options: KernelOptions):
+    def __init__(self, rows: np.ndarray, call: _Call, slave_x, master_x, slave_normals,
+                 crosspoint, on_master):
         self.rows = rows
+        self.call = call
         self.slave_x = _contiguous(slave_x[rows])
         self.master_x = _contiguous(master_x[rows])
         self.slave_normals = _contiguous(slave_normals[rows])
-        self.crosspoint = None if crosspoint is None else np.ascontiguousarray(
-            crosspoint[rows], dtype=np.uint8)
-        self.dual_basis = options.basis == "dual"
-        self.rule = options.num_gauss_points or 7
-        self.scalar_gradients = options.scalar_gradients
+        self.crosspoint = None if crosspoint is None else np.ascontiguousarray(crosspoint[rows])
+        self.on_master = None if on_master is None else np.ascontiguousarray(on_master[rows])
+        self.chunk = _pairs_per_call(type(self).chunk, call.num_variables)
         self._buffers: _Buffers | None = None
 
     def _names(self) -> tuple[str, ...]:
-        return _GRADIENTS if self.scalar_gradients else _GRADIENTS[:4]
+        return _GRADIENTS if self.call.scalar_gradients else _GRADIENTS[:4]
+
+    def _run(self, index: np.ndarray) -> dict:
+        """The kernel on the kept pairs ``index`` (at most a buffer of them)."""
+        def kept(array):
+            return None if array is None else array[index]
+
+        return self._buffers.run(self.slave_x[index], self.master_x[index],
+                                 self.slave_normals[index], kept(self.crosspoint),
+                                 kept(self.on_master))
 
     def gradients(self, rows: np.ndarray) -> list[np.ndarray]:
         """As :meth:`~.contract.GradientsOnDemand.gradients`; for up to :attr:`chunk`
         contributing rows, views of the kernel's buffers, overwritten by the next call."""
         rows = np.asarray(rows)
-        nv = compiled.NUM_VARIABLES
-        shapes = {"Dn_grad": (3, 3, 3), "Mn_grad": (3, 3, 3), "area_grad": (3,),
-                  "gap_grad": (3,), "D_grad": (3, 3), "M_grad": (3, 3)}
         kept = self.rows
         position = np.minimum(np.searchsorted(kept, rows), max(kept.size - 1, 0))
         found = kept[position] == rows if kept.size else np.zeros(rows.shape, dtype=bool)
         if self._buffers is None:
-            self._buffers = _Buffers(self.chunk, self.scalar_gradients)
-        buffers = self._buffers
-        if found.all() and rows.size <= buffers.size:
-            index = position
-            cross = None if self.crosspoint is None else self.crosspoint[index]
-            out = buffers.run(self.slave_x[index], self.master_x[index],
-                              self.slave_normals[index], cross, self.dual_basis, self.rule)
+            self._buffers = _Buffers(self.chunk, self.call)
+        size = self._buffers.size
+        if found.all() and rows.size <= size:
+            out = self._run(position)
             return [out[name] for name in self._names()]
-        result = {name: np.zeros((rows.size,) + shapes[name] + (nv,))
-                  for name in self._names()}
+        shapes = self.call.shapes()
+        result = {name: np.zeros((rows.size,) + shapes[name]) for name in self._names()}
         asked = np.flatnonzero(found)
-        for start in range(0, asked.size, buffers.size):
-            part = asked[start:start + buffers.size]
-            index = position[part]
-            cross = None if self.crosspoint is None else self.crosspoint[index]
-            out = buffers.run(self.slave_x[index], self.master_x[index],
-                              self.slave_normals[index], cross, self.dual_basis, self.rule)
+        for start in range(0, asked.size, size):
+            part = asked[start:start + size]
+            out = self._run(position[part])
             for name in self._names():
                 result[name][part] = out[name]
         return [result[name] for name in self._names()]
 
 
-def _near(slave_x: np.ndarray, master_x: np.ndarray, slave_normals: np.ndarray) -> np.ndarray:
+def _field_directions(slave_x: np.ndarray, master_x: np.ndarray, slave_normals: np.ndarray,
+                      normals: str) -> np.ndarray:
+    """(n, 3) a vector along each pair's auxiliary plane normal n0 (any length): the sum of
+    the normal field's nodal normals (averaged: the given ones; slave: the slave facet's unit
+    corner normals; master: the master facet's normal, at every node)."""
+    if normals == "averaged":
+        return slave_normals.sum(axis=1)
+    if normals == "master":
+        nm = master_x.shape[1]
+        if nm == 4:
+            return np.cross(master_x[:, 2] - master_x[:, 0], master_x[:, 3] - master_x[:, 1])
+        return np.cross(master_x[:, 1] - master_x[:, 0], master_x[:, 2] - master_x[:, 0])
+    ns = slave_x.shape[1]
+    total = np.zeros((slave_x.shape[0], 3))
+    for i in range(ns):
+        corner = np.cross(slave_x[:, (i + 1) % ns] - slave_x[:, i],
+                          slave_x[:, (i - 1) % ns] - slave_x[:, i])
+        length = np.linalg.norm(corner, axis=1, keepdims=True)
+        total += corner / np.where(length > 0.0, length, np.nan)
+    return total
+
+
+def _near(slave_x: np.ndarray, master_x: np.ndarray, slave_normals: np.ndarray,
+          normals: str = "averaged") -> np.ndarray:
     """The candidates whose facets may overlap on the auxiliary plane: the others' projected
-    bounding discs (centre the node mean, radius the farthest node) lie apart by a millionth
-    of their radii, far more than the kernel's separation tolerance, so the kernel would
-    find them separated. Spares the kernel most of a search's candidates."""
+    bounding discs (centre the node mean, radius the farthest node; projecting along the
+    plane normal moves no two points apart) lie apart by a millionth of their radii, far more
+    than the kernel's separation tolerance, so the kernel would find them separated. Spares
+    the segment-based kernel most of a search's candidates."""
     s, m = slave_x.transpose(1, 2, 0), master_x.transpose(1, 2, 0)  # (node, xyz, pair)
-    slave_centre, master_centre = (s[0] + s[1] + s[2]) / 3.0, (m[0] + m[1] + m[2]) / 3.0
+    slave_centre, master_centre = s.sum(axis=0) / s.shape[0], m.sum(axis=0) / m.shape[0]
 
     def radius(nodes, centre):
-        return np.sqrt(np.maximum(np.maximum(((nodes[0] - centre) ** 2).sum(axis=0),
-                                             ((nodes[1] - centre) ** 2).sum(axis=0)),
-                                  ((nodes[2] - centre) ** 2).sum(axis=0)))
+        return np.sqrt(np.max([((node - centre) ** 2).sum(axis=0) for node in nodes], axis=0))
 
-    normals = slave_normals.transpose(1, 2, 0)
-    normal = normals[0] + normals[1] + normals[2]
+    normal = _field_directions(slave_x, master_x, slave_normals, normals).T
     length2 = (normal**2).sum(axis=0)
     offset = master_centre - slave_centre
     along = (offset * normal).sum(axis=0)
@@ -172,39 +264,71 @@ def _near(slave_x: np.ndarray, master_x: np.ndarray, slave_normals: np.ndarray) 
     return np.flatnonzero((in_plane2 <= reach**2) | ~(length2 > 0.0))
 
 
+def _points_on_master(call: _Call, slave_x, master_x, slave_normals,
+                      slave_facet: np.ndarray | None) -> np.ndarray:
+    """(n, q) uint8: the Gauss points each pair gets (element-based), from the C kernel's
+    scores of every pair, in chunks."""
+    n, q = slave_x.shape[0], call.points.shape[0]
+    score = np.empty((n, q))
+    module = compiled._get()
+    ffi, lib = module.ffi, module.lib
+    d = "double *"
+    for start in range(0, n, EVALUATION_CHUNK):
+        part = slice(start, min(n, start + EVALUATION_CHUNK))
+        status = lib.surface3_element_scores(
+            part.stop - start, call.ns, call.nm, *(compiled._pointer(ffi, array[part], d)
+                                                   for array in (slave_x, master_x,
+                                                                 slave_normals)),
+            call.normals, q, compiled._pointer(ffi, call.points, d),
+            compiled._pointer(ffi, score[part], d))
+        if status != 0:
+            raise RuntimeError(f"compiled 3D element scores failed (status {status})")
+    facets = np.arange(n) if slave_facet is None else np.asarray(slave_facet).reshape(-1)
+    return np.ascontiguousarray(compiled._points_on_master(score, facets), dtype=np.uint8)
+
+
 def evaluate(geometry: PairGeometry, options: KernelOptions,
-             crosspoint: np.ndarray | None = None) -> PairQuantities:
+             crosspoint: np.ndarray | None = None,
+             slave_facet: np.ndarray | None = None) -> PairQuantities:
     """The pairs' values by the compiled kernel (:func:`covers` must hold), their gradients
     on demand (``gradients_on_demand``; the outputs' ``grad`` also works, for every
-    contributing pair at once)."""
+    contributing pair at once). ``slave_facet``: as :meth:`~.contract.MortarKernel.evaluate`
+    (element-based integration)."""
     slave_x = _contiguous(geometry.slave_x)
     master_x = _contiguous(geometry.master_x)
-    slave_normals = _contiguous(geometry.slave_normals)
-    n = slave_x.shape[0]
+    n, ns = slave_x.shape[:2]
+    nm = master_x.shape[1]
+    slave_normals = (np.zeros_like(slave_x) if geometry.slave_normals is None
+                     else _contiguous(geometry.slave_normals))
+    call = _Call.of(ns, nm, options)
     cross = None
     if crosspoint is not None:
-        cross = np.ascontiguousarray(np.asarray(crosspoint, dtype=bool).reshape(n, 3),
+        cross = np.ascontiguousarray(np.asarray(crosspoint, dtype=bool).reshape(n, ns),
                                      dtype=np.uint8)
-    rule = options.num_gauss_points or 7
-    dual_basis = options.basis == "dual"
-    values = {name: np.zeros((n,) + shape) for name, shape in (
-        ("D", (3, 3)), ("M", (3, 3)), ("Dn", (3, 3, 3)), ("Mn", (3, 3, 3)), ("gap", (3,)),
-        ("area", (3,)))}
+    shapes = call.shapes()
+    values = {name: np.zeros((n,) + shapes[name]) for name in _VALUES}
     valid = np.zeros(n, dtype=bool)
     overlap = np.zeros(n)
-    near = _near(slave_x, master_x, slave_normals)
-    buffers = _Buffers(min(EVALUATION_CHUNK, max(near.size, 1)), options.scalar_gradients)
-    for start in range(0, near.size, buffers.size):
-        part = near[start:start + buffers.size]
+    on_master = None
+    if call.element:
+        on_master = _points_on_master(call, slave_x, master_x, slave_normals, slave_facet)
+        candidates = np.flatnonzero(on_master.any(axis=1))
+    else:
+        candidates = _near(slave_x, master_x, slave_normals, options.normals)
+    size = _pairs_per_call(EVALUATION_CHUNK, call.num_variables)
+    buffers = _Buffers(min(size, max(candidates.size, 1)), call)
+    for start in range(0, candidates.size, buffers.size):
+        part = candidates[start:start + buffers.size]
         out = buffers.run(slave_x[part], master_x[part], slave_normals[part],
-                          None if cross is None else cross[part], dual_basis, rule)
+                          None if cross is None else cross[part],
+                          None if on_master is None else on_master[part])
         for name in _VALUES:
             values[name][part] = out[name]
         valid[part] = out["valid"].view(bool)
         overlap[part] = out["overlap"]
     del buffers
     rows = np.flatnonzero(valid)
-    source = CompiledGradients(rows, slave_x, master_x, slave_normals, cross, options)
+    source = CompiledGradients(rows, call, slave_x, master_x, slave_normals, cross, on_master)
     names = ("Dn", "Mn", "area", "gap") + (("D", "M") if options.scalar_gradients else ())
     cached: list = []
 
@@ -219,6 +343,5 @@ def evaluate(geometry: PairGeometry, options: KernelOptions,
              for i, name in enumerate(names)}
     return PairQuantities(
         D=values["D"], M=values["M"], Dn=duals["Dn"], Mn=duals["Mn"], gap=duals["gap"],
-        area=duals["area"], valid=valid, overlap=overlap,
-        num_variables=compiled.NUM_VARIABLES, D_dual=duals.get("D"), M_dual=duals.get("M"),
-        gradients_on_demand=source)
+        area=duals["area"], valid=valid, overlap=overlap, num_variables=call.num_variables,
+        D_dual=duals.get("D"), M_dual=duals.get("M"), gradients_on_demand=source)
