@@ -72,6 +72,8 @@ def check_slave_body(comm, pairs, interfaces, labels: np.ndarray) -> None:
     """Raise unless the slave and master surfaces of each pair lie on different bodies:
     meshes that share no node (a conforming mesh joins its parts: they move as one)."""
     for pair, interface in zip(pairs, interfaces, strict=True):
+        if interface.self_contact:
+            continue
         slave, master = interface.slave, interface.master
         slave_bodies = np.unique(np.concatenate(comm.allgather(labels[slave.cells])))
         master_bodies = np.unique(np.concatenate(comm.allgather(labels[master.cells])))
@@ -99,6 +101,8 @@ def check_slave_body(comm, pairs, interfaces, labels: np.ndarray) -> None:
 def check_facing(warnings: ProblemWarnings, pairs, interfaces, u) -> None:
     """Warn when a slave surface looks away from its master where the two are closest."""
     for k, (pair, interface) in enumerate(zip(pairs, interfaces, strict=True)):
+        if interface.self_contact:
+            continue  # its facets face every way; the search pairs those that face
         slave, master = interface.slave, interface.master
         facing = diagnostics.facing_report(
             warnings.comm, slave.current_coordinates(u), slave.facets,
@@ -120,7 +124,7 @@ def check_facing(warnings: ProblemWarnings, pairs, interfaces, u) -> None:
 def check_initial_overlap(warnings: ProblemWarnings, pairs, interfaces, u) -> None:
     """Warn when the bodies start overlapping by more than :data:`INITIAL_OVERLAP`."""
     for k, (pair, interface) in enumerate(zip(pairs, interfaces, strict=True)):
-        if ("facing", k) in warnings:
+        if ("facing", k) in warnings or interface.self_contact:
             continue  # the wrong face puts every node "behind": one message says it
         slave, master = interface.slave, interface.master
         report = diagnostics.penetration_report(
@@ -219,11 +223,15 @@ def check_penetration(warnings: ProblemWarnings, pairs, interfaces, u, threshold
     among the causes; None with Lagrange multipliers)."""
     reports = []
     for k, (pair, interface) in enumerate(zip(pairs, interfaces, strict=True)):
-        slave, master = interface.slave, interface.master
-        report = diagnostics.penetration_report(
-            warnings.comm, threshold, slave.node_global_blocks,
-            slave.current_coordinates(u), slave.facets, master.node_global_blocks,
-            master.current_coordinates(u), master.facets)
+        if interface.self_contact:
+            report = diagnostics.penetration_report(
+                warnings.comm, threshold, *interface.pair_sides())
+        else:
+            slave, master = interface.slave, interface.master
+            report = diagnostics.penetration_report(
+                warnings.comm, threshold, slave.node_global_blocks,
+                slave.current_coordinates(u), slave.facets, master.node_global_blocks,
+                master.current_coordinates(u), master.facets)
         reports.append(report)
         if report.count:
             other = "master" if report.side == "slave" else "slave"

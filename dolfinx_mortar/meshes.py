@@ -943,6 +943,107 @@ def rings(
     return _tagged(data, markers, aliases, h_contact)
 
 
+SLIT_TIP = 1.2
+"""How far (in y, from y = 0) :func:`slit_block`'s slit reaches into the block [0, 2]^2."""
+
+
+def slit_block(ratio: Sequence[int] = (5, 7), cell_type: str = "triangle",
+               comm: MPI.Comm = MPI.COMM_WORLD) -> TaggedMesh:
+    """One body with a slit: the self-contact patch test (``demos/self_contact.py``).
+
+    The block [0, 2] x [0, 2] (3D: times [0, 1/2] in z) is cut along x = 1 from y = 0 to
+    y = :data:`SLIT_TIP`; above the tip its halves are one mesh. The slit's left lip has
+    ratio[0] elements along the slit, the right lip ratio[1] (non-matching unless equal);
+    the part above the tip has max(ratio) // 2 + 1 rows, z (3D) max(1, min(ratio) // 2)
+    layers. The four pieces are structured (triangles split each square by its rising
+    diagonal, tetrahedra each cube into six around its main diagonal, so that the pieces
+    join conformingly). Pressed from both sides (u_x = +d at x = 0, -d at x = 2), the
+    lips meet along the whole slit and the stress is uniform: a uniform pressure
+    across a slit whose two lips are one surface.
+
+    Returns:
+        Cells "block"; facets "slit" (both lips), "left" (x = 0), "right" (x = 2),
+        "bottom" (y = 0) and in 3D "back" (z = 0); ``h_contact`` the finer lip's.
+    """
+    n_left, n_right = _check_ratio(ratio)
+    if cell_type not in CELL_TYPES + CELL_TYPES_3D:
+        raise ValueError(f"cell_type must be one of {CELL_TYPES + CELL_TYPES_3D}, "
+                         f"got {cell_type!r}")
+    gdim = 3 if cell_type in CELL_TYPES_3D else 2
+    tip = SLIT_TIP
+    rows_above = max(n_left, n_right) // 2 + 1
+    layers = max(1, min(n_left, n_right) // 2)
+    pieces = [((0.0, 1.0), (0.0, tip), (n_left, n_left), 0),
+              ((1.0, 2.0), (0.0, tip), (n_right, n_right), 1),
+              ((0.0, 1.0), (tip, 2.0), (n_left, rows_above), 0),
+              ((1.0, 2.0), (tip, 2.0), (n_right, rows_above), 1)]
+    x, cells = np.zeros((0, gdim)), []
+    if comm.rank == 0:
+        nodes = []
+        for (x0, x1), (y0, y1), (nx, ny), side in pieces:
+            axes = [np.linspace(x0, x1, nx + 1), np.linspace(y0, y1, ny + 1)]
+            if gdim == 3:
+                axes.append(np.linspace(0.0, 0.5, layers + 1))
+            grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, gdim)
+            first = sum(n.shape[0] for n in nodes)
+            cells.append(first + _structured_cells([a.size - 1 for a in axes], cell_type))
+            nodes.append(np.column_stack([grid, np.full(grid.shape[0], side)]))
+        everything = np.concatenate(nodes)
+        x = everything[:, :gdim]
+        on_slit = np.isclose(x[:, 0], 1.0) & (x[:, 1] < tip - 1e-9)
+        key = np.column_stack([np.round(x * 1e9).astype(np.int64),
+                               np.where(on_slit, everything[:, gdim], -1).astype(np.int64)])
+        _, first, merged = np.unique(key, axis=0, return_index=True, return_inverse=True)
+        x, cells = x[first], merged.reshape(-1)[np.concatenate(cells)]
+    else:
+        cells = np.zeros((0, 2**gdim if cell_type in ("quadrilateral", "hexahedron")
+                          else gdim + 1), dtype=np.int64)
+    domain = ufl.Mesh(basix.ufl.element("Lagrange", cell_type, 1, shape=(gdim,)))
+    mesh = dolfinx.mesh.create_mesh(comm, cells=np.asarray(cells, dtype=np.int64), x=x,
+                                    e=domain)
+    markers = _numbered(["block"], ["slit", "left", "right", "bottom", "back"][:4 + (gdim == 3)])
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    facets = dolfinx.mesh.exterior_facet_indices(mesh.topology)
+    middle = dolfinx.mesh.compute_midpoints(mesh, tdim - 1, facets)
+    where = {"slit": np.isclose(middle[:, 0], 1.0) & (middle[:, 1] < tip),
+             "left": np.isclose(middle[:, 0], 0.0), "right": np.isclose(middle[:, 0], 2.0),
+             "bottom": np.isclose(middle[:, 1], 0.0)}
+    if gdim == 3:
+        where["back"] = np.isclose(middle[:, 2], 0.0)
+    values = np.zeros(facets.size, dtype=np.int32)
+    for name, found in where.items():
+        values[found] = markers[name]
+    tagged = values > 0
+    facet_tags = dolfinx.mesh.meshtags(mesh, tdim - 1, facets[tagged], values[tagged])
+    num_cells = mesh.topology.index_map(tdim)
+    all_cells = np.arange(num_cells.size_local + num_cells.num_ghosts, dtype=np.int32)
+    cell_tags = dolfinx.mesh.meshtags(mesh, tdim, all_cells,
+                                      np.full(all_cells.size, markers["block"], np.int32))
+    return TaggedMesh(mesh, cell_tags, facet_tags, markers, tip / max(n_left, n_right))
+
+
+def _structured_cells(counts: Sequence[int], cell_type: str) -> np.ndarray:
+    """Cells of a structured grid of ``counts`` cells per axis (nodes numbered as
+    ``np.meshgrid(..., indexing="ij")``), in dolfinx's vertex order; simplices split each
+    square (cube) around its rising (main) diagonal, the same way everywhere."""
+    shape = [c + 1 for c in counts]
+    index = np.arange(np.prod(shape)).reshape(shape)
+    corner = index[tuple(slice(0, c) for c in counts)].reshape(-1)
+    strides = [index.strides[k] // index.itemsize for k in range(len(counts))]
+    # vertex v of a square (cube): bit k of v steps along axis k (dolfinx's order)
+    offsets = np.array([sum(strides[k] for k in range(len(counts)) if v >> k & 1)
+                        for v in range(2 ** len(counts))])
+    boxes = corner[:, None] + offsets[None, :]
+    if cell_type in ("quadrilateral", "hexahedron"):
+        return boxes
+    top = 2 ** len(counts) - 1
+    paths = [[0, 1 << a, (1 << a) | (1 << b), top]
+             for a, b in itertools.permutations(range(3), 2)] if len(counts) == 3 \
+        else [[0, 1, top], [0, 2, top]]
+    return np.concatenate([boxes[:, path] for path in paths])
+
+
 def tied_blocks(
     ratio: Sequence[int] = (3, 4),
     refinement: int = 0,

@@ -39,7 +39,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from . import covered, kernels, search, stencils, surface
+from . import covered, kernels, search, self_contact, stencils, surface
 from .deprecation import renamed_keywords
 from .dual import Dual, RowSubsetDual
 from .kernels import BasisOption, IntegrationOption, KernelOptions, NormalOption, PairQuantities
@@ -152,9 +152,15 @@ class MortarInterface:
         self._evaluated_version = -1
         if num_gauss_points is not None and num_gauss_points < 1:
             raise ValueError("num_gauss_points must be >= 1")
+        self.self_contact = slave == master
+        """One surface that may touch itself (:mod:`~dolfinx_mortar.self_contact`): it is
+        its own master, and each search decides which facets of each zone are slaves."""
         self.slave = surface.extract_surface(V, facet_tags, slave, "slave")
-        self.master = surface.extract_surface(V, facet_tags, master, "master")
-        surface.check_disjoint(self.slave, self.master, self.comm)
+        if self.self_contact:
+            self.master = self.slave
+        else:
+            self.master = surface.extract_surface(V, facet_tags, master, "master")
+            surface.check_disjoint(self.slave, self.master, self.comm)
         self.gdim = self.slave.reference_coordinates.shape[1]
         self._stencil_type = stencils.STENCILS[self.gdim]
         self.num_gauss_points = (num_gauss_points
@@ -179,6 +185,7 @@ class MortarInterface:
         self._pair_block_sides: dict[str, tuple[int, BlockIncidence]] = {}
         self.quantities: PairQuantities | None = None
         self._crosspoint_blocks = np.zeros(0, dtype=np.int64)
+        self._fold_blocks = np.zeros(0, dtype=np.int64)
         self._pair_dofs: np.ndarray | None = None
         self.stencil: stencils.PairStencil | None = None
         self.scalar_gradients = False
@@ -520,7 +527,34 @@ class MortarInterface:
             self._node_x, slave.facets, self._node_x, all_master_facets, self.reuse.margin,
             slave_previous=node_origin, master_previous=node_origin, depth=self.search_depth,
         )
+        if self.self_contact:
+            pairs, all_slave_facets = self._one_sided(pairs, all_slave_facets,
+                                                      all_master_facets)
         self._set_pairs(pairs, all_slave_facets, all_master_facets)
+
+    def _one_sided(self, pairs: np.ndarray, all_slave_facets: np.ndarray,
+                   all_master_facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Of a self-contact surface's candidate pairs, those of facets that face each other,
+        each once, its slave on the zone's slave side (:mod:`self_contact`); and the slave
+        facets without the master sides' (the slave nodes' averaged normals). Collective."""
+        slave_nodes = self.slave.facets[pairs[:, 0]]
+        master_nodes = all_master_facets[pairs[:, 1]]
+        slave_blocks = self._node_blocks[slave_nodes]
+        master_blocks = self._node_blocks[master_nodes]
+        slave_x, master_x = self._node_x[slave_nodes], self._node_x[master_nodes]
+        facing = self_contact.facing(slave_blocks, master_blocks, slave_x, master_x)
+        pairs, slave_nodes, master_nodes = (
+            pairs[facing], slave_nodes[facing], master_nodes[facing])
+        sizes = [self_contact.facet_frames(self._node_x, nodes)[2]
+                 for nodes in (slave_nodes, master_nodes)]
+        slave_side, master_side = self_contact.slave_side(
+            self.comm, slave_blocks[facing], master_blocks[facing], *sizes)
+        on_master_side = self_contact.rows_in(
+            np.sort(self._node_blocks[all_slave_facets], axis=1), master_side)
+        # a node on both sides of a zone (a slit's tip) has a weighted gap of zero whatever
+        # the displacement: it carries no multiplier, as a crosspoint
+        self._fold_blocks = np.unique(master_side)
+        return pairs[slave_side], all_slave_facets[~on_master_side]
 
     def _set_pairs(self, pairs: np.ndarray, all_slave_facets: np.ndarray,
                    all_master_facets: np.ndarray) -> None:
@@ -540,8 +574,9 @@ class MortarInterface:
         self.pair_slave_facets = stencil.slave_facets
         self.pair_multipliers = self.node_multipliers[stencil.slave_nodes]
         slave_blocks = self._node_blocks[stencil.slave_nodes]
-        if self._crosspoint_blocks.size:
-            self.pair_crosspoint = np.isin(slave_blocks, self._crosspoint_blocks)
+        carry_none = np.union1d(self._crosspoint_blocks, self._fold_blocks)
+        if carry_none.size:
+            self.pair_crosspoint = np.isin(slave_blocks, carry_none)
         else:
             self.pair_crosspoint = np.zeros(slave_blocks.shape, dtype=bool)
         self._pair_dofs = None
@@ -565,6 +600,19 @@ class MortarInterface:
         stencil = self.stencil
         return self._node_blocks[stencil.nodes[:, np.concatenate([stencil.slave_slots,
                                                                    stencil.master_slots])]]
+
+    def pair_sides(self) -> tuple[np.ndarray, ...]:
+        """The facets of this rank's pairs at the last update, slave side then master side,
+        each as (global node blocks (m,), positions (m, gdim), facets (f, k) indexing them):
+        what :func:`~dolfinx_mortar.diagnostics.penetration_report` compares (of a
+        self-contact surface, the sides its search decided)."""
+        sides = []
+        for facet_nodes in (self.stencil.slave_nodes, self.stencil.master_nodes):
+            facets = np.unique(facet_nodes, axis=0)
+            nodes, compact = np.unique(facets, return_inverse=True)
+            sides += [self._node_blocks[nodes], self._node_x[nodes],
+                      compact.reshape(facets.shape)]
+        return tuple(sides)
 
     @property
     def pair_slave_nodes(self) -> np.ndarray:

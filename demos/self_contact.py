@@ -1,0 +1,156 @@
+"""Self-contact: one surface that touches itself, found and enforced by the mortar method.
+
+``--case patch``: the self-contact patch test. One block [0, 2] x [0, 2] (3D: times
+[0, 1/2]) is slit along x = 1 from y = 0 to y = 1.2; its halves are one mesh above the
+tip, and the slit's two lips, one surface (one facet tag) meshed non-matching in the ratio
+``--ratio``, are its only contact surface: ``ContactPair(tags, slit, slit)``. The sides are
+pushed together (u_x = +d at x = 0, -d at x = 2; rollers at y = 0 and, 3D, z = 0), so
+that the lips press on each other and the stress is uniform: sigma_xx = -p everywhere, a
+uniform contact pressure p along the whole slit (linear material: p = E d in 3D,
+4 mu (lambda + mu) / (lambda + 2 mu) d in plane strain). The search pairs the lips' facets
+that face each other, the finer lip becomes the slave (the tip's node, on both lips,
+carries no multiplier), and the mortar integrals pass the uniform pressure through the
+non-matching lips exactly.
+
+JSON (``--json``): ``max_pressure_deviation_rel`` (largest |p_node - p| / p over the
+slave lip's nodes, linear material; with a nonlinear material the spread
+(max - min) / mean), ``max_penetration_rel`` (deepest node behind the other lip, in facet
+lengths), ``force_balance`` (|slave force + master force| / |slave force|),
+``newton_iterations``, ``converged``.
+
+Run:  python3 demos/self_contact.py --ratio 5:7 --json self.json
+      mpirun -n 3 python3 demos/self_contact.py --dim 3 --cell hexahedron --ratio 4:6
+"""
+
+from __future__ import annotations
+
+import pathlib
+import sys
+import time
+
+import dolfinx
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+from dolfinx_mortar import (
+    ContactOutput,
+    ContactPair,
+    ContactProblem,
+    Material,
+    diagnostics,
+    internal_work,
+    meshes,
+)
+
+DEMOS = pathlib.Path(__file__).resolve().parent
+if str(DEMOS) not in sys.path:  # loaded from its path (tests, benchmarks): find demos/cli.py
+    sys.path.insert(0, str(DEMOS))
+import cli  # noqa: E402
+from cli import option_record, problem_options, write_summary  # noqa: E402
+
+E, NU, SQUEEZE = 1000.0, 0.3, 0.01
+
+
+def exact_pressure(gdim: int, E: float = E, nu: float = NU, squeeze: float = SQUEEZE) -> float:
+    """The uniform contact pressure of the linear patch test (strain -squeeze across)."""
+    if gdim == 3:
+        return E * squeeze
+    lam, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+    return 4.0 * mu * (lam + mu) / (lam + 2.0 * mu) * squeeze
+
+
+def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
+    parser = cli.parser(__doc__)
+    parser.add_argument("--dim", type=int, choices=(2, 3), default=2, help="2D or 3D")
+    parser.add_argument("--case", choices=("patch",), default="patch", help="which problem")
+    parser.add_argument("--ratio", default="5:7", help="left:right lip elements along the slit")
+    parser.add_argument("--cell-type", "--cell", choices=meshes.CELL_TYPES + meshes.CELL_TYPES_3D,
+                        default=None, help="cells (default: triangle in 2D, tetrahedron in 3D)")
+    cli.add_material_argument(parser)
+    cli.add_common_arguments(parser)
+    args = parser.parse_args(argv)
+    allowed = meshes.CELL_TYPES if args.dim == 2 else meshes.CELL_TYPES_3D
+    if args.cell_type is None:
+        args.cell_type = allowed[0]
+    if args.cell_type not in allowed:
+        parser.error(f"--cell-type {args.cell_type} is not a {args.dim}D cell (one of {allowed})")
+    ratio = tuple(int(n) for n in args.ratio.split(":"))
+    start = time.perf_counter()
+    tagged = meshes.slit_block(ratio, args.cell_type, comm)
+    mesh, markers, gdim = tagged.mesh, tagged.markers, args.dim
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (gdim,)))
+    u = dolfinx.fem.Function(V, name="displacement")
+    F = internal_work(u, ufl.TestFunction(V), {markers["block"]: Material(E, NU, args.material)},
+                      tagged.cell_tags)
+
+    def held(tag: str, component: int, value: float):
+        facets = tagged.facet_tags.find(markers[tag])
+        dofs = dolfinx.fem.locate_dofs_topological(V.sub(component), gdim - 1, facets)
+        return dolfinx.fem.dirichletbc(dolfinx.default_scalar_type(value), dofs, V.sub(component))
+
+    bcs = [held("left", 0, SQUEEZE), held("right", 0, -SQUEEZE), held("bottom", 1, 0.0)]
+    if gdim == 3:
+        bcs.append(held("back", 2, 0.0))
+    pair = ContactPair(tagged.facet_tags, markers["slit"], markers["slit"], name="slit")
+    configuration = "reference" if args.material == "linear" else "current"
+    with ContactProblem(F, u, bcs, [pair], configuration=configuration,
+                        **problem_options(args)) as problem:
+        report = problem.solve()
+        if args.output:
+            output = ContactOutput(problem, args.output / "paraview")
+            output.write(1.0)
+            output.close()
+        carrying = _carrying_multipliers(problem, comm)
+        p, raw = (np.concatenate(comm.allgather(problem.contact_pressure(raw=raw)[1][carrying]))
+                  for raw in (False, True))
+        if args.material == "linear":
+            expected = exact_pressure(gdim)
+            deviation = float(np.max(np.abs(p - expected)) / expected)
+            raw_deviation = float(np.max(np.abs(raw - expected)) / expected)
+        else:
+            deviation, raw_deviation = (float(np.ptp(v) / np.mean(v)) for v in (p, raw))
+        penetration = diagnostics.penetration_report(
+            comm, 0.0, *problem.interfaces[0].pair_sides())
+        slave_force, master_force = problem.contact_forces()
+        balance = float(np.linalg.norm(slave_force + master_force) / np.linalg.norm(slave_force))
+        summary = {
+            "case": args.case, "dim": gdim, "ratio": list(ratio), "cell_type": args.cell_type,
+            "material": args.material, **option_record(args), "num_ranks": comm.size,
+            "converged": report.converged, "newton_iterations": report.iterations,
+            "slave_nodes": int(p.size),
+            "surface_nodes": interface_nodes(problem),
+            "pressure_min": float(p.min()), "pressure_max": float(p.max()),
+            "max_pressure_deviation_rel": deviation,
+            "max_multiplier_deviation_rel": raw_deviation,
+            "max_penetration_rel": float(penetration.depth),
+            "force_balance": balance, "slave_force": slave_force.tolist(),
+            "num_dofs": V.dofmap.index_map.size_global * gdim,
+            "wall_time_s": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
+        }
+    if comm.rank == 0:
+        print(f"self-contact patch test {gdim}D {args.cell_type} {args.ratio}: pressure "
+              f"deviation {deviation:.3e} over {summary['slave_nodes']} slave nodes, "
+              f"penetration {penetration.depth:.2e} facet lengths, force balance "
+              f"{balance:.1e}, {report.iterations} Newton iterations", flush=True)
+        write_summary(args.json, summary)
+    return summary
+
+
+def interface_nodes(problem: ContactProblem) -> int:
+    """The number of nodes of the self-contact surface (each carries a multiplier slot)."""
+    return int(problem.interfaces[0].num_global_multipliers)
+
+
+def _carrying_multipliers(problem: ContactProblem, comm) -> np.ndarray:
+    """Which of this rank's multipliers carry the contact: those of nodes on the slave side
+    of the pairs and not on the master side (the slit's tip is on both: it carries none).
+    Collective."""
+    interface = problem.interfaces[0]
+    sides = interface.pair_sides()
+    slave, master = (np.concatenate(comm.allgather(blocks)) for blocks in (sides[0], sides[3]))
+    return np.isin(interface.owned_multiplier_blocks, np.setdiff1d(slave, master))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,266 @@
+"""Self-contact (dolfinx_mortar/self_contact.py): which facet pairs of one surface face each
+other, which side of each zone is the slave, and the self-contact patch test
+(demos/self_contact.py): a uniform pressure across a slit whose non-matching lips are one
+surface, exact in 2D and 3D, serial and parallel; the linearization (Taylor)."""
+
+from __future__ import annotations
+
+import dolfinx
+import numpy as np
+import pytest
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+from test_contact import assert_taylor_second_order, demo
+
+from dolfinx_mortar import ContactPair, ContactProblem, Material, compat, internal_work, meshes
+from dolfinx_mortar import self_contact as sc
+
+
+def segment(a, b):
+    """A 2D facet's nodes (outward normal (t_y, -t_x) for t = b - a)."""
+    return np.array([a, b], dtype=float)
+
+
+def facing_of(pairs):
+    """self_contact.facing of 2D facet pairs [(slave blocks, slave x, master blocks,
+    master x)]."""
+    sb, sx, mb, mx = (np.array([p[i] for p in pairs]) for i in range(4))
+    return sc.facing(sb, mb, sx, mx)
+
+
+def test_facing_pairs_of_one_surface():
+    """A facet faces a facet across a gap (opposite normals, each in front of the other);
+    not itself, not its smooth neighbour, not the back of a wall (thicker than half a
+    facet: a thinner one looks like a penetrated pair), not one facing the same way; the
+    two lips of a slit at its tip (a shared node, folded back) do."""
+    up = segment([1.0, 0.0], [0.0, 0.0])  # normal +y
+    cases = {
+        "across a gap": ([0, 1], up, [2, 3], segment([0.2, 0.1], [1.2, 0.1])),
+        "itself": ([0, 1], up, [0, 1], up),
+        "smooth neighbour": ([0, 1], up, [1, 4], segment([0.0, 0.0], [-1.0, 0.0])),
+        "bent neighbour": ([0, 1], up, [1, 4], segment([0.0, 0.0], [-0.6, 0.8])),
+        "back of a wall": ([0, 1], up, [5, 6], segment([0.0, -0.8], [1.0, -0.8])),
+        "facing the same way": ([0, 1], up, [2, 3], segment([1.2, 0.1], [0.2, 0.1])),
+        "slit lips at the tip": ([0, 1], up, [1, 7], segment([0.0, 0.0], [1.0, 0.0])),
+        "penetrated a little": ([0, 1], up, [2, 3], segment([0.2, -0.05], [1.2, -0.05])),
+    }
+    got = dict(zip(cases, facing_of(list(cases.values())), strict=True))
+    assert got == {"across a gap": True, "itself": False, "smooth neighbour": False,
+                   "bent neighbour": False, "back of a wall": False,
+                   "facing the same way": False, "slit lips at the tip": True,
+                   "penetrated a little": True}
+
+
+def zone_pairs():
+    """Candidate pairs of two zones, each found from both facets: zone A (facets 0, 1 of
+    size 1 facing 2, 3, 4 of size 0.5: the finer side 2-4), zone B (facets 10, 11 of
+    equal size facing each other)."""
+    one_way = [(0, 2), (0, 3), (1, 3), (1, 4), (10, 11)]
+    pairs = one_way + [(b, a) for a, b in one_way]
+    size = {0: 1.0, 1: 1.0, 2: 0.5, 3: 0.5, 4: 0.5, 10: 0.3, 11: 0.3}
+    blocks = np.array([[[a, 100 + a], [b, 100 + b]] for a, b in pairs])
+    sizes = np.array([[size[a], size[b]] for a, b in pairs])
+    return pairs, blocks, sizes
+
+
+def test_each_zone_is_counted_once_from_its_finer_side():
+    pairs, blocks, sizes = zone_pairs()
+    keep, master_side = sc.slave_side(MPI.COMM_SELF, blocks[:, 0], blocks[:, 1],
+                                      sizes[:, 0], sizes[:, 1])
+    kept = sorted(p for p, k in zip(pairs, keep, strict=True) if k)
+    assert kept == [(2, 0), (3, 0), (3, 1), (4, 1), (10, 11)]
+    assert sorted(master_side[:, 0].tolist()) == [0, 1, 11]
+
+
+def test_odd_cycles_are_dropped():
+    """Three facets each facing the other two: no two colours; the pairs whose facets
+    share one are dropped, every other pair kept once."""
+    pairs = [(0, 1), (1, 2), (2, 0)]
+    pairs += [(b, a) for a, b in pairs]
+    blocks = np.array([[[a, 100 + a], [b, 100 + b]] for a, b in pairs])
+    keep, _ = sc.slave_side(MPI.COMM_SELF, blocks[:, 0], blocks[:, 1], np.ones(6), np.ones(6))
+    kept = {tuple(sorted(p)) for p, k in zip(pairs, keep, strict=True) if k}
+    assert sum(keep) == len(kept) == 2
+
+
+@pytest.mark.parallel
+def test_ranks_agree_on_the_sides():
+    """The pairs dealt out to the ranks in turn: the same pairs kept as on one rank."""
+    comm = MPI.COMM_WORLD
+    pairs, blocks, sizes = zone_pairs()
+    mine = np.arange(len(pairs)) % comm.size == comm.rank
+    keep, _ = sc.slave_side(comm, blocks[mine, 0], blocks[mine, 1], sizes[mine, 0],
+                            sizes[mine, 1])
+    serial, _ = sc.slave_side(MPI.COMM_SELF, blocks[:, 0], blocks[:, 1], sizes[:, 0],
+                              sizes[:, 1])
+    assert np.array_equal(keep, serial[mine])
+
+
+def test_rows_in():
+    table = np.array([[1, 2], [3, 4]])
+    assert sc.rows_in(np.array([[3, 4], [2, 1], [1, 2]]), table).tolist() == [True, False, True]
+    assert sc.rows_in(np.zeros((0, 2), int), table).size == 0
+
+
+PATCH_CASES = [(2, "triangle", "5:7"), (2, "triangle", "7:5"), (2, "quadrilateral", "4:9"),
+               (2, "triangle", "6:6"), (3, "tetrahedron", "3:4"), (3, "hexahedron", "4:6"),
+               (3, "tetrahedron", "5:3")]
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("dim, cell, ratio", PATCH_CASES)
+@pytest.mark.parametrize("basis", ["dual", "standard"])
+def test_self_contact_patch_test_is_exact(dim, cell, ratio, basis):
+    summary = demo("self_contact").main(
+        ["--dim", str(dim), "--cell", cell, "--ratio", ratio, "--multipliers", basis])
+    assert summary["converged"]
+    assert summary["max_pressure_deviation_rel"] < 1e-10
+    assert summary["max_multiplier_deviation_rel"] < 1e-10
+    assert summary["force_balance"] < 1e-10
+    assert summary["max_penetration_rel"] < 1e-10
+    # the finer lip carries the multipliers, all but the tip's
+    n_left, n_right = (int(n) for n in ratio.split(":"))
+    layers = 1 if dim == 2 else max(1, min(n_left, n_right) // 2) + 1
+    assert summary["slave_nodes"] == max(n_left, n_right) * layers
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("dim, cell", [(2, "quadrilateral"), (3, "hexahedron")])
+def test_self_contact_patch_test_neo_hookean_is_uniform(dim, cell):
+    """Uniform to Newton's tolerance (the default relative 1e-10 leaves a spread of 3.5e-10
+    in 3D): solved to 1e-13 here, through the options database as a user would."""
+    options = PETSc.Options()
+    options["dolfinx_mortar_snes_rtol"] = 1e-13
+    try:
+        summary = demo("self_contact").main(
+            ["--dim", str(dim), "--cell", cell, "--ratio", "4:6", "--material", "neo-hookean"])
+    finally:
+        options.delValue("dolfinx_mortar_snes_rtol")
+    assert summary["converged"] and summary["newton_iterations"] <= 6
+    assert summary["max_pressure_deviation_rel"] < 1e-10  # (max - min) / mean
+    assert summary["force_balance"] < 1e-10
+
+
+def pressed_slit(dim: int, cell: str, comm=MPI.COMM_WORLD, noise: float = 1e-3,
+                 **options) -> ContactProblem:
+    """The slit block (Neo-Hookean, current configuration) with its lips pushed 0.02 into
+    each other and sheared by waves plus ``noise`` (1e-3), random multipliers in [0.5, 1.5]
+    (without noise: all 1, the same state on any number of ranks): a
+    state for a Taylor test in which no active set and no clip polygon's shape changes
+    within the steps (at most 1e-4: with noise as small as the steps, the lips' aligned
+    layers leave edges of slave and master facets crossing within a step in 3D)."""
+    tagged = meshes.slit_block((4, 6), cell, comm)
+    markers = tagged.markers
+    V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (dim,)))
+    u = dolfinx.fem.Function(V)
+    F = internal_work(u, ufl.TestFunction(V), {markers["block"]: Material(1000.0, 0.3,
+                                                                           "neo-hookean")},
+                      tagged.cell_tags)
+    bcs = []
+    for name, component, value in (("bottom", 1, 0.0),):
+        dofs = dolfinx.fem.locate_dofs_topological(
+            V.sub(component), dim - 1, tagged.facet_tags.find(markers[name]))
+        bcs.append(dolfinx.fem.dirichletbc(dolfinx.default_scalar_type(value), dofs,
+                                           V.sub(component)))
+    pair = ContactPair(tagged.facet_tags, markers["slit"], markers["slit"])
+    problem = ContactProblem(F, u, bcs, [pair], configuration="current", **options)
+    rng = np.random.default_rng(5 + comm.rank)
+
+    def pushed(towards: float):
+        def field(x):
+            # zero from the tip up, where the halves share their nodes
+            depth = towards * np.clip((meshes.SLIT_TIP - x[1]) / meshes.SLIT_TIP, 0.0, 1.0)
+            wave = 0.01 * np.sin(3.0 * x[1])
+            return np.vstack([depth, wave]
+                             + ([0.005 * np.cos(2.0 * x[1])] if dim == 3 else []))
+        return field
+
+    # by cells: the two lips' nodes share their coordinates
+    for side, towards in ((lambda x: x[0] <= 1.0 + 1e-12, 0.01),
+                          (lambda x: x[0] >= 1.0 - 1e-12, -0.01)):
+        u.interpolate(pushed(towards), dolfinx.mesh.locate_entities(tagged.mesh, dim, side))
+    u.x.array[:] += noise * rng.standard_normal(u.x.array.size)
+    u.x.scatter_forward()
+    compat.set_bc_values(u, problem.bcs)
+    for z in problem.multipliers:
+        if noise:
+            z.setArray(rng.uniform(0.5, 1.5, z.getLocalSize()))
+        else:
+            z.set(1.0)
+    problem.equations.read_state(problem.x)
+    return problem
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("dim, cell", [(2, "triangle"), (3, "tetrahedron"), (3, "hexahedron")])
+def test_self_contact_jacobian_taylor(dim, cell):
+    """|R(x + e h) - R(x) - e J h| = O(e^2) with the lips pressed into each other: the
+    facets of one surface in both roles, the tip's node in both."""
+    problem = pressed_slit(dim, cell)
+    assert_taylor_second_order(problem, seed=11)
+    problem.destroy()
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("dim, cell", [(2, "triangle"), (3, "tetrahedron")])
+def test_self_contact_serial_equals_parallel(dim, cell):
+    """The Neo-Hookean patch test on one rank and on all: the same pressures and forces.
+    (Not the same Newton path in 3D: the lips' edges on the block's faces lie on each
+    other, so which side of a clip a sliver falls on is rounding, and with it the
+    Jacobian's branch; measured the same for two bodies, demos/patch_test.py --dim 3
+    --material neo-hookean: 3 Newton iterations on 1 and 3 ranks, the second residual
+    7.8e-4 against 4.1e-4.)"""
+    results = []
+    for communicator in (MPI.COMM_SELF, MPI.COMM_WORLD):
+        summary = demo("self_contact").main(
+            ["--dim", str(dim), "--cell", cell, "--ratio", "3:5", "--material",
+             "neo-hookean"], comm=communicator)
+        assert summary["converged"]
+        results.append(np.hstack([summary["pressure_min"], summary["pressure_max"],
+                                  summary["slave_force"]]))
+    serial, parallel = results
+    np.testing.assert_allclose(parallel, serial, rtol=1e-8, atol=1e-8 * np.abs(serial).max())
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("dim, cell", [(2, "triangle"), (3, "tetrahedron")])
+def test_self_contact_system_serial_equals_parallel(dim, cell):
+    """At one pressed state (no noise: the same on any number of ranks) the residual and
+    the Jacobian's action on a smooth direction have the same norms on one rank and on
+    all."""
+    norms = []
+    for communicator in (MPI.COMM_SELF, MPI.COMM_WORLD):
+        problem = pressed_slit(dim, cell, comm=communicator, noise=0.0)
+        residual = problem.b.duplicate()
+        problem.equations.residual(problem.snes, problem.x, residual)
+        J = problem.equations.assemble_system()
+        direction = problem.x.copy()
+        applied = residual.duplicate()
+        J.mult(direction, applied)
+        norms.append([residual.norm(), applied.norm(), problem.num_active()])
+        problem.destroy()
+    np.testing.assert_allclose(norms[1], norms[0], rtol=1e-12)
+
+
+def test_a_slit_pulled_open_carries_nothing():
+    """The lips pulled apart: no pressure, the pair's facets are found but hold nothing."""
+    comm = MPI.COMM_WORLD
+    tagged = meshes.slit_block((5, 7), "triangle", comm)
+    markers = tagged.markers
+    V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (2,)))
+    u = dolfinx.fem.Function(V)
+    F = internal_work(u, ufl.TestFunction(V), {markers["block"]: Material(1000.0, 0.3)},
+                      tagged.cell_tags)
+    bcs = []
+    for name, component, value in (("left", 0, -0.01), ("right", 0, 0.01), ("bottom", 1, 0.0)):
+        dofs = dolfinx.fem.locate_dofs_topological(
+            V.sub(component), 1, tagged.facet_tags.find(markers[name]))
+        bcs.append(dolfinx.fem.dirichletbc(dolfinx.default_scalar_type(value), dofs,
+                                           V.sub(component)))
+    pair = ContactPair(tagged.facet_tags, markers["slit"], markers["slit"])
+    with ContactProblem(F, u, bcs, [pair], configuration="reference") as problem:
+        report = problem.solve()
+        assert report.converged
+        assert np.abs(problem.gathered_pressure()[1]).max() < 1e-12
+        assert problem.num_active() == 0
