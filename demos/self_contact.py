@@ -12,13 +12,27 @@ that face each other, the finer lip becomes the slave (the tip's node, on both l
 carries no multiplier), and the mortar integrals pass the uniform pressure through the
 non-matching lips exactly.
 
-JSON (``--json``): ``max_pressure_deviation_rel`` (largest |p_node - p| / p over the
+``--case crush`` (2D): half a Neo-Hookean ring (radii 0.7 and 1, E = 1, the plane x = 0
+a symmetry plane) between two plates (E = 100) that touch it; the upper plate is driven
+down by ``--depth`` (1.5: the plates end 0.5 apart) in ``--steps`` equal steps. The ring's
+outer arc is the slave of one pair with each plate; its inner arc is one self-contact
+surface, ``ContactPair(tags, inner, inner)``: its walls meet at about 0.9 of the travel and
+flatten against each other from the middle out. The plate force against its travel goes
+to a CSV and a PNG, the displacement to ParaView at every step (``--output``).
+
+JSON (``--json``), patch: ``max_pressure_deviation_rel`` (largest |p_node - p| / p over the
 slave lip's nodes, linear material; with a nonlinear material the spread
 (max - min) / mean), ``max_penetration_rel`` (deepest node behind the other lip, in facet
 lengths), ``force_balance`` (|slave force + master force| / |slave force|),
-``newton_iterations``, ``converged``.
+``newton_iterations``, ``converged``. Crush: ``converged`` (every step), ``newton_iterations``
+and ``cutbacks`` per step, ``max_penetration_rel`` (the deepest node of either wall behind
+the other over all steps, in facet lengths), ``force_balance`` (|F_top + F_bottom| /
+|F_top| of the plates' forces on the ring: the self-contact forces cancel within the
+ring), ``plate_force``, ``plate_travel`` and ``inner_active`` (the inner walls' nodes in
+contact) per step.
 
 Run:  python3 demos/self_contact.py --ratio 5:7 --json self.json
+      python3 demos/self_contact.py --case crush --output crush
       mpirun -n 3 python3 demos/self_contact.py --dim 3 --cell hexahedron --ratio 4:6
 """
 
@@ -41,6 +55,7 @@ from dolfinx_mortar import (
     diagnostics,
     internal_work,
     meshes,
+    solve_load_steps,
 )
 
 DEMOS = pathlib.Path(__file__).resolve().parent
@@ -63,13 +78,21 @@ def exact_pressure(gdim: int, E: float = E, nu: float = NU, squeeze: float = SQU
 def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     parser = cli.parser(__doc__)
     parser.add_argument("--dim", type=int, choices=(2, 3), default=2, help="2D or 3D")
-    parser.add_argument("--case", choices=("patch",), default="patch", help="which problem")
+    parser.add_argument("--case", choices=("patch", "crush"), default="patch",
+                        help="which problem")
     parser.add_argument("--ratio", default="5:7", help="left:right lip elements along the slit")
     parser.add_argument("--cell-type", "--cell", choices=meshes.CELL_TYPES + meshes.CELL_TYPES_3D,
                         default=None, help="cells (default: triangle in 2D, tetrahedron in 3D)")
+    parser.add_argument("--steps", type=int, default=60, help="load steps (crush)")
+    parser.add_argument("--depth", type=float, default=1.5, help="plate travel (crush)")
+    parser.add_argument("--refinement", type=int, default=0, help="halves h per level (crush)")
     cli.add_material_argument(parser)
     cli.add_common_arguments(parser)
     args = parser.parse_args(argv)
+    if args.case == "crush":
+        if args.dim != 2:
+            parser.error("--case crush is 2D (--dim 2)")
+        return crush(args, comm)
     allowed = meshes.CELL_TYPES if args.dim == 2 else meshes.CELL_TYPES_3D
     if args.cell_type is None:
         args.cell_type = allowed[0]
@@ -135,6 +158,116 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
               f"{balance:.1e}, {report.iterations} Newton iterations", flush=True)
         write_summary(args.json, summary)
     return summary
+
+
+def crush(args, comm) -> dict:
+    """``--case crush``: see the module docstring."""
+    start = time.perf_counter()
+    tagged = meshes.crushed_ring(args.refinement, comm=comm)
+    mesh, markers, facet_tags = tagged.mesh, tagged.markers, tagged.facet_tags
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    u = dolfinx.fem.Function(V, name="displacement")
+    materials = {markers["ring"]: Material(1.0, NU, "neo-hookean"),
+                 markers["plate_top"]: Material(100.0, NU, "neo-hookean"),
+                 markers["plate_bottom"]: Material(100.0, NU, "neo-hookean")}
+    F = internal_work(u, ufl.TestFunction(V), materials, tagged.cell_tags)
+
+    def dofs(name: str, component: int | None = None):
+        space = V if component is None else V.sub(component)
+        return dolfinx.fem.locate_dofs_topological(space, 1, facet_tags.find(markers[name]))
+
+    travel = dolfinx.fem.Constant(mesh, 0.0)
+    bcs = [dolfinx.fem.dirichletbc(np.float64(0.0), dofs("symmetry", 0), V.sub(0)),
+           dolfinx.fem.dirichletbc(np.zeros(2), dofs("plate_bottom_support"), V),
+           dolfinx.fem.dirichletbc(np.float64(0.0), dofs("plate_top_load", 0), V.sub(0)),
+           dolfinx.fem.dirichletbc(travel, dofs("plate_top_load", 1), V.sub(1))]
+    pairs = [ContactPair(facet_tags, markers["ring_outer_top"], markers["plate_top_contact"],
+                         name="ring-top plate"),
+             ContactPair(facet_tags, markers["ring_outer_bottom"],
+                         markers["plate_bottom_contact"], name="ring-bottom plate"),
+             ContactPair(facet_tags, markers["ring_inner"], markers["ring_inner"],
+                         name="inner walls")]
+    history = []
+    with ContactProblem(F, u, bcs, pairs, **problem_options(args)) as problem:
+        inner = problem.interfaces[2]
+
+        def apply_load(t: float) -> None:
+            travel.value = -args.depth * t
+
+        def record(step) -> None:
+            top, bottom = (problem.contact_forces(k)[0] for k in (0, 1))
+            slave, master = problem.contact_forces(2)
+            penetration = diagnostics.penetration_report(comm, 0.0, *inner.pair_sides())
+            history.append({
+                "t": step.load, "plate_travel": args.depth * step.load,
+                "newton_iterations": step.iterations, "cutbacks": step.cutbacks,
+                "plate_force": float(-top[1]), "bottom_force": float(bottom[1]),
+                "inner_force": float(np.linalg.norm(slave)),
+                "inner_balance": float(np.linalg.norm(slave + master)),
+                "penetration_rel": float(penetration.depth),
+                "inner_active": int(comm.allreduce(int(problem.active[2].sum()))),
+            })
+
+        output = ContactOutput(problem, args.output / "paraview") if args.output else None
+        records = solve_load_steps(problem, apply_load, args.steps, output=output,
+                                   on_step=record)
+        if output is not None:
+            output.close()
+    top = np.array([h["plate_force"] for h in history])
+    bottom = np.array([h["bottom_force"] for h in history])
+    summary = {
+        "case": "crush", "dim": 2, "refinement": args.refinement, **option_record(args),
+        "num_ranks": comm.size, "steps": args.steps, "depth": args.depth,
+        "converged": bool(records) and abs(records[-1].load - 1.0) < 1e-12,
+        "newton_iterations": [h["newton_iterations"] for h in history],
+        "cutbacks": [h["cutbacks"] for h in history],
+        "max_penetration_rel": max(h["penetration_rel"] for h in history),
+        "force_balance": float(np.max(np.abs(top - bottom)) / np.max(np.abs(top))),
+        "inner_balance_rel": max(h["inner_balance"] for h in history)
+        / max(max(h["inner_force"] for h in history), 1e-300),
+        "plate_travel": [h["plate_travel"] for h in history],
+        "plate_force": top.tolist(), "inner_force": [h["inner_force"] for h in history],
+        "inner_active": [h["inner_active"] for h in history],
+        "num_dofs": V.dofmap.index_map.size_global * 2,
+        "wall_time_s": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
+    }
+    if comm.rank == 0:
+        print(f"crushed ring: {len(history)} steps, Newton iterations per step at most "
+              f"{max(summary['newton_iterations'])}, {sum(summary['cutbacks'])} cut-backs, "
+              f"plate force {top[-1]:.4g} at travel {args.depth:g}, "
+              f"{summary['inner_active'][-1]} inner nodes in contact, deepest penetration {summary['max_penetration_rel']:.3g} facet "
+              f"lengths, force balance {summary['force_balance']:.1e}", flush=True)
+        write_summary(args.json, summary)
+        if args.output:
+            _plot_crush(args.output, history)
+    return summary
+
+
+def _plot_crush(folder: pathlib.Path, history: list[dict]) -> None:
+    import csv
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    folder.mkdir(parents=True, exist_ok=True)
+    keys = ("plate_travel", "plate_force", "inner_force", "newton_iterations", "cutbacks",
+            "penetration_rel", "inner_active")
+    with open(folder / "crush_force.csv", "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(keys)
+        writer.writerows([h[k] for k in keys] for h in history)
+    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    travel = [h["plate_travel"] for h in history]
+    ax.plot(travel, [h["plate_force"] for h in history], "o-", ms=3, label="plate force")
+    ax.plot(travel, [h["inner_force"] for h in history], "s--", ms=3,
+            label="inner walls' contact force")
+    ax.set_xlabel("plate travel")
+    ax.set_ylabel("force (half model, per unit thickness)")
+    ax.legend()
+    ax.grid(True, alpha=0.3)
+    cli.save_figure(fig, folder / "crush_force.png")
 
 
 def interface_nodes(problem: ContactProblem) -> int:

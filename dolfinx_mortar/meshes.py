@@ -943,6 +943,73 @@ def rings(
     return _tagged(data, markers, aliases, h_contact)
 
 
+def crushed_ring(refinement: int = 0, inner_radius: float = 0.7, outer_radius: float = 1.0,
+                 cell_type: str = "triangle", comm: MPI.Comm = MPI.COMM_WORLD) -> TaggedMesh:
+    """Half a ring (x >= 0, centre at the origin) between two plates that touch it at
+    (0, +-outer_radius): ``demos/self_contact.py --case crush`` (the plane x = 0 a
+    symmetry plane).
+
+    The plates are [0, 1.6 R] x [R, 1.2 R] and its mirror; the ring's element size is
+    its thickness over 6 (over 6 * 2**refinement), the plates' 0.1 R.
+
+    Returns:
+        Cells "ring", "plate_top", "plate_bottom"; facets "ring_outer_top" and
+        "ring_outer_bottom" (the outer arc above and below y = 0), "ring_inner" (the
+        whole inner arc: the self-contact surface), "plate_top_contact",
+        "plate_bottom_contact", "plate_top_load" (the top plate's upper face),
+        "plate_bottom_support", "symmetry" (every facet on x = 0).
+    """
+    level = _check_refinement(refinement)
+    quadrilateral = _check_cell_type(cell_type)
+    r_in = _check_positive("inner_radius", inner_radius)
+    r_out = _check_positive("outer_radius", outer_radius)
+    if r_in >= r_out:
+        raise ValueError(f"inner_radius {inner_radius} must be below outer_radius {outer_radius}")
+    h_ring = (r_out - r_in) / 6.0 * 0.5**level
+    markers = _numbered(
+        ["ring", "plate_top", "plate_bottom"],
+        ["ring_outer_top", "ring_outer_bottom", "ring_inner", "plate_top_contact",
+         "plate_bottom_contact", "plate_top_load", "plate_bottom_support", "symmetry"])
+
+    def construct(m: _Model) -> None:
+        centre = m.point(0.0, 0.0)
+        top, right, bottom = m.point(0.0, r_out), m.point(r_out, 0.0), m.point(0.0, -r_out)
+        inner_top, inner_right = m.point(0.0, r_in), m.point(r_in, 0.0)
+        inner_bottom = m.point(0.0, -r_in)
+        outer_top, outer_bottom = m.arc(top, centre, right), m.arc(right, centre, bottom)
+        inner = [m.arc(inner_top, centre, inner_right), m.arc(inner_right, centre, inner_bottom)]
+        cuts = [m.line(inner_top, top), m.line(bottom, inner_bottom)]
+        ring = m.surface([outer_top, outer_bottom, cuts[1], *inner[::-1], cuts[0]])
+        plates, faces = {}, {}
+        for name, sign in (("top", 1.0), ("bottom", -1.0)):
+            near, far = sign * r_out, sign * 1.2 * r_out
+            corners = [m.point(0.0, near), m.point(1.6 * r_out, near),
+                       m.point(1.6 * r_out, far), m.point(0.0, far)]
+            sides = [m.line(corners[i], corners[(i + 1) % 4]) for i in range(4)]
+            plates[name] = m.surface(sides)
+            faces[name] = sides
+        m.refine_near([outer_top, outer_bottom, *inner], h_ring, GROWTH)
+        m.refine_near([faces["top"][0], faces["bottom"][0]], 2.0 * h_ring, GROWTH)
+        m.mesh(
+            cells={markers["ring"]: [ring], markers["plate_top"]: [plates["top"]],
+                   markers["plate_bottom"]: [plates["bottom"]]},
+            facets={markers["ring_outer_top"]: [outer_top],
+                    markers["ring_outer_bottom"]: [outer_bottom],
+                    markers["ring_inner"]: inner,
+                    markers["plate_top_contact"]: [faces["top"][0]],
+                    markers["plate_bottom_contact"]: [faces["bottom"][0]],
+                    markers["plate_top_load"]: [faces["top"][2]],
+                    markers["plate_bottom_support"]: [faces["bottom"][2]],
+                    markers["symmetry"]: cuts + [faces["top"][3], faces["bottom"][3]]},
+            names=_names(markers),
+            h_max=0.1 * r_out,
+            quadrilateral=quadrilateral,
+        )
+
+    data = _build(comm, "crushed_ring", construct)
+    return _tagged(data, markers, {}, h_ring)
+
+
 SLIT_TIP = 1.2
 """How far (in y, from y = 0) :func:`slit_block`'s slit reaches into the block [0, 2]^2."""
 

@@ -186,6 +186,7 @@ class MortarInterface:
         self.quantities: PairQuantities | None = None
         self._crosspoint_blocks = np.zeros(0, dtype=np.int64)
         self._fold_blocks = np.zeros(0, dtype=np.int64)
+        self._slave_side_facets: np.ndarray | None = None
         self._pair_dofs: np.ndarray | None = None
         self.stencil: stencils.PairStencil | None = None
         self.scalar_gradients = False
@@ -542,13 +543,15 @@ class MortarInterface:
         slave_blocks = self._node_blocks[slave_nodes]
         master_blocks = self._node_blocks[master_nodes]
         slave_x, master_x = self._node_x[slave_nodes], self._node_x[master_nodes]
-        facing = self_contact.facing(slave_blocks, master_blocks, slave_x, master_x)
+        facing = self_contact.facing(slave_blocks, master_blocks, slave_x, master_x,
+                                     self.search_depth)
         pairs, slave_nodes, master_nodes = (
             pairs[facing], slave_nodes[facing], master_nodes[facing])
         sizes = [self_contact.facet_frames(self._node_x, nodes)[2]
                  for nodes in (slave_nodes, master_nodes)]
-        slave_side, master_side = self_contact.slave_side(
-            self.comm, slave_blocks[facing], master_blocks[facing], *sizes)
+        slave_side, master_side, self._slave_side_facets = self_contact.slave_side(
+            self.comm, slave_blocks[facing], master_blocks[facing], *sizes,
+            previous_slaves=self._slave_side_facets)
         on_master_side = self_contact.rows_in(
             np.sort(self._node_blocks[all_slave_facets], axis=1), master_side)
         # a node on both sides of a zone (a slit's tip) has a weighted gap of zero whatever

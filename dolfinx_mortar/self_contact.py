@@ -4,15 +4,18 @@ A :class:`~dolfinx_mortar.mortar.MortarInterface` whose slave and master tags ar
 searches the surface against itself. Of the candidate pairs the search finds, a pair of
 facets is kept when the two facets can meet from the front (:func:`facing`): they are
 different facets, their outward normals point against each other, and each lies in front
-of the other (not back to back, as the two faces of a thin wall); facets that share a node
+of the other (not back to back, as the two faces of a wall thicker than the search's
+depth); facets that share a node
 only when they are folded onto each other (the two lips of a slit at its tip).
 
 Each pair of facing facets is found twice, once from each facet. Which facet is the slave
 is decided per contact zone, so that every zone is counted once and its multipliers sit
 on one side (:func:`slave_side`): the pairs form a graph whose connected components are
 the zones; its facets are coloured in two (breadth first from the zone's first facet), the
-side of finer facets (smaller mean measure; on a tie, the side of the first facet) is the
-slave, as the finer side is advised for two bodies. The graph is gathered on every rank
+side of clearly finer facets is the slave, as the finer side is advised for two bodies;
+between sides of about equal facets the side that was the slave at the last search stays
+the slave (so that a growing zone does not swap its multipliers from one wall to the
+other), and a new zone takes the finer, or on a tie the side of its first facet. The graph is gathered on every rank
 and coloured identically there, so that the ranks agree. A pair whose facets got one colour
 (an odd cycle: a zone that curls round onto itself) is dropped. A surface far from itself
 has no candidates and costs one collective gather of nothing per search.
@@ -32,9 +35,13 @@ from mpi4py import MPI
 FOLDED_COSINE = -0.5
 """Facets sharing a node are paired only when their normals' cosine is below this: folded
 onto each other (a slit's lips: -1), not neighbours on a smooth or bent surface."""
+CLEARLY_FINER = 1.1
+"""A side whose facets are this many times smaller (in mean) than the other's is the
+slave whatever the last search decided; between closer sides the last decision holds."""
 BEHIND_SHARE = 0.5
 """A facet whose centre lies further behind the other facet's plane than this share of the
-two facets' mean size does not face it (back to back: the two faces of a thin wall)."""
+two facets' mean size, and than the search's depth, does not face it (back to back: the
+two faces of a wall)."""
 
 
 def facet_frames(x: np.ndarray, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray,
@@ -58,10 +65,12 @@ def facet_frames(x: np.ndarray, facets: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 
 def facing(slave_blocks: np.ndarray, master_blocks: np.ndarray, slave_x: np.ndarray,
-           master_x: np.ndarray) -> np.ndarray:
+           master_x: np.ndarray, depth: float = 0.0) -> np.ndarray:
     """Which candidate pairs of one surface's facets can meet from the front (see the
     module docstring). ``*_blocks`` (n, k): each pair's facet nodes' global dof blocks;
-    ``*_x`` (n, k, gdim): their positions, in the surface's node order."""
+    ``*_x`` (n, k, gdim): their positions, in the surface's node order; ``depth``: how
+    far behind each other the search pairs facets (a penetration the contact is to undo,
+    not the back of a wall)."""
     n, k = slave_blocks.shape
     if n == 0:
         return np.zeros(0, dtype=bool)
@@ -73,39 +82,97 @@ def facing(slave_blocks: np.ndarray, master_blocks: np.ndarray, slave_x: np.ndar
     cosine = np.einsum("ij,ij->i", slave_normal, master_normal)
     shares = (slave_blocks[:, :, None] == master_blocks[:, None, :]).any(axis=(1, 2))
     offset = master_centre - slave_centre
-    reach = BEHIND_SHARE * 0.5 * (slave_size + master_size)
+    reach = np.maximum(BEHIND_SHARE * 0.5 * (slave_size + master_size), depth)
     in_front = ((np.einsum("ij,ij->i", offset, slave_normal) > -reach)
                 & (np.einsum("ij,ij->i", offset, master_normal) < reach))
     return in_front & np.where(shares, cosine < FOLDED_COSINE, cosine < 0.0)
 
 
 def slave_side(comm: MPI.Intracomm, slave_blocks: np.ndarray, master_blocks: np.ndarray,
-               slave_size: np.ndarray, master_size: np.ndarray) -> tuple[np.ndarray,
-                                                                         np.ndarray]:
+               slave_size: np.ndarray, master_size: np.ndarray,
+               previous_slaves: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray,
+                                                                   np.ndarray]:
     """Which of this rank's facing pairs keep their slave facet as the slave (see the module
     docstring), and the master sides' facets (sorted global dof blocks, (m, k)), which
     the slave nodes' averaged normals leave out (at a slit's tip the two lips' normals
-    would cancel). ``*_blocks`` (n, k): each pair's facets' global dof blocks;
-    ``*_size``: their sizes. Collective: every rank calls it at every search of a
-    self-contact surface, and all get the same zones and sides."""
+    would cancel), and the slave sides' facets (the next search's ``previous_slaves``).
+    ``*_blocks`` (n, k): each pair's facets' global dof blocks; ``*_size``: their sizes;
+    ``previous_slaves``: the slave sides' facets of the last search (sorted global dof
+    blocks), which keep their side where neither is :data:`CLEARLY_FINER`. Collective:
+    every rank calls it at every search of a self-contact surface, and all get the same
+    zones and sides."""
     k = slave_blocks.shape[1]
     local = np.column_stack([np.sort(slave_blocks, axis=1), np.sort(master_blocks, axis=1)])
     gathered = comm.allgather((local, np.column_stack([slave_size, master_size])))
     keys = np.concatenate([g[0] for g in gathered]).reshape(-1, 2, k)
     sizes = np.concatenate([g[1] for g in gathered]).reshape(-1, 2)
     if keys.shape[0] == 0:
-        return np.zeros(0, dtype=bool), np.zeros((0, k), dtype=np.int64)
+        empty = np.zeros((0, k), dtype=np.int64)
+        return np.zeros(0, dtype=bool), empty, empty
     facets, ids = np.unique(keys.reshape(-1, k), axis=0, return_inverse=True)
     ids = ids.reshape(-1, 2)
     facet_size = np.zeros(facets.shape[0])
     facet_size[ids.reshape(-1)] = sizes.reshape(-1)
     colour, zone, conflict = _two_colours(facets.shape[0], ids)
-    slave_colour = _finer_colour(colour, zone, facet_size)
+    was_slave = (rows_in(facets, previous_slaves) if previous_slaves is not None
+                 else np.zeros(facets.shape[0], dtype=bool))
+    slave_colour = _slave_colour(colour, zone, facet_size, was_slave)
     start = sum(g[0].shape[0] for g in gathered[:comm.rank])
     mine = slice(start, start + slave_blocks.shape[0])
     first = ids[mine, 0]
     master_side = colour != slave_colour[zone]
-    return (colour[first] == slave_colour[zone[first]]) & ~conflict[mine], facets[master_side]
+    return ((colour[first] == slave_colour[zone[first]]) & ~conflict[mine],
+            facets[master_side], facets[~master_side])
+
+
+def rows_in(rows: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """Which rows of ``rows`` (n, k) are rows of ``table`` (m, k) (integer arrays)."""
+    if rows.shape[0] == 0 or table.shape[0] == 0:
+        return np.zeros(rows.shape[0], dtype=bool)
+    _, inverse = np.unique(np.concatenate([table, rows]), axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    return np.isin(inverse[table.shape[0]:], inverse[:table.shape[0]])
+
+
+def _two_colours(num_facets: int, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray,
+                                                               np.ndarray]:
+    """(colour 0/1 per facet, zone per facet, whether each pair's two facets got one
+    colour): breadth first from each zone's lowest facet, the colour the parity of the
+    depth."""
+    graph = scipy.sparse.coo_matrix(
+        (np.ones(pairs.shape[0]), (pairs[:, 0], pairs[:, 1])), shape=(num_facets,) * 2).tocsr()
+    graph = graph + graph.T
+    num_zones, zone = scipy.sparse.csgraph.connected_components(graph, directed=False)
+    depth = np.full(num_facets, -1, dtype=np.int64)
+    roots = np.unique(zone, return_index=True)[1]
+    for root in roots:
+        order, predecessor = scipy.sparse.csgraph.breadth_first_order(
+            graph, root, directed=False, return_predecessors=True)
+        depth[root] = 0
+        for facet in order[1:]:
+            depth[facet] = depth[predecessor[facet]] + 1
+    colour = depth % 2
+    return colour, zone, colour[pairs[:, 0]] == colour[pairs[:, 1]]
+
+
+def _slave_colour(colour: np.ndarray, zone: np.ndarray, size: np.ndarray,
+                  was_slave: np.ndarray) -> np.ndarray:
+    """Per zone, the colour of its slave side: the side :data:`CLEARLY_FINER` than the
+    other if one is; else the side with more facets that were slaves at the last search
+    (a zone that grows keeps its sides); else the finer by the mean facet size; else
+    colour 0 (the side of the zone's first facet)."""
+    num_zones = int(zone.max()) + 1 if zone.size else 0
+    total, count, kept = (np.zeros((num_zones, 2)) for _ in range(3))
+    np.add.at(total, (zone, colour), size)
+    np.add.at(count, (zone, colour), 1.0)
+    np.add.at(kept, (zone, colour), was_slave.astype(float))
+    mean = total / np.where(count > 0, count, 1.0)
+    mean[count == 0] = np.inf
+    one = np.where(mean[:, 1] * CLEARLY_FINER < mean[:, 0], True,
+                   np.where(mean[:, 0] * CLEARLY_FINER < mean[:, 1], False,
+                            np.where(kept[:, 1] != kept[:, 0], kept[:, 1] > kept[:, 0],
+                                     mean[:, 1] < mean[:, 0] * (1.0 - 1e-9))))
+    return one.astype(np.int64)
 
 
 def rows_in(rows: np.ndarray, table: np.ndarray) -> np.ndarray:
