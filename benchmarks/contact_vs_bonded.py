@@ -11,7 +11,7 @@ this script
    otherwise), loaded by the demo's traction and a uniform body force. Plain dolfinx:
    assembly, then CG + GAMG (dolfinx's elasticity demo options) with the six rigid-body
    modes as the near-nullspace (``--per-body-modes``: six per body) and block size 3,
-   rtol 1e-8. Reported:
+   rtol 1e-8. Reported: the cells' edge ratios (longest / shortest edge),
    assembly, GAMG set-up and CG solve times (the slowest rank), CG iterations and the
    peak resident set per rank;
 2. runs the demo itself (its options after ``--``) with the condensed preconditioner
@@ -121,6 +121,26 @@ def global_rigid_body_modes(V) -> list[np.ndarray]:
     return basis
 
 
+CELL_EDGES = {
+    "tetrahedron": ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)),
+    # dolfinx's hexahedron: vertices 0-7 in lexicographic order, edges along x, y, z
+    "hexahedron": ((0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7),
+                   (0, 4), (1, 5), (2, 6), (3, 7)),
+}
+
+
+def edge_ratios(mesh) -> dict:
+    """Longest over shortest edge of every cell (owned cells, gathered): the mesh's
+    stretching, which algebraic multigrid feels. Collective."""
+    owned = mesh.topology.index_map(3).size_local
+    nodes = mesh.geometry.x[compat.geometry_dofmap(mesh)[:owned]]
+    lengths = np.stack([np.linalg.norm(nodes[:, i] - nodes[:, j], axis=1)
+                        for i, j in CELL_EDGES[mesh.topology.cell_name()]], axis=1)
+    ratios = np.concatenate(mesh.comm.allgather(lengths.max(axis=1) / lengths.min(axis=1)))
+    return {"median": float(np.median(ratios)), "p90": float(np.percentile(ratios, 90)),
+            "max": float(ratios.max()), "fraction_above_10": float(np.mean(ratios > 10.0))}
+
+
 def bonded_solve(args, comm) -> dict:
     """Build the mesh, assemble and solve the bonded problem ``args.bonded_repeats``
     times (see the module docstring); times are the slowest rank's."""
@@ -163,6 +183,7 @@ def bonded_solve(args, comm) -> dict:
         "form_compile_s": compile_time,
         "options": BONDED_OPTIONS,
         "near_nullspace_vectors": len(modes),
+        "edge_ratio": edge_ratios(mesh),
         "solves": solves,
         "peak_mib_per_rank": comm.gather(memory["VmHWM"], root=0),
         "rss_mib_per_rank": comm.gather(memory["VmRSS"], root=0),
@@ -351,7 +372,10 @@ def report(result: dict) -> None:
     print(f"bonded ({bonded['cell']}, {bonded['num_dofs']} dofs): assembly "
           f"{last['assembly_s']:.3f} s, GAMG set-up {last['set_up_s']:.3f} s, CG "
           f"{last['solve_s']:.3f} s ({last['iterations']} iterations), total "
-          f"{last['total_s']:.3f} s; peak RSS per rank {bonded['peak_mib_per_rank']} MiB")
+          f"{last['total_s']:.3f} s; peak RSS per rank {bonded['peak_mib_per_rank']} MiB; "
+          "edge ratio (longest / shortest edge of a cell) median {median:.2f}, 90th "
+          "percentile {p90:.2f}, max {max:.2f}, above 10: {fraction_above_10:.1%}".format(
+              **bonded["edge_ratio"]))
     if "box" in result:
         box = result["box"]["solves"][-1]
         print(f"bonded on the unit cube ({result['box']['num_dofs']} dofs): assembly "

@@ -248,3 +248,22 @@ def test_contact_vs_bonded_reports_that_friction_takes_the_direct_solver():
     assert contact["linear_solver"] == "direct"
     assert contact["friction"] == ["coulomb", 0.3]
     assert contact["inner_solver"] is None and contact["applications"] == 0
+
+
+def test_edge_ratios_of_a_unit_cube():
+    """Longest over shortest edge per cell: 1 for the cubes of a uniform hexahedral box; on
+    its tetrahedra (each cube cut into six along a body diagonal) the body diagonal over a
+    cube edge, sqrt(3), for every cell."""
+    import dolfinx
+    from mpi4py import MPI
+
+    ratios = contact_vs_bonded().edge_ratios
+    cube = dolfinx.mesh.create_unit_cube(MPI.COMM_WORLD, 3, 3, 3,
+                                         dolfinx.mesh.CellType.hexahedron)
+    assert ratios(cube) == {"median": pytest.approx(1.0), "p90": pytest.approx(1.0),
+                            "max": pytest.approx(1.0), "fraction_above_10": 0.0}
+    cube = dolfinx.mesh.create_unit_cube(MPI.COMM_WORLD, 3, 3, 3,
+                                         dolfinx.mesh.CellType.tetrahedron)
+    result = ratios(cube)
+    assert result["median"] == pytest.approx(math.sqrt(3.0))
+    assert result["max"] == pytest.approx(math.sqrt(3.0))
