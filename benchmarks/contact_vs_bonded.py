@@ -404,6 +404,10 @@ def main(argv=None) -> dict:
     parser.add_argument("--refinement", type=int, default=1)
     parser.add_argument("--elements-per-radius", type=int, default=meshes3d.ELEMENTS_PER_RADIUS)
     parser.add_argument("--bonded-only", action="store_true")
+    parser.add_argument("--hexahedral-growth", type=float, default=None,
+                        help="size ratio of neighbouring graded hexahedra (default "
+                             f"meshes3d.HEXAHEDRAL_GROWTH = {meshes3d.HEXAHEDRAL_GROWTH}): "
+                             "a mesh-quality experiment, for the bonded and the contact run")
     parser.add_argument("--per-body-modes", action="store_true",
                         help="the bonded solve's near-nullspace: six modes per body (as the "
                              "contact problem's K_c) instead of the mesh's six")
@@ -418,7 +422,10 @@ def main(argv=None) -> dict:
     args = parser.parse_args(argv)
     demo_args = args.demo_args[1:] if args.demo_args[:1] == ["--"] else args.demo_args
     comm = MPI.COMM_WORLD
-    result = {"ranks": comm.size, "load_before": os.getloadavg()[0],
+    if args.hexahedral_growth is not None:
+        meshes3d.HEXAHEDRAL_GROWTH = args.hexahedral_growth
+    result = {"ranks": comm.size, "hexahedral_growth": meshes3d.HEXAHEDRAL_GROWTH,
+              "load_before": os.getloadavg()[0],
               "petsc_options_env": os.environ.get("PETSC_OPTIONS", ""),
               "bonded": bonded_solve(args, comm)}
     if args.box:
