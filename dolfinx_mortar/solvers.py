@@ -116,6 +116,16 @@ BOOMERAMG_3D_OPTIONS = {
     "pc_hypre_boomeramg_P_max": 4,
 }
 
+BOOMERAMG_HEXAHEDRON_OPTIONS = {
+    # added (under condensed_, unless the user set them) on hexahedral meshes, after
+    # BOOMERAMG_3D_OPTIONS: the graded hexahedral Hertz grids (cells up to 20:1) took 16.5
+    # inner steps per application at the default threshold 0.25 and 6.3 at 0.7 (50,526
+    # dofs, serial; inner steps per Newton iteration 87 -> 28, outer 5.3 -> 4.4, the same
+    # Newton iterates). On tetrahedra 0.7 cost steps (6.1 -> 9.7), so there it stays
+    # (docs/benchmarks.md, "Contact vs bonded elasticity (issue 26)")
+    "pc_hypre_boomeramg_strong_threshold": 0.7,
+}
+
 GAMG_OPTIONS = {
     # selectable with petsc_options={"condensed_pc_type": "gamg"}: the near-nullspace
     # (rigid-body modes) is set on K_c for it; SOR smoothing needs no eigenvalue
@@ -291,8 +301,12 @@ def rigid_body_modes(V) -> list[np.ndarray]:
 
 
 def condensed_preconditioner(ksp: PETSc.KSP, layout, interfaces, block_size: int, prefix: str,
-                             near_nullspace: list[np.ndarray] | None = None):
-    """Make the condensed solve the (python) preconditioner of the monolithic KSP."""
+                             near_nullspace: list[np.ndarray] | None = None,
+                             cell_name: str = ""):
+    """Make the condensed solve the (python) preconditioner of the monolithic KSP.
+
+    ``cell_name`` (the mesh's cell type) selects BoomerAMG's options beyond the
+    dimension's: :data:`BOOMERAMG_HEXAHEDRON_OPTIONS` on hexahedra."""
     from .condensation import CondensedPreconditioner
 
     comm = layout.comm
@@ -306,7 +320,10 @@ def condensed_preconditioner(ksp: PETSc.KSP, layout, interfaces, block_size: int
     options = PETSc.Options()
     added = []
     if block_size == 3:
-        for key, value in BOOMERAMG_3D_OPTIONS.items():
+        defaults = dict(BOOMERAMG_3D_OPTIONS)
+        if cell_name == "hexahedron":
+            defaults.update(BOOMERAMG_HEXAHEDRON_OPTIONS)
+        for key, value in defaults.items():
             name = f"{prefix}condensed_{key}"
             if not options.hasName(name):
                 options[name] = value
