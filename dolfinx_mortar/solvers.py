@@ -5,9 +5,10 @@ or, with condensation, fgmres on it preconditioned by a condensed displacement-o
 solve (:mod:`dolfinx_mortar.condensation`): MUMPS LU (``linear_solver="direct"``) or
 GMRES with algebraic multigrid whose near-nullspace is the rigid-body modes of each
 body (``linear_solver="iterative"``; BoomerAMG, with :data:`BOOMERAMG_3D_OPTIONS` in
-3D and :data:`BOOMERAMG_HEXAHEDRON_OPTIONS` on hexahedra). ``linear_solver="auto"``, the problem's default, is one of the two by dimension
-and size (:func:`automatic_linear_solver`), and falls back to the direct solver for
-the rest of the run where the iterative one fails a linear solve. The option
+3D and :data:`BOOMERAMG_HEXAHEDRON_OPTIONS` on hexahedra). ``linear_solver="auto"``,
+the problem's default, is one of the two by dimension and size
+(:func:`automatic_linear_solver`), and falls back to the direct solver for the rest of
+the run where the iterative one fails a linear solve. The option
 ``condensed_keep_products`` (default true) keeps the condensation's sub-matrices and
 products between Newton iterations, so that a Jacobian of the same pattern only
 recomputes values; false frees them after each set-up (less memory, every product
