@@ -41,6 +41,11 @@ SETS = {
                         BOOMERAMG + "vec_interp_variant": 2},
     "hmis_nodal1_vi3": {**HMIS, BOOMERAMG + "nodal_coarsen": 1,
                         BOOMERAMG + "vec_interp_variant": 3},
+    "hmis_st0.5_l1gs": {**HMIS, BOOMERAMG + "strong_threshold": 0.5,
+                        BOOMERAMG + "relax_type_all": "l1scaled-SOR/Jacobi"},
+    "hmis_st0.5_agg1": {**HMIS, BOOMERAMG + "strong_threshold": 0.5, BOOMERAMG + "agg_nl": 1},
+    "hmis_st0.7_agg1": {**HMIS, BOOMERAMG + "strong_threshold": 0.7, BOOMERAMG + "agg_nl": 1},
+    "hmis_st0.5_nodal4": {**NODAL4, BOOMERAMG + "strong_threshold": 0.5},
     "gamg_sor": GAMG_SOR,
     "gamg_sor_t0.05": {**GAMG_SOR, "pc_gamg_threshold": 0.05},
 }

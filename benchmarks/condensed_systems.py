@@ -8,7 +8,9 @@ of its first two applications as ``b_<k>_<i>.dat``, the rigid-body modes as
 iteration in ``info.json`` (printed too): the first application of a Newton step
 gets the Newton residual, the later ones FGMRES's Krylov directions.
 
-    tools/run python3 benchmarks/condensed_systems.py N0 REF OUTPUT_DIR
+    tools/run python3 benchmarks/condensed_systems.py N0 REF OUTPUT_DIR [DEMO OPTIONS...]
+
+Further arguments go to the demo as they are (e.g. ``--cell hexahedron --steps 1``).
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ def save(obj, path: pathlib.Path) -> None:
     viewer.destroy()
 
 
-def main(n0: int, refinement: int, output: pathlib.Path) -> dict:
+def main(n0: int, refinement: int, output: pathlib.Path, demo_options=()) -> dict:
     output.mkdir(parents=True, exist_ok=True)
     condenser_class = condensation.CondensedPreconditioner
     set_up, apply = condenser_class.setUp, condenser_class.apply
@@ -55,7 +57,8 @@ def main(n0: int, refinement: int, output: pathlib.Path) -> dict:
     condenser_class.setUp, condenser_class.apply = logged_set_up, logged_apply
     try:
         summary = demo("hertz_sphere").main(["--elements-per-radius", str(n0), "--refinement",
-                                             str(refinement), "--linear-solver", "iterative"])
+                                             str(refinement), "--linear-solver", "iterative",
+                                             *demo_options])
     finally:
         condenser_class.setUp, condenser_class.apply = set_up, apply
     info = {"dofs": summary["num_dofs"], "newton": summary["newton_iterations"],
@@ -69,4 +72,4 @@ def main(n0: int, refinement: int, output: pathlib.Path) -> dict:
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]), int(sys.argv[2]), pathlib.Path(sys.argv[3]))
+    main(int(sys.argv[1]), int(sys.argv[2]), pathlib.Path(sys.argv[3]), sys.argv[4:])

@@ -76,7 +76,7 @@ class ContactNewton:
                                   if self.linear_solver == "iterative" else None)
                 self.condenser = solvers.condensed_preconditioner(
                     ksp, equations.layout, self.interfaces, V.dofmap.index_map_bs,
-                    self.prefix, near_nullspace)
+                    self.prefix, near_nullspace, V.mesh.topology.cell_name())
 
         self.snes = snes
         self.solve_options = solvers.configure_snes(

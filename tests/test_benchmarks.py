@@ -202,3 +202,68 @@ def test_library_ships_neither_benchmarks_nor_demo_helpers():
             if words[:1] in (["import"], ["from"]) and len(words) > 1:
                 module = words[1].split(".")[0]
                 assert module not in ("benchmarks", "suite", "demos", "cli"), (path, line)
+
+
+def contact_vs_bonded():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("contact_vs_bonded",
+                                                  BENCHMARKS / "contact_vs_bonded.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_contact_vs_bonded_measures_both_on_the_same_mesh(tmp_path):
+    """Issue 26's baseline: the bonded solve converges (CG + GAMG, block size 3, the
+    six rigid-body modes) on the contact problem's mesh (same dofs); the contact run's
+    parts are recorded (the inner iterations per set-up, one application per outer
+    iteration, times per Newton iteration) and the ratio is the contact time per Newton
+    iteration over the bonded solve's."""
+    path = tmp_path / "cvb.json"
+    result = contact_vs_bonded().main(["--refinement", "0", "--bonded-repeats", "1",
+                                       "--json", str(path), "--", "--steps", "1",
+                                       "--linear-solver", "iterative"])
+    bonded, contact = result["bonded"], result["contact"]
+    solve = bonded["solves"][0]
+    assert solve["reason"] > 0 and 0 < solve["iterations"] < 100
+    assert solve["block_size"] == 3 and bonded["near_nullspace_vectors"] == 6
+    assert bonded["num_dofs"] == contact["num_dofs"] == 2703
+    assert contact["linear_solver"] == "iterative" and contact["inner_solver"] == "hypre"
+    newton = sum(contact["newton_iterations"])
+    assert len(contact["inner_iterations"]) == newton
+    assert contact["applications"] == sum(contact["outer_iterations"])
+    per_newton = contact["per_newton_s"]
+    assert per_newton["total"] == pytest.approx(contact["timings"]["total"] / newton)
+    assert result["ratio"] == pytest.approx(per_newton["total"] / solve["total_s"])
+    assert json.loads(path.read_text())["bonded"]["num_dofs"] == 2703
+
+
+def test_contact_vs_bonded_reports_that_friction_takes_the_direct_solver():
+    """Friction is not supported by the iterative path: the record says the direct solver
+    ran, and there is no inner solve to report."""
+    result = contact_vs_bonded().main(["--refinement", "0", "--bonded-repeats", "1", "--",
+                                       "--steps", "1", "--mu", "0.3"])
+    contact = result["contact"]
+    assert contact["linear_solver"] == "direct"
+    assert contact["friction"] == ["coulomb", 0.3]
+    assert contact["inner_solver"] is None and contact["applications"] == 0
+
+
+def test_edge_ratios_of_a_unit_cube():
+    """Longest over shortest edge per cell: 1 for the cubes of a uniform hexahedral box; on
+    its tetrahedra (each cube cut into six along a body diagonal) the body diagonal over a
+    cube edge, sqrt(3), for every cell."""
+    import dolfinx
+    from mpi4py import MPI
+
+    ratios = contact_vs_bonded().edge_ratios
+    cube = dolfinx.mesh.create_unit_cube(MPI.COMM_WORLD, 3, 3, 3,
+                                         dolfinx.mesh.CellType.hexahedron)
+    assert ratios(cube) == {"median": pytest.approx(1.0), "p90": pytest.approx(1.0),
+                            "max": pytest.approx(1.0), "fraction_above_10": 0.0}
+    cube = dolfinx.mesh.create_unit_cube(MPI.COMM_WORLD, 3, 3, 3,
+                                         dolfinx.mesh.CellType.tetrahedron)
+    result = ratios(cube)
+    assert result["median"] == pytest.approx(math.sqrt(3.0))
+    assert result["max"] == pytest.approx(math.sqrt(3.0))

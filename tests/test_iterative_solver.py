@@ -65,16 +65,22 @@ def inner_preconditioner_view(problem) -> str:
 
 
 @pytest.mark.parallel
-@pytest.mark.parametrize(("dim", "petsc_options", "coarsening", "interpolation", "p_max"), [
-    (3, {}, "HMIS", "ext\\+i", 4),
-    (3, {"condensed_pc_hypre_boomeramg_coarsen_type": "PMIS"}, "PMIS", "ext\\+i", 4),
+@pytest.mark.parametrize(("dim", "cell", "petsc_options", "coarsening", "interpolation",
+                          "p_max", "threshold"), [
+    (3, "hexahedron", {}, "HMIS", "ext\\+i", 4, "0.7"),
+    (3, "tetrahedron", {}, "HMIS", "ext\\+i", 4, "0.25"),
+    (3, "hexahedron", {"condensed_pc_hypre_boomeramg_coarsen_type": "PMIS",
+                       "condensed_pc_hypre_boomeramg_strong_threshold": 0.5},
+     "PMIS", "ext\\+i", 4, "0.5"),
     # PETSc 3.25 (sid) prints "not yet set" where it leaves hypre its own default
-    (2, {}, "(Falgout|not yet set)", "(classical|not yet set)", 0),
+    (2, "triangle", {}, "(Falgout|not yet set)", "(classical|not yet set)", 0, "0.25"),
 ])
-def test_boomeramg_options_follow_the_dimension(dim, petsc_options, coarsening,
-                                                interpolation, p_max):
+def test_boomeramg_options_follow_the_dimension(dim, cell, petsc_options, coarsening,
+                                                interpolation, p_max, threshold):
+    """HMIS, ext+i, P_max 4 in 3D; the strong threshold 0.7 on hexahedra only (issue 26);
+    the user's options win; hypre's defaults in 2D."""
     if dim == 3:
-        problem, _ = curved_punch(MPI.COMM_WORLD, linear_solver="iterative",
+        problem, _ = curved_punch(MPI.COMM_WORLD, cell=cell, linear_solver="iterative",
                                   petsc_options=petsc_options)
     else:
         problem = hertz(refinement=0, linear_solver="iterative",
@@ -83,6 +89,7 @@ def test_boomeramg_options_follow_the_dimension(dim, petsc_options, coarsening,
     assert re.search(f"Coarsen type +{coarsening}\\n", text), text
     assert re.search(f"Interpolation type +{interpolation}\\n", text), text
     assert re.search(f"max elements per row {p_max}\\n", text), text
+    assert re.search(f"Threshold for strong coupling {threshold}\\n", text), text
     names = [name for name in PETSc.Options().getAll() if "boomeramg" in name]
     assert names == []
     problem.destroy()
