@@ -242,7 +242,8 @@ def crush(args, comm) -> dict:
         print(f"crushed ring: {len(history)} steps, Newton iterations per step at most "
               f"{max(summary['newton_iterations'])}, {sum(summary['cutbacks'])} cut-backs, "
               f"plate force {top[-1]:.4g} at travel {args.depth:g}, "
-              f"{summary['inner_active'][-1]} inner nodes in contact, deepest penetration {summary['max_penetration_rel']:.3g} facet "
+              f"{summary['inner_active'][-1]} inner nodes in contact, deepest penetration "
+              f"{summary['max_penetration_rel']:.3g} facet "
               f"lengths, force balance {summary['force_balance']:.1e}", flush=True)
         write_summary(args.json, summary)
         if args.output:

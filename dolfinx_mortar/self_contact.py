@@ -15,10 +15,12 @@ the zones; its facets are coloured in two (breadth first from the zone's first f
 side of clearly finer facets is the slave, as the finer side is advised for two bodies;
 between sides of about equal facets the side that was the slave at the last search stays
 the slave (so that a growing zone does not swap its multipliers from one wall to the
-other), and a new zone takes the finer, or on a tie the side of its first facet. The graph is gathered on every rank
-and coloured identically there, so that the ranks agree. A pair whose facets got one colour
-(an odd cycle: a zone that curls round onto itself) is dropped. A surface far from itself
-has no candidates and costs one collective gather of nothing per search.
+other), and a new zone takes the finer, or on a tie the side of its first facet. The graph
+is gathered on every rank and coloured identically there, so that the ranks agree. A pair
+whose facets got one colour (an odd cycle: a zone that curls round onto itself) is
+dropped. A surface far from itself still pays its search against itself (its own
+neighbours are candidates until :func:`facing` drops them) and an interface's fixed
+costs (docs/benchmarks.md, "Self-contact").
 
 This follows the two-pass-free, one-sided treatment of 4C's self-contact (a binary tree
 search, then a master/slave assignment of the contacting elements per search) with a
@@ -173,46 +175,3 @@ def _slave_colour(colour: np.ndarray, zone: np.ndarray, size: np.ndarray,
                             np.where(kept[:, 1] != kept[:, 0], kept[:, 1] > kept[:, 0],
                                      mean[:, 1] < mean[:, 0] * (1.0 - 1e-9))))
     return one.astype(np.int64)
-
-
-def rows_in(rows: np.ndarray, table: np.ndarray) -> np.ndarray:
-    """Which rows of ``rows`` (n, k) are rows of ``table`` (m, k) (integer arrays)."""
-    if rows.shape[0] == 0 or table.shape[0] == 0:
-        return np.zeros(rows.shape[0], dtype=bool)
-    _, inverse = np.unique(np.concatenate([table, rows]), axis=0, return_inverse=True)
-    inverse = inverse.reshape(-1)
-    return np.isin(inverse[table.shape[0]:], inverse[:table.shape[0]])
-
-
-def _two_colours(num_facets: int, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray,
-                                                               np.ndarray]:
-    """(colour 0/1 per facet, zone per facet, whether each pair's two facets got one
-    colour): breadth first from each zone's lowest facet, the colour the parity of the
-    depth."""
-    graph = scipy.sparse.coo_matrix(
-        (np.ones(pairs.shape[0]), (pairs[:, 0], pairs[:, 1])), shape=(num_facets,) * 2).tocsr()
-    graph = graph + graph.T
-    num_zones, zone = scipy.sparse.csgraph.connected_components(graph, directed=False)
-    depth = np.full(num_facets, -1, dtype=np.int64)
-    roots = np.unique(zone, return_index=True)[1]
-    for root in roots:
-        order, predecessor = scipy.sparse.csgraph.breadth_first_order(
-            graph, root, directed=False, return_predecessors=True)
-        depth[root] = 0
-        for facet in order[1:]:
-            depth[facet] = depth[predecessor[facet]] + 1
-    colour = depth % 2
-    return colour, zone, colour[pairs[:, 0]] == colour[pairs[:, 1]]
-
-
-def _finer_colour(colour: np.ndarray, zone: np.ndarray, size: np.ndarray) -> np.ndarray:
-    """Per zone, the colour of its finer side (smaller mean facet size); colour 0 (the side
-    of the zone's first facet) on a tie to 1e-9."""
-    num_zones = int(zone.max()) + 1 if zone.size else 0
-    total = np.zeros((num_zones, 2))
-    count = np.zeros((num_zones, 2))
-    np.add.at(total, (zone, colour), size)
-    np.add.at(count, (zone, colour), 1.0)
-    mean = total / np.where(count > 0, count, 1.0)
-    one_finer = (count[:, 1] > 0) & (mean[:, 1] < mean[:, 0] * (1.0 - 1e-9))
-    return one_finer.astype(np.int64)
