@@ -92,7 +92,8 @@ def check_slave_body(comm, pairs, interfaces, labels: np.ndarray) -> None:
             f"{pair_name(pair)}: the slave and the master surface lie on one connected "
             f"mesh (cells joined through shared nodes{where}), so they cannot separate or "
             "slide. Either both tags are on the same body (is the slave or the master tag "
-            "on the wrong body? self-contact is not supported), or two bodies share nodes, "
+            "on the wrong body? a surface touching itself is one tag as both: "
+            "ContactPair(tags, surface, surface)), or two bodies share nodes, "
             "as a gmsh model built with fragment or coherence makes them: build each body "
             "as its own mesh and join them with dolfinx_mortar.bodies.merge_meshes."
         )

@@ -225,8 +225,9 @@ def test_bad_input():
     slave, master = tagged.markers["contact_slave"], tagged.markers["contact_master"]
     with pytest.raises(SurfaceError, match="marks no facet"):
         MortarInterface(V, tagged.facet_tags, 999, master)
-    with pytest.raises(SurfaceError, match="both slave"):
-        MortarInterface(V, tagged.facet_tags, slave, slave)
+    itself = MortarInterface(V, tagged.facet_tags, slave, slave)  # self-contact (issue 29)
+    assert itself.self_contact and itself.master is itself.slave
+    itself.destroy()
     with pytest.raises(ValueError, match="unknown normals"):
         MortarInterface(V, tagged.facet_tags, slave, master, normals="sideways")
     with pytest.raises(ValueError, match="unknown integration"):
