@@ -255,9 +255,11 @@ def _facet_rule(nodes: int, rule: int) -> tuple[np.ndarray, np.ndarray]:
             np.array([wa * wb for wa in w for wb in w]))
 
 
-def _points_on_master(score: np.ndarray, slave_facet: np.ndarray) -> np.ndarray:
+def points_on_master(score: np.ndarray, slave_facet: np.ndarray) -> np.ndarray:
     """(n, q) mask: each Gauss point of a slave facet goes to the pair (of that slave facet)
-    whose master facet it lands on most centrally (the first such pair on ties)."""
+    whose master facet it lands on most centrally (the first such pair on ties); ``score``
+    (n, q): how far outside its master facet each point lands, inf where it misses. The
+    rule of both 3D kernels' element-based integration."""
     n, q = score.shape
     flat = score.ravel()
     key = np.repeat(np.asarray(slave_facet, dtype=np.int64) * q, q) + np.tile(np.arange(q), n)
@@ -361,7 +363,7 @@ def pair_quantities_compiled(slave_x, master_x, slave_normals, *, normals: str =
             _pointer(ffi, score, d))
         if status != 0:
             raise ValueError("bad element-based arguments")
-        on_master = np.ascontiguousarray(_points_on_master(
+        on_master = np.ascontiguousarray(points_on_master(
             score, np.arange(n) if slave_facet is None else np.asarray(slave_facet).reshape(-1)),
             dtype=np.uint8)
         status = lib.surface3_element(

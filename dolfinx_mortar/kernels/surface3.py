@@ -48,7 +48,7 @@ import numpy as np
 
 from .. import dual
 from ..dual import Dual, RowSubsetDual
-from . import surface3_compiled
+from . import compiled, surface3_compiled
 from .contract import (
     KernelOptions,
     PairGeometry,
@@ -1040,14 +1040,8 @@ def _element_points_on_master(slave_x, master_x, slave_normals, normals, points,
             points)
     outside = _outside(eta, master_x.shape[1])
     finite = np.all(np.isfinite(eta), axis=-1)
-    score = np.where((outside <= 1e-12) & finite & facing[:, None], outside, np.inf).ravel()
-    key = np.repeat(np.asarray(slave_facet, dtype=np.int64) * q, q) + np.tile(np.arange(q), n)
-    order = np.lexsort((score, key))
-    first = np.ones(order.size, dtype=bool)
-    first[1:] = key[order][1:] != key[order][:-1]
-    winner = np.zeros(order.size, dtype=bool)
-    winner[order[first]] = True
-    return (winner & np.isfinite(score)).reshape(n, q)
+    score = np.where((outside <= 1e-12) & finite & facing[:, None], outside, np.inf)
+    return compiled.points_on_master(score.reshape(n, q), slave_facet)
 
 
 def _integrate_element(slave_x, master_x, slave_normals, crosspoint, normals, basis, points,

@@ -17,7 +17,7 @@ dual basis, crosspoints, every Gauss rule the numpy kernel accepts (a rule it re
 it, which raises). The covered dual basis runs it with the standard basis.
 
 Element-based integration gives each Gauss point of a slave facet to one of its pairs (the
-master facet it lands on most centrally, :func:`.compiled._points_on_master`): decided once, at
+master facet it lands on most centrally, :func:`.compiled.points_on_master`): decided once, at
 evaluation, from the C kernel's scores, and kept for the contributing pairs, so that the
 gradients made again later are those of the same assignment as the values.
 """
@@ -284,7 +284,7 @@ def _points_on_master(call: _Call, slave_x, master_x, slave_normals,
         if status != 0:
             raise RuntimeError(f"compiled 3D element scores failed (status {status})")
     facets = np.arange(n) if slave_facet is None else np.asarray(slave_facet).reshape(-1)
-    return np.ascontiguousarray(compiled._points_on_master(score, facets), dtype=np.uint8)
+    return np.ascontiguousarray(compiled.points_on_master(score, facets), dtype=np.uint8)
 
 
 def evaluate(geometry: PairGeometry, options: KernelOptions,
