@@ -146,6 +146,7 @@ def row(run: dict) -> dict:
         "cutbacks": s["cutbacks"],
         "linear_solver": s["linear_solver"],
         "wall_time_s": s["wall_time_s"],
+        "swapped": s.get("swapped", False),
     }
 
 
@@ -175,6 +176,8 @@ def markdown(record: dict) -> str:
             lines.append(f"{head} failed: {error.replace('|', '/')} |" + " |" * 9)
             continue
         r = run["row"]
+        if r["swapped"]:  # slave_side="auto" solved the pair as the other body's
+            head = head.replace(f"| {run['slave']} |", f"| {run['slave']} (swapped) |")
         done += 1
         within = abs(r["p_max_error_rel"]) <= goal
         met += within
