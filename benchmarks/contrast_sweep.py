@@ -169,15 +169,16 @@ def markdown(record: dict) -> str:
     ]
     met = done = 0
     for run in record["runs"]:
-        head = (f"| {run['case']} | {run['ratio']:g} | {run['slave']} | {run['cell']} | "
+        slave = run["slave"]
+        if not run["failed"] and run["row"]["swapped"]:  # slave_side="auto" swapped them
+            slave += " (swapped)"
+        head = (f"| {run['case']} | {run['ratio']:g} | {slave} | {run['cell']} | "
                 f"{run['refinement']} |")
         if run["failed"]:
             error = run["error"].strip().splitlines()[-1] if run["error"].strip() else ""
             lines.append(f"{head} failed: {error.replace('|', '/')} |" + " |" * 9)
             continue
         r = run["row"]
-        if r["swapped"]:  # slave_side="auto" solved the pair as the other body's
-            head = head.replace(f"| {run['slave']} |", f"| {run['slave']} (swapped) |")
         done += 1
         within = abs(r["p_max_error_rel"]) <= goal
         met += within
