@@ -13,8 +13,17 @@ from mpi4py import MPI
 from petsc4py import PETSc
 from test_contact import assert_taylor_second_order, demo
 
-from dolfinx_mortar import ContactPair, ContactProblem, Material, compat, internal_work, meshes
+from dolfinx_mortar import (
+    ContactPair,
+    ContactProblem,
+    Material,
+    compat,
+    internal_work,
+    meshes,
+    search,
+)
 from dolfinx_mortar import self_contact as sc
+from dolfinx_mortar.mortar import MortarInterface
 
 
 def segment(a, b):
@@ -318,3 +327,92 @@ def test_crush_without_the_self_contact_pair():
     assert without["converged"] and not without["self_contact"]
     assert max(without["inner_active"]) == 0 == max(with_pair["inner_active"])
     np.testing.assert_allclose(without["plate_force"], with_pair["plate_force"], rtol=1e-8)
+
+
+# -- a surface far from itself costs (almost) nothing -------------------------------------
+
+def stadium_hole(gap: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The boundary of a stadium-shaped hole: walls y = +-gap/2 for -1 <= x <= 1 joined by
+    half circles, facets about 0.1 long, the nodes jittered by 0.002; as nodes and facets
+    oriented as the body around the hole orients them (self_contact.facet_frames' normal
+    (t_y, -t_x) into the hole: clockwise)."""
+    radius = 0.5 * gap
+    wall = np.linspace(1.0, -1.0, 20, endpoint=False)
+    turn = np.linspace(0.5 * np.pi, 1.5 * np.pi, max(4, int(np.pi * radius / 0.1)),
+                       endpoint=False)
+    x = np.concatenate([np.column_stack([wall, np.full(wall.size, radius)]),
+                        np.column_stack([radius * np.cos(turn) - 1.0, radius * np.sin(turn)]),
+                        np.column_stack([-wall, np.full(wall.size, -radius)]),
+                        np.column_stack([1.0 - radius * np.cos(turn), -radius * np.sin(turn)])])
+    x += 0.002 * np.random.default_rng(seed).standard_normal(x.shape)
+    n = x.shape[0]
+    return x, np.column_stack([(np.arange(n) + 1) % n, np.arange(n)])
+
+
+def test_the_far_surface_precheck_misses_no_pair():
+    """self_contact.may_face is False only where the search against itself keeps no facing
+    pair: a hole whose walls are ``gap`` apart, the margin 0.1, with and without a sweep
+    and a search depth; both answers occur."""
+    answers = set()
+    for gap in (0.05, 0.15, 0.21, 0.3, 0.6):
+        for seed in range(3):
+            x, facets = stadium_hole(gap, seed=seed)
+            for origin, depth in ((None, 0.0), (x + 0.03, 0.0), (None, 0.05)):
+                pairs = search.candidate_pairs(x, facets, x, facets, 0.1,
+                                               slave_previous=origin, master_previous=origin,
+                                               depth=depth)
+                kept = sc.facing(facets[pairs[:, 0]], facets[pairs[:, 1]],
+                                 x[facets[pairs[:, 0]]], x[facets[pairs[:, 1]]], depth)
+                may = sc.may_face(x, np.arange(x.shape[0]), facets, facets, 0.1, origin,
+                                  depth)
+                assert may or not kept.any(), (gap, seed, origin is None, depth)
+                answers.add(may)
+    assert answers == {True, False}
+
+
+@pytest.mark.parallel
+def test_a_ring_far_from_itself_skips_its_interface_until_it_closes():
+    """The crushed ring's inner surface (demos/self_contact.py --case crush) undeformed and
+    squeezed to 0.9 and 0.8 of its height: the search finds no facing pair on any rank, so
+    the interface holds no pair (``without_pairs``, the same on every rank), evaluates
+    nothing after the first update, keeps its pattern through new searches and adds no
+    force; squeezed to 0.02 of its height, the walls face each other and the next search
+    finds the same pairs as an interface that was never apart."""
+    comm = MPI.COMM_WORLD
+    tagged = meshes.crushed_ring(0, comm=comm)
+    V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (2,)))
+    inner = tagged.markers["ring_inner"]
+    interface = MortarInterface(V, tagged.facet_tags, inner, inner)
+    u = dolfinx.fem.Function(V)
+
+    def squeezed(height: float) -> None:
+        u.interpolate(lambda x: np.vstack([0.0 * x[0], (height - 1.0) * x[1]]))
+
+    interface.update(u)
+    assert interface.without_pairs and interface.stencil.num_pairs == 0
+    version, evaluations = interface._pattern_version, interface.statistics.evaluations
+    for height in (0.9, 0.8):
+        squeezed(height)
+        interface.reuse.invalidate()  # a new search, which finds nothing again
+        interface.update(u)
+        assert interface.without_pairs
+    assert interface.statistics.searches_done == 3
+    assert interface._pattern_version == version
+    assert interface.statistics.evaluations == evaluations
+    force = dolfinx.fem.Function(V)  # (kept: its PETSc vector wraps its array)
+    z = interface.create_multiplier_vector()
+    z.set(1.0)
+    interface.contact_force(z, force.x.petsc_vec)
+    assert force.x.petsc_vec.norm() == 0.0
+    squeezed(0.02)
+    interface.update(u)
+    fresh = MortarInterface(V, tagged.facet_tags, inner, inner)
+    fresh.update(u)
+    assert not interface.without_pairs
+    found = [comm.allreduce(i.stencil.num_pairs, op=MPI.SUM) for i in (interface, fresh)]
+    assert found[0] == found[1] > 0
+    np.testing.assert_array_equal(interface.contributing_pairs(), fresh.contributing_pairs())
+    np.testing.assert_array_equal(interface.quantities.gap.value, fresh.quantities.gap.value)
+    z.destroy()
+    interface.destroy()
+    fresh.destroy()
