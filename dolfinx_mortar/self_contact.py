@@ -18,9 +18,14 @@ the slave (so that a growing zone does not swap its multipliers from one wall to
 other), and a new zone takes the finer, or on a tie the side of its first facet. The graph
 is gathered on every rank and coloured identically there, so that the ranks agree. A pair
 whose facets got one colour (an odd cycle: a zone that curls round onto itself) is
-dropped. A surface far from itself still pays its search against itself (its own
-neighbours are candidates until :func:`facing` drops them) and an interface's fixed
-costs (docs/benchmarks.md, "Self-contact").
+dropped. A surface far from itself (no two facets whose search boxes overlap face each
+other: :func:`may_face`) skips the search and the gathering, and its interface, without
+pairs on any rank, skips its evaluation and assembly (docs/benchmarks.md, "Self-contact:
+a surface far from itself").
+
+Friction needs nothing of its own here: the tangents are those of the slave side's
+normals, as for two bodies, and the slips are measured from the start of each solve,
+through the pairs of the current search.
 
 This follows the two-pass-free, one-sided treatment of 4C's self-contact (a binary tree
 search, then a master/slave assignment of the contacting elements per search) with a
