@@ -190,9 +190,8 @@ class MortarInterface:
         self._pair_dofs: np.ndarray | None = None
         self.stencil: stencils.PairStencil | None = None
         self.without_pairs = False
-        """The last search kept no pair on any rank (decided collectively): the quantities are
-        empty until the next search, and the solver skips this interface's forces, gaps and
-        blocks on every rank alike (a self-contact surface far from itself)."""
+        """No pair on any rank at the last search (one allreduce): every rank alike skips this
+        interface's evaluation, gaps, forces and blocks (a self-contact surface far away)."""
         self.scalar_gradients = False
         """3D: the kernel also keeps the gradients of D and M, and the stencils hold the
         averaged normals' stars whatever the normal option (friction's tangent frames;
