@@ -85,6 +85,9 @@ class ContactEquations:
             np.zeros(i.num_owned_multipliers, dtype=bool) for i in interfaces]
         self.gaps: list[np.ndarray] = [np.zeros(i.num_owned_multipliers) for i in interfaces]
         self.areas: list[np.ndarray] = [np.zeros(i.num_owned_multipliers) for i in interfaces]
+        self._zero_gaps = [-1] * len(interfaces)
+        """Per pair, the interface's pattern version whose gaps and areas (all zero: no pair
+        on any rank) are assembled already; -1 if none."""
         self.b_u = compat.create_vector(F_form)
         self.inversion_check = diagnostics.InversionCheck(self.V)
         self.last_inversion = diagnostics.Inversion()
@@ -152,8 +155,12 @@ class ContactEquations:
 
     def assemble_gaps(self, k: int) -> None:
         """Pair k's weighted gaps g~_j and areas A_j at its owned slave nodes, from the last
-        :meth:`MortarInterface.update`."""
+        :meth:`MortarInterface.update`. Collective; an interface without pairs on any rank
+        has zero gaps and areas until its next search: assembled once."""
         interface = self.interfaces[k]
+        if interface.without_pairs and self._zero_gaps[k] == interface._pattern_version:
+            return
+        self._zero_gaps[k] = interface._pattern_version if interface.without_pairs else -1
         q = interface.quantities
         for name, values, into in (("gap", q.gap.value, self.gaps),
                                    ("area", q.area.value, self.areas)):
