@@ -46,6 +46,32 @@ solved. When T G is diagonal the outer method converges in one iteration.
 
 The normal n_j is the direction of G's column j at node j's own dofs (the
 diagonal Dn_jj), so that P_jj = |Dn_jj| > 0.
+
+Friction (``node_groups``): a slave node j has d multipliers lambda_j = (z_j, y_j^1 ..
+y_j^(d-1)), and their rows' own block Z_j (d x d: the normal row's delta, a tangential
+row's own entries and its coupling to z_j) is not diagonal: a slipping node's rows tie
+y_j to mu z_j along the slip (Z_j has rank 1 in 2D), a sticking node's rows are
+constraints on du (Z_j = 0 on them), a node at its slip bound in 3D has a tangential
+direction whose own entry nearly vanishes. Each node's rows and multipliers are turned
+by the singular value decomposition Z_j = U_j diag(sigma_j) V_j^T (rows U_j^T, unknowns
+mu_j = V_j^T lambda_j; Gitterle, Popp, Gee and Wall 2010 condense the same rows node by
+node with the dual basis), which makes the multiplier block diagonal, sigma. A node
+whose rows all have their own diagonal entry (inactive, penalty: Z_j triangular) is
+eliminated whole, exactly, as the d_j != 0 rows above; at the others (active Lagrange
+nodes) a rotated multiplier whose sigma is at least ELIMINATION_RATIO of its node's
+largest is eliminated through it, and the others are condensed through the
+slave node's rows, T's rows then the orthonormalized directions of their columns of
+G V at the node (a Gram-Schmidt factorization G V = T^T P on the node, P upper
+triangular, so P^-1 is a d x d block per node), and a small sigma kept in their rows:
+
+    K_r = (I - T^T T)(I - G P^-1 T) A' - T^T (C_a - S P^-1 T A'),   S = diag(sigma_a).
+
+Eliminating a row with a small sigma instead would add the stiffness G sigma^-1 C,
+about c_t r / (1 - r) at a node whose slip ratio r = b/|v| nears 1 (a stick condition
+as a penalty); condensing it keeps every entry bounded. A sticking node condenses like
+an active normal row, along its normal and tangent frame; a 2D slipping node condenses
+its tilted force direction n +- mu tau (the tangential row eliminated through its
+diagonal).
 """
 
 from __future__ import annotations
@@ -55,6 +81,13 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from . import diagnostics
+
+ELIMINATION_RATIO = 0.1
+"""With friction, a rotated multiplier whose singular value sigma is at least this
+fraction of its node's largest is eliminated through it; below, it is condensed (module
+docstring). At a 3D node at its slip bound the tangential direction across the slip has
+sigma/max = (1 - r)/sqrt(1 + mu^2), r = b/|v|: eliminating it would add a penalty of
+about r/(1 - r) c_t, at most 9 c_t here."""
 
 
 class CondensedPreconditioner:
@@ -66,6 +99,10 @@ class CondensedPreconditioner:
         z_rows: this rank's monolithic rows of all multipliers (global indices).
         z_node_dofs: (len(z_rows), gdim) global displacement dofs of the slave
             node of each owned multiplier (owned by this rank too).
+        node_groups: with friction, (owned slave nodes, d) the positions in z_rows of
+            each node's normal and tangential multipliers (every position once), whose
+            rows are condensed node by node (module docstring); None: one multiplier per
+            node.
         prefix: options prefix of the inner solver of K_c (ContactProblem puts
             its defaults, MUMPS LU or GMRES + AMG, into the options database).
         near_nullspace: this rank's part (owned displacement dofs, in order) of
@@ -81,7 +118,8 @@ class CondensedPreconditioner:
     """
 
     def __init__(self, comm: MPI.Intracomm, u_rows, z_rows, z_node_dofs, prefix: str,
-                 near_nullspace: list[np.ndarray] | None = None, keep_products: bool = True):
+                 near_nullspace: list[np.ndarray] | None = None, keep_products: bool = True,
+                 node_groups: np.ndarray | None = None):
         self.comm = comm
         self.keep_products = keep_products
         self.is_u = PETSc.IS().createGeneral(np.asarray(u_rows, dtype=PETSc.IntType), comm=comm)
@@ -91,6 +129,13 @@ class CondensedPreconditioner:
         z_node_dofs = np.asarray(z_node_dofs, dtype=np.int64)
         self.block_size = z_node_dofs.shape[1] if z_node_dofs.ndim == 2 else 2
         self.z_node_dofs = z_node_dofs.reshape(self.num_z, self.block_size)
+        self.rotate = node_groups is not None and np.shape(node_groups)[1] > 1
+        self.node_groups = (np.asarray(node_groups, dtype=np.int64) if self.rotate
+                            else np.arange(self.num_z, dtype=np.int64)[:, None])
+        if np.any(np.sort(self.node_groups.reshape(-1)) != np.arange(self.num_z)):
+            raise ValueError("node_groups must hold every multiplier position once")
+        # the first of this rank's columns of the z space in the sub-matrices G, Z
+        self.z_first = comm.exscan(self.num_z) or 0  # (None on rank 0)
         self.near_nullspace = near_nullspace
         self.inner_iterations: list[int] = []
         self.inner_failure = ""
@@ -147,18 +192,25 @@ class CondensedPreconditioner:
         m, v = self._matrices, self._vectors
         source = x.getArray(readonly=True)
         v["ru"].getArray()[:] = source[: self.num_u]
-        v["rz"].getArray()[:] = source[self.num_u:]
+        if self.rotate:  # the multiplier rows turned node by node: U^T r_z
+            v["rz_raw"].getArray()[:] = source[self.num_u:]
+            m["R_U_t"].mult(v["rz_raw"], v["rz"])
+        else:
+            v["rz"].getArray()[:] = source[self.num_u:]
         # r' = r_u - G d^-1 r_z
         v["sz"].pointwiseMult(v["inverse_d"], v["rz"])
         m["G"].mult(v["sz"], v["rp"])
         v["rp"].aypx(-1.0, v["ru"])
-        # rc = (I - G P^-1 T) r', then rc - T^T (T rc + r_za)
-        m["T"].mult(v["rp"], v["tz"])
-        m["G_p"].mult(v["tz"], v["rc"])
+        # rc = (I - G P^-1 T) r', then rc - T^T (T rc + r_za [- S P^-1 T r'])
+        m["T"].mult(v["rp"], v["tr"])
+        m["G_p"].mult(v["tr"], v["rc"])
         v["rc"].aypx(-1.0, v["rp"])
         m["T"].mult(v["rc"], v["tz"])
         v["sz"].pointwiseMult(v["active"], v["rz"])
         v["tz"].axpy(1.0, v["sz"])
+        if self.rotate:
+            m["S_P_inv"].mult(v["tr"], v["sz"])
+            v["tz"].axpy(-1.0, v["sz"])
         m["T"].multTranspose(v["tz"], v["tu"])
         v["rc"].axpy(-1.0, v["tu"])
         # the column elimination's row operation: rc - E Q^-1 T rc
@@ -183,11 +235,17 @@ class CondensedPreconditioner:
         m["A_prime"].mult(v["du"], v["tu"])
         v["tu"].aypx(-1.0, v["rp"])
         m["T"].mult(v["tu"], v["tz"])
-        v["tz"].pointwiseMult(v["tz"], v["inverse_p"])
-        v["sz"].axpy(1.0, v["tz"])
+        if self.rotate:
+            m["P_inv"].multAdd(v["tz"], v["sz"], v["sz"])
+            m["R_V"].mult(v["sz"], v["rz_raw"])  # lambda = V mu
+            result = v["rz_raw"]
+        else:
+            v["tz"].pointwiseMult(v["tz"], v["inverse_p"])
+            v["sz"].axpy(1.0, v["tz"])
+            result = v["sz"]
         target = y.getArray()
         target[: self.num_u] = v["du"].getArray(readonly=True)
-        target[self.num_u:] = v["sz"].getArray(readonly=True)
+        target[self.num_u:] = result.getArray(readonly=True)
 
     def view(self, pc: PETSc.PC, viewer: PETSc.Viewer) -> None:
         viewer.printfASCII(f"static condensation of the multipliers ({self.num_active} active)\n")
@@ -196,28 +254,74 @@ class CondensedPreconditioner:
     # -- pieces ------------------------------------------------------------
 
     def _split(self, J: PETSc.Mat, reuse: bool) -> np.ndarray:
-        """J's blocks A, G, C, the scalings d^-1 and P^-1 and T from them; returns which
-        multipliers are active (d_j = 0)."""
+        """J's blocks A, G, C (with friction turned node by node: G V, U^T C), the
+        scalings d^-1 and P^-1 and T from them; returns which (rotated) multipliers are
+        condensed (d_j = 0 or, with friction, a small sigma)."""
         m, v = self._matrices, self._vectors
         A = m["A"] = J.createSubMatrix(self.is_u, self.is_u, submat=m.get("A"))
-        G = m["G"] = J.createSubMatrix(self.is_u, self.is_z, submat=m.get("G"))
-        m["C"] = J.createSubMatrix(self.is_z, self.is_u, submat=m.get("C"))
-        diagonal = J.getDiagonal()
-        d = diagonal.getArray(readonly=True)[self.num_u:].copy()
-        diagonal.destroy()
-        active = d == 0.0
+        raw = "_raw" if self.rotate else ""
+        G = m["G" + raw] = J.createSubMatrix(self.is_u, self.is_z, submat=m.get("G" + raw))
+        m["C" + raw] = J.createSubMatrix(self.is_z, self.is_u, submat=m.get("C" + raw))
+        if self.rotate:
+            d = self._rotate(J)
+            G = m["G"]
+            active = ~(d > 0.0)
+        else:
+            diagonal = J.getDiagonal()
+            d = diagonal.getArray(readonly=True)[self.num_u:].copy()
+            diagonal.destroy()
+            active = d == 0.0
         self.num_active = self.comm.allreduce(int(active.sum()), op=MPI.SUM)
-        normals, lengths = self._normals(G, active)
         if not reuse:
-            for name in ("inverse_d", "inverse_p", "inverse_q", "active", "rz", "sz", "tz"):
+            for name in ("inverse_d", "inverse_p", "inverse_q", "active", "rz", "sz", "tz",
+                         "tr", "rz_raw"):
                 v[name] = G.createVecRight()
             for name in ("ru", "rp", "rc", "du", "tu"):
                 v[name] = A.createVecRight()
         v["inverse_d"].getArray()[:] = np.where(active, 0.0, 1.0 / np.where(active, 1.0, d))
-        v["inverse_p"].getArray()[:] = np.where(active, 1.0 / np.where(active, lengths, 1.0), 0.0)
         v["active"].getArray()[:] = active
-        m["T"] = self._normal_matrix(normals, A, m.get("T"))
+        if self.rotate:
+            frames, inverse_p = self._frames(G, active)
+            m["P_inv"] = self._block_matrix(inverse_p, m.get("P_inv"))
+            scaled = inverse_p * self._sigma[self.node_groups][:, :, None]
+            m["S_P_inv"] = self._block_matrix(scaled, m.get("S_P_inv"))
+        else:
+            frames, lengths = self._normals(G, active)
+            v["inverse_p"].getArray()[:] = np.where(active,
+                                                    1.0 / np.where(active, lengths, 1.0), 0.0)
+        m["T"] = self._normal_matrix(frames, A, m.get("T"))
         return active
+
+    def _rotate(self, J: PETSc.Mat) -> np.ndarray:
+        """With friction: each node's block Z_j of J turned into its singular values,
+        G V into "G" and U^T C into "C" (and the turns R_V, R_U^T kept for ``apply``);
+        returns the singular values of the eliminated rotated multipliers, 0 at the
+        condensed ones (their own values, possibly nonzero, in ``_sigma``)."""
+        m = self._matrices
+        store = _MatrixStore(m, self.keep_products)
+        Z = m["Z"] = J.createSubMatrix(self.is_z, self.is_z, submat=m.get("Z"))
+        groups = self.node_groups
+        g = groups.shape[1]
+        columns = self.z_first + groups
+        blocks = _entries(Z, np.repeat(groups, g, axis=1).reshape(-1, g, g),
+                          np.tile(columns, (1, g)).reshape(-1, g, g))
+        store.release("Z")
+        U, sigma, Vh = np.linalg.svd(blocks)
+        # a node whose every row has its own entry (inactive, penalty: Z_j triangular and
+        # invertible) is eliminated whole, as without friction
+        whole = np.all(np.diagonal(blocks, axis1=1, axis2=2) != 0.0, axis=1)
+        eliminated = whole[:, None] | (sigma > ELIMINATION_RATIO * sigma[:, :1])
+        self._sigma = np.zeros(self.num_z)
+        self._sigma[groups] = np.where(eliminated, 0.0, sigma)
+        d = np.zeros(self.num_z)
+        d[groups] = np.where(eliminated, sigma, 0.0)
+        # R_V[group i, group k] = V[i, k]; R_U^T[group k, group i] = U[i, k]
+        m["R_V"] = self._block_matrix(np.swapaxes(Vh, 1, 2), m.get("R_V"))
+        m["R_U_t"] = self._block_matrix(np.swapaxes(U, 1, 2), m.get("R_U_t"))
+        store.product("G", m["G_raw"], m["R_V"])
+        store.product("C", m["R_U_t"], m["C_raw"])
+        store.release("G_raw", "C_raw")
+        return d
 
     def _condensed_operator(self, active: np.ndarray) -> PETSc.Mat:
         """K_c from A, G, C, T and the scalings (the module docstring's products, in
@@ -230,18 +334,23 @@ class CondensedPreconditioner:
         A_prime = store.combination("A_prime", [(1.0, A), (-1.0, store.product("G_C", G, scaled))])
         store.release("A", "scaled_C", "G_C")
         # B1 = (I - G P^-1 T) A'
-        G_p = store.scaled_copy("G_p", G, right=v["inverse_p"])
-        correction = store.product("G_p_T_A", G_p, store.product("T_A", T, A_prime))
-        store.release("T_A")
+        if self.rotate:
+            G_p = store.product("G_p", G, m["P_inv"])
+        else:
+            G_p = store.scaled_copy("G_p", G, right=v["inverse_p"])
+        T_A = store.product("T_A", T, A_prime)
+        correction = store.product("G_p_T_A", G_p, T_A)
         B1 = store.combination("B1", [(1.0, A_prime), (-1.0, correction)])
         store.release("G_p_T_A")
-        # K_r = B1 - T^T (T B1 + C_a): the normal rows at active nodes become the
-        # constraints, negated so that their diagonal (c_n D_jj) is positive as the
-        # stiffness is (the constraints row C_a is -c_n D n on the slave node)
+        # K_r = B1 - T^T (T B1 + C_a [- S P^-1 T A']): the normal rows at active nodes
+        # become the constraints, negated so that their diagonal (c_n D_jj) is positive
+        # as the stiffness is (the constraints row C_a is -c_n D n on the slave node)
         C_a = store.scaled_copy("C_a", C, left=v["active"])
-        normal_rows = store.combination("normal_rows",
-                                        [(1.0, store.product("T_B1", T, B1)), (1.0, C_a)])
-        store.release("T_B1")
+        terms = [(1.0, store.product("T_B1", T, B1)), (1.0, C_a)]
+        if self.rotate:
+            terms.append((-1.0, store.product("S_P_inv_T_A", m["S_P_inv"], T_A)))
+        normal_rows = store.combination("normal_rows", terms)
+        store.release("T_B1", "T_A", *(("S_P_inv_T_A",) if self.rotate else ()))
         replaced = store.product("replaced", T, normal_rows, transpose=True)
         store.release("normal_rows")
         K_r = store.combination("K_r", [(1.0, B1), (-1.0, replaced)])
@@ -289,6 +398,64 @@ class CondensedPreconditioner:
             raise RuntimeError("an active multiplier has no coupling to its own slave node")
         normals[selected] /= lengths[selected, None]
         return normals, lengths
+
+    def _frames(self, G: PETSc.Mat, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """With friction: T's rows (num_z, gdim), per node the orthonormalized directions of
+        its condensed multipliers' columns of G at the node's dofs (Gram-Schmidt in the
+        order of the node's multipliers: G = T^T P on the node), zero at the eliminated
+        ones; and P^-1 per node (nodes, d, d), zero outside the condensed ones."""
+        groups = self.node_groups
+        num_nodes, g = groups.shape
+        first_row = G.getOwnershipRange()[0]
+        rows = np.broadcast_to((self.z_node_dofs[groups[:, 0]] - first_row)[:, None, :],
+                               (num_nodes, g, self.block_size))
+        columns = np.broadcast_to((self.z_first + groups)[:, :, None], rows.shape)
+        condensed = active[groups]
+        columns_at_node = _entries(G, rows, columns) * condensed[:, :, None]
+        Q = np.zeros_like(columns_at_node)
+        R = np.zeros((num_nodes, g, g))
+        for k in range(g):
+            column = columns_at_node[:, k]
+            R[:, :k, k] = np.einsum("nic,nc->ni", Q[:, :k], column)
+            rest = column - np.einsum("ni,nic->nc", R[:, :k, k], Q[:, :k])
+            length = np.linalg.norm(rest, axis=1)
+            R[:, k, k] = length
+            usable = condensed[:, k] & (length > 0.0)
+            Q[usable, k] = rest[usable] / length[usable, None]
+        if np.any(condensed & (np.diagonal(R, axis1=1, axis2=2) == 0.0)):
+            raise RuntimeError("a condensed multiplier has no coupling to its own slave node "
+                               "independent of its node's other ones")
+        diagonal = np.arange(g)
+        R[:, diagonal, diagonal] += ~condensed  # identity on the eliminated ones
+        inverse_p = np.linalg.inv(R)
+        inverse_p[:, diagonal, diagonal] *= condensed
+        frames = np.zeros((self.num_z, self.block_size))
+        frames[groups] = Q
+        return frames, inverse_p
+
+    def _block_matrix(self, values: np.ndarray, existing: PETSc.Mat | None) -> PETSc.Mat:
+        """The z x z matrix with values[j, r, c] at (node_groups[j, r], node_groups[j, c])
+        (a d x d block per node, every entry in the pattern); an ``existing`` one only
+        gets the new values."""
+        groups = self.node_groups
+        num_nodes, g = groups.shape
+        order = np.argsort(groups, axis=1)
+        sorted_columns = np.take_along_axis(groups, order, axis=1) + self.z_first
+        sorted_values = np.take_along_axis(values, order[:, None, :], axis=2)
+        columns = np.zeros((self.num_z, g), dtype=PETSc.IntType)
+        entries = np.zeros((self.num_z, g))
+        columns[groups] = sorted_columns[:, None, :]
+        entries[groups] = sorted_values
+        indptr = np.arange(0, g * self.num_z + 1, g, dtype=PETSc.IntType)
+        if existing is not None:
+            existing.setValuesCSR(indptr, columns.reshape(-1), entries.reshape(-1))
+            existing.assemble()
+            return existing
+        matrix = PETSc.Mat().createAIJ(size=((self.num_z, PETSc.DETERMINE),) * 2,
+                                       csr=(indptr, columns.reshape(-1), entries.reshape(-1)),
+                                       comm=self.comm)
+        matrix.assemble()
+        return matrix
 
     def _normal_matrix(self, normals: np.ndarray, A: PETSc.Mat,
                        existing: PETSc.Mat | None = None) -> PETSc.Mat:
@@ -360,6 +527,21 @@ class CondensedPreconditioner:
         self.ksp.destroy()
         self.is_u.destroy()
         self.is_z.destroy()
+
+
+def _entries(matrix: PETSc.Mat, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """The values of ``matrix`` at (local row, global column) pairs of any shape, 0 where
+    its pattern has no entry."""
+    indptr, indices, values = matrix.getValuesCSR()
+    num_columns = matrix.getSize()[1]
+    # AIJ rows are sorted by column: the keys row * num_columns + column are sorted
+    keys = np.repeat(np.arange(indptr.size - 1, dtype=np.int64), np.diff(indptr))
+    keys = keys * num_columns + indices
+    wanted = np.asarray(rows, dtype=np.int64) * num_columns + np.asarray(columns)
+    if not keys.size:
+        return np.zeros(wanted.shape)
+    position = np.minimum(np.searchsorted(keys, wanted), keys.size - 1)
+    return np.where(keys[position] == wanted, values[position], 0.0)
 
 
 def _pattern_fingerprint(J: PETSc.Mat, comm: MPI.Intracomm) -> tuple:

@@ -76,7 +76,8 @@ class ContactNewton:
                                   if self.linear_solver == "iterative" else None)
                 self.condenser = solvers.condensed_preconditioner(
                     ksp, equations.layout, self.interfaces, V.dofmap.index_map_bs,
-                    self.prefix, near_nullspace, V.mesh.topology.cell_name())
+                    self.prefix, near_nullspace, V.mesh.topology.cell_name(),
+                    components=equations.system.components)
 
         self.snes = snes
         self.solve_options = solvers.configure_snes(

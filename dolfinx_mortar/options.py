@@ -119,7 +119,7 @@ class ContactOptions:
             the uncondensed one (:mod:`dolfinx_mortar.condensation`).
         linear_solver: ``auto`` (``iterative`` for 3D problems of at least
             :data:`~dolfinx_mortar.solvers.AUTO_ITERATIVE_MIN_DOFS` displacement dofs with
-            dual multipliers and no friction, else ``direct``; why:
+            dual multipliers (friction or not), else ``direct``; why:
             :func:`~dolfinx_mortar.solvers.automatic_linear_solver`), ``direct`` (MUMPS
             LU, of the monolithic system, or of the condensed one with ``condensation``)
             or ``iterative``: condensation (dual multipliers only) with GMRES and hypre's

@@ -69,7 +69,8 @@ def automatic_linear_solver(gdim: int, num_dofs: int, multipliers: str,
                             has_friction: bool) -> str:
     """What ``linear_solver="auto"`` (the default) means for a problem: ``iterative`` in
     3D from :data:`AUTO_ITERATIVE_MIN_DOFS` displacement dofs on, with dual multipliers
-    and without friction (what the iterative path supports); ``direct`` otherwise.
+    (what the iterative path supports), with or without friction (``has_friction``: the
+    tangential rows condense with the normal ones, node by node); ``direct`` otherwise.
 
     Why, as measured on the Hertz problems (benchmarks/README.md, "Direct or iterative
     by default"): in 2D MUMPS was faster than the condensed GMRES + BoomerAMG solve at
@@ -84,8 +85,8 @@ def automatic_linear_solver(gdim: int, num_dofs: int, multipliers: str,
     (:meth:`~dolfinx_mortar.problem.ContactProblem.solve`): a linear solve that only
     the iterative solver fails does not stop an ``auto`` run.
     """
-    if (gdim == 3 and num_dofs >= AUTO_ITERATIVE_MIN_DOFS and multipliers == "dual"
-            and not has_friction):
+    del has_friction  # the same rule with friction
+    if gdim == 3 and num_dofs >= AUTO_ITERATIVE_MIN_DOFS and multipliers == "dual":
         return "iterative"
     return "direct"
 
@@ -303,21 +304,36 @@ def rigid_body_modes(V) -> list[np.ndarray]:
 
 def condensed_preconditioner(ksp: PETSc.KSP, layout, interfaces, block_size: int, prefix: str,
                              near_nullspace: list[np.ndarray] | None = None,
-                             cell_name: str = ""):
+                             cell_name: str = "", components: int = 0):
     """Make the condensed solve the (python) preconditioner of the monolithic KSP.
 
     ``cell_name`` (the mesh's cell type) selects BoomerAMG's options beyond the
-    dimension's: :data:`BOOMERAMG_HEXAHEDRON_OPTIONS` on hexahedra."""
+    dimension's: :data:`BOOMERAMG_HEXAHEDRON_OPTIONS` on hexahedra. ``components``:
+    the tangential multiplier fields per pair (d - 1 with friction, fields P + 1 ..
+    of the layout, pair by pair), condensed with their node's normal multiplier."""
     from .condensation import CondensedPreconditioner
 
     comm = layout.comm
     first = int(layout.offsets[comm.rank])
     u_rows = first + np.arange(layout.owned_u.start, layout.owned_u.stop)
     z_rows = first + np.arange(layout.owned_z.start, layout.owned_z.stop)
-    node_dofs = np.concatenate(
-        [i.owned_multiplier_blocks[:, None] * block_size + np.arange(block_size)
-         for i in interfaces]
-    ).reshape(-1, block_size)
+    # per layout field after u: each pair's normal multipliers, then (friction) each
+    # pair's tangential ones; a multiplier's position in z_rows and its node's dofs
+    fields = [(k, 1 + k) for k in range(len(interfaces))] + [
+        (k, 1 + len(interfaces) + k * components + a)
+        for k in range(len(interfaces)) for a in range(components)]
+    node_dofs = np.zeros((z_rows.size, block_size), dtype=np.int64)
+    positions = {}
+    for k, field in fields:
+        owned = layout.owned(field)
+        blocks = interfaces[k].owned_multiplier_blocks
+        node_dofs[owned.start - layout.owned_z.start:owned.stop - layout.owned_z.start] = (
+            blocks[:, None] * block_size + np.arange(block_size))
+        positions.setdefault(k, []).append(
+            np.arange(owned.start, owned.stop) - layout.owned_z.start)
+    node_groups = (np.concatenate([np.stack(positions[k], axis=1)
+                                   for k in range(len(interfaces))])
+                   if components else None)
     options = PETSc.Options()
     added = []
     if block_size == 3:
@@ -334,7 +350,8 @@ def condensed_preconditioner(ksp: PETSc.KSP, layout, interfaces, block_size: int
         condenser = CondensedPreconditioner(comm, u_rows, z_rows, node_dofs,
                                             prefix=f"{prefix}condensed_",
                                             near_nullspace=near_nullspace,
-                                            keep_products=keep_products)
+                                            keep_products=keep_products,
+                                            node_groups=node_groups)
     finally:
         for name in added:
             options.delValue(name)

@@ -97,7 +97,8 @@ def test_boomeramg_options_follow_the_dimension(dim, cell, petsc_options, coarse
 
 def test_automatic_choice_follows_dimension_size_and_support():
     """``auto``: iterative only where it was measured faster and is supported (3D, at
-    least AUTO_ITERATIVE_MIN_DOFS, dual multipliers, no friction); direct elsewhere."""
+    least AUTO_ITERATIVE_MIN_DOFS, dual multipliers, with or without friction); direct
+    elsewhere."""
     from dolfinx_mortar.solvers import AUTO_ITERATIVE_MIN_DOFS, automatic_linear_solver
 
     large = AUTO_ITERATIVE_MIN_DOFS
@@ -105,7 +106,7 @@ def test_automatic_choice_follows_dimension_size_and_support():
     assert automatic_linear_solver(3, large - 1, "dual", False) == "direct"
     assert automatic_linear_solver(2, 100 * large, "dual", False) == "direct"
     assert automatic_linear_solver(3, large, "standard", False) == "direct"
-    assert automatic_linear_solver(3, large, "dual", True) == "direct"
+    assert automatic_linear_solver(3, large, "dual", True) == "iterative"  # friction too
 
 
 @pytest.mark.parallel
