@@ -179,3 +179,25 @@ def test_friction_is_accepted_by_every_linear_solver():
     with pytest.raises(ValueError, match="basis='dual'"):
         PATCH.sheared_blocks_3d((3, 7), "upper", Coulomb(0.2), 0.0, 0.0,
                                 linear_solver="iterative", basis="standard")
+
+
+def test_low_memory_condensation_gives_the_same_outer_iterations():
+    """``condensed_keep_products: False`` (every product built anew at each set-up) with
+    friction: the same preconditioner, so the same outer and Newton iterations and answer,
+    and only what ``apply`` needs is kept (the turns, P^-1 and S P^-1 among it)."""
+    limit = 0.2 * PATCH.PRESSURE
+    runs, kept = {}, {}
+    for keep in (True, False):
+        problem = PATCH.sheared_blocks_3d(
+            (3, 7), "upper", Coulomb(0.2), 2.0 * limit / PATCH.SHEAR_MODULUS, limit,
+            linear_solver="iterative", petsc_options={"condensed_keep_products": keep,
+                                                      "snes_rtol": 1e-12, "snes_atol": 0.0})
+        report = problem.solve()
+        assert report.converged
+        runs[keep] = (report.iterations, report.linear_iterations, snapshot(problem))
+        kept[keep] = sorted(problem._condenser._matrices)
+        problem.destroy()
+    assert runs[True][:2] == runs[False][:2]
+    np.testing.assert_allclose(runs[False][2]["u"], runs[True][2]["u"], rtol=0, atol=1e-14)
+    assert kept[False] == ["A_prime", "C", "E_q", "G", "G_p", "K_inner", "P_inv", "R_U_t",
+                           "R_V", "S_P_inv", "T"]
