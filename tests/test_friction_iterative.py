@@ -201,3 +201,26 @@ def test_low_memory_condensation_gives_the_same_outer_iterations():
     np.testing.assert_allclose(runs[False][2]["u"], runs[True][2]["u"], rtol=0, atol=1e-14)
     assert kept[False] == ["A_prime", "C", "E_q", "G", "G_p", "K_inner", "P_inv", "R_U_t",
                            "R_V", "S_P_inv", "T"]
+
+
+@pytest.mark.parallel
+@pytest.mark.timeout(600)
+def test_frictional_hertz_sphere_iterative_is_direct():
+    """demos/hertz_sphere.py --mu 0.3 (quarter model: slave nodes on the symmetry planes
+    hold the tangent directions along them, y^a = 0 rows eliminated whole or per
+    component), 2 load steps: the iterative solve takes the direct solver's Newton
+    iterations and multipliers (to 1e-8 of the largest) and balances the load."""
+    argv = ["--elements-per-radius", "2", "--refinement", "1", "--steps", "2", "--mu", "0.3"]
+    hertz = load_demo("hertz_sphere")
+    summaries = {solver: hertz.main(argv + ["--linear-solver", solver], comm=MPI.COMM_WORLD)
+                 for solver in ("direct", "iterative")}
+    direct, iterative = summaries["direct"], summaries["iterative"]
+    assert iterative["linear_solver"] == "iterative"
+    assert iterative["newton_iterations"] == direct["newton_iterations"]
+    reference = np.array(direct["pressure_profile"]["multiplier"])
+    np.testing.assert_allclose(iterative["pressure_profile"]["multiplier"], reference,
+                               rtol=0, atol=1e-8 * reference.max())
+    assert iterative["total_force"] == pytest.approx(iterative["load"], rel=1e-10)
+    for newton, outer in zip(iterative["newton_iterations"], iterative["krylov_iterations"],
+                             strict=True):
+        assert outer <= OUTER_PER_NEWTON * newton
