@@ -187,6 +187,9 @@ class MortarInterface:
         self._crosspoint_blocks = np.zeros(0, dtype=np.int64)
         self._fold_blocks = np.zeros(0, dtype=np.int64)
         self._slave_side_facets: np.ndarray | None = None
+        self._facing_pairs: np.ndarray | None = None
+        """A self-contact surface's facing pairs at the last search (sorted global blocks
+        of the slave facet, then the master facet's): they keep facing while penetrated."""
         self._pair_dofs: np.ndarray | None = None
         self.stencil: stencils.PairStencil | None = None
         self.scalar_gradients = False
@@ -543,8 +546,12 @@ class MortarInterface:
         slave_blocks = self._node_blocks[slave_nodes]
         master_blocks = self._node_blocks[master_nodes]
         slave_x, master_x = self._node_x[slave_nodes], self._node_x[master_nodes]
+        keys = np.column_stack([np.sort(slave_blocks, axis=1), np.sort(master_blocks, axis=1)])
+        faced = (self_contact.rows_in(keys, self._facing_pairs)
+                 if self._facing_pairs is not None else None)
         facing = self_contact.facing(slave_blocks, master_blocks, slave_x, master_x,
-                                     self.search_depth)
+                                     self.search_depth, faced)
+        self._facing_pairs = keys[facing]
         pairs, slave_nodes, master_nodes = (
             pairs[facing], slave_nodes[facing], master_nodes[facing])
         sizes = [self_contact.facet_frames(self._node_x, nodes)[2]
