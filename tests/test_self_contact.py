@@ -386,10 +386,10 @@ def test_crushed_tube_closes_and_carries_the_plates():
     """A coarse, short 3D crush (demos/self_contact.py --dim 3 --case crush, a slice one
     tetrahedron long, 30 steps): every step converges without a cut-back in at most 10
     Newton iterations, the inner walls meet only near the end, the plates' forces balance,
-    no node of either wall deeper than 0.05 facet lengths behind the other (measured 0.018),
-    and one rank and all ranks give the same forces. The slice's ends are held in z (plane
-    strain): the end force is the 2D ring's, 0.265 per unit length (its 60 and 30 steps
-    alike; 0.0200 / 0.075 = 0.266 measured here)."""
+    no node of either wall deeper than 0.02 facet lengths behind the other (measured
+    0.0090; the issue asks for 0.01), and one rank and all ranks give the same forces. The
+    slice's ends are held in z (plane strain): the end force is the 2D ring's, 0.265 per
+    unit length (its 60 and 30 steps alike; 0.01989 / 0.075 = 0.2652 measured here)."""
     arguments = ["--dim", "3", "--case", "crush", "--length", "0.075", "--steps", "30"]
     comm = MPI.COMM_WORLD
     serial = demo("self_contact").main(arguments, comm=MPI.COMM_SELF)
@@ -398,8 +398,8 @@ def test_crushed_tube_closes_and_carries_the_plates():
     active = np.array(serial["inner_active"])
     assert active[: len(active) * 4 // 5].max() == 0 and active[-1] > 20
     assert serial["force_balance"] < 1e-9
-    assert serial["max_penetration_rel"] < 0.05
-    np.testing.assert_allclose(serial["plate_force"][-1] / 0.075, 0.265, rtol=0.03)
+    assert serial["max_penetration_rel"] < 0.02
+    np.testing.assert_allclose(serial["plate_force"][-1] / 0.075, 0.265, rtol=0.01)
     if comm.size > 1:
         parallel = demo("self_contact").main(arguments, comm=comm)
         assert parallel["converged"] and sum(parallel["cutbacks"]) == 0
