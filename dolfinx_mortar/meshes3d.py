@@ -468,7 +468,7 @@ def crushed_tube(refinement: int = 0, inner_radius: float = 0.7, outer_radius: f
     along z in layers of about h_ring, each prism cut into tetrahedra: every layer the
     same, as the solution of a slice held at its ends does not vary along z (free
     tetrahedra made the fold where the inner walls close wave along z, and left a node
-    there 0.11 facet lengths behind the other wall instead of 0.0090, docs/benchmarks.md).
+    there 0.11 facet lengths behind the other wall instead of 0.0072, docs/benchmarks.md).
     The plates are free tetrahedra of size 2 h_ring.
 
     Returns:
