@@ -146,6 +146,7 @@ def row(run: dict) -> dict:
         "cutbacks": s["cutbacks"],
         "linear_solver": s["linear_solver"],
         "wall_time_s": s["wall_time_s"],
+        "swapped": s.get("swapped", False),
     }
 
 
@@ -168,7 +169,10 @@ def markdown(record: dict) -> str:
     ]
     met = done = 0
     for run in record["runs"]:
-        head = (f"| {run['case']} | {run['ratio']:g} | {run['slave']} | {run['cell']} | "
+        slave = run["slave"]
+        if not run["failed"] and run["row"]["swapped"]:  # slave_side="auto" swapped them
+            slave += " (swapped)"
+        head = (f"| {run['case']} | {run['ratio']:g} | {slave} | {run['cell']} | "
                 f"{run['refinement']} |")
         if run["failed"]:
             error = run["error"].strip().splitlines()[-1] if run["error"].strip() else ""

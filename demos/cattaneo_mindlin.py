@@ -74,12 +74,15 @@ from dolfinx_mortar import (
     configure_logging,
     internal_work,
     meshes,
+    meshes3d,
     solve_load_steps,
 )
 
 DEMOS = pathlib.Path(__file__).resolve().parent
 if str(DEMOS) not in sys.path:  # loaded from its path (tests, benchmarks): find demos/cli.py
     sys.path.insert(0, str(DEMOS))
+import hertz_sphere  # noqa: E402
+
 import cli  # noqa: E402
 from cli import write_summary  # noqa: E402
 
@@ -146,9 +149,15 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     parser = cli.parser(__doc__)
     parser.add_argument(
         "--tangential-ratio", type=float, default=0.5, help="Q / (mu P), in [0, 1)")
+    parser.add_argument("--dim", type=int, choices=(2, 3), default=2,
+                        help="2: the cylinder (plane strain); 3: a sphere on a block")
     parser.add_argument(
-        "--refinement", type=int, default=1, help="halves the element sizes per level")
-    parser.add_argument("--steps", type=int, default=2, help="load steps of the normal force")
+        "--refinement", type=int, default=None,
+        help="halves the element sizes per level (default 1 in 2D, 0 in 3D)")
+    parser.add_argument(
+        "--steps", type=int, default=None,
+        help="load steps of the normal force (default 2 in 2D; in 3D enough that the "
+        "contact edge moves by at most 3 elements per step)")
     parser.add_argument(
         "--tangential-steps", type=int, default=4, help="load steps of the tangential force")
     parser.add_argument(
@@ -164,6 +173,10 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     if not 0.0 <= args.tangential_ratio < 1.0:
         parser.error(f"--tangential-ratio must lie in [0, 1), got {args.tangential_ratio}")
     configure_logging(comm)
+    if args.dim == 3:
+        return main_3d(args, comm)
+    args.refinement = 1 if args.refinement is None else args.refinement
+    args.steps = 2 if args.steps is None else args.steps
     exact = exact_solution(LOAD, RADIUS, args.mu, args.tangential_ratio)
     tangential_load = args.tangential_ratio * args.mu * LOAD
     start = time.perf_counter()
@@ -326,6 +339,255 @@ def plot(path: pathlib.Path, x_nodes, traction, sticking, x_pressure, pressure, 
     ax.set_ylabel("tangential traction")
     ax.set_title(f"mu {summary['mu']}, Q/(mu P) {summary['tangential_ratio']}: c "
                  f"{summary['stick_half_width']:.3f} vs {exact['c']:.3f}")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    cli.save_figure(fig, path)
+
+
+# --- 3D: a sphere on a block --------------------------------------------------------
+
+LOAD_3D = 0.15
+"""The total normal force P of the 3D case: demos/hertz_sphere.py's (R = 1, E = 200,
+nu = 0.3 for both bodies: a = 0.1008, p0 = 7.05)."""
+
+
+def exact_solution_3d(load: float, mu: float, ratio: float) -> dict:
+    """Hertz a and p0 of a sphere (R = 1) on a half-space of the same material, and the
+    stick radius c = a (1 - Q / (mu P))^(1/3) of Mindlin (1949)."""
+    hertz = hertz_sphere.hertz_solution(load, 1.0, E, NU, E, NU, "block")
+    return {"a": hertz["a"], "p0": hertz["p0"], "c": hertz["a"] * (1.0 - ratio) ** (1.0 / 3.0),
+            "mu": mu, "R_star": hertz["R_star"]}
+
+
+def exact_traction_3d(r, exact: dict) -> np.ndarray:
+    """|q(r)|: the 2D formula of the module docstring with x the distance r from the
+    axis (Mindlin's traction, parallel to Q; Johnson, Contact Mechanics, 7.2)."""
+    return exact_traction(np.asarray(r, dtype=float), exact)
+
+
+def bulk_problem_3d(tagged, u):
+    """(F, (normal, tangential) load Constants, bcs) of the half model y >= 0: u_y = 0 on
+    y = 0, the block clamped at its bottom, the sphere held by contact and friction only.
+
+    On the sphere's flat top (z = R, a half disc of area A and second moment
+    I = int x^2 dA about the y axis): -P/2 / A along z, Q/2 / A along x, and
+    (Q/2) R x / I along z, whose moment about the contact point cancels the shear's,
+    so that the sphere is pulled without a moment, as the theory assumes."""
+    mesh, markers = tagged.mesh, tagged.markers
+    V = u.function_space
+    v = ufl.TestFunction(V)
+    ds = ufl.Measure("ds", domain=mesh, subdomain_data=tagged.facet_tags)
+    x = ufl.SpatialCoordinate(mesh)
+
+    def integral(form) -> float:
+        local = dolfinx.fem.assemble_scalar(dolfinx.fem.form(form * ds(markers["load"])))
+        return mesh.comm.allreduce(local, op=MPI.SUM)
+
+    area = integral(dolfinx.fem.Constant(mesh, 1.0))
+    moment = integral(x[0] ** 2)  # of the discrete (faceted) top: the totals are exact
+    height = 1.0
+    normal = dolfinx.fem.Constant(mesh, 0.0)
+    tangential = dolfinx.fem.Constant(mesh, 0.0)
+    traction = ufl.as_vector([
+        0.5 * tangential / area, 0.0,
+        -0.5 * normal / area + 0.5 * tangential * height * x[0] / moment])
+    material = Material(E, NU, "linear")
+    F = (internal_work(u, v, {markers["sphere"]: material, markers["block"]: material},
+                       tagged.cell_tags)
+         - ufl.inner(traction, v) * ds(markers["load"]))
+    support = tagged.facet_tags.find(markers["support"])
+    bcs = [dolfinx.fem.dirichletbc(
+        np.zeros(3), dolfinx.fem.locate_dofs_topological(V, 2, support), V)]
+    symmetry = tagged.facet_tags.find(markers["symmetry_y"])
+    dofs = dolfinx.fem.locate_dofs_topological(V.sub(1), 2, symmetry)
+    bcs.append(dolfinx.fem.dirichletbc(np.float64(0.0), dofs, V.sub(1)))
+    return F, (normal, tangential), bcs
+
+
+def tangential_tractions(problem, comm) -> dict:
+    """Every slave node's reference coordinates, tangential traction vector y_j . tau_j
+    (the friction traction on the master; on the slave it is the opposite), stick and
+    slip flags, gathered on every rank. Collective."""
+    state = problem.friction_state()
+    traction = np.einsum("na,nai->ni", state["traction"], state["frames"])
+    keys = {"coordinates": state["coordinates"], "traction": traction,
+            "coulomb_ratio": np.linalg.norm(state["traction"], axis=1)
+            / np.maximum(problem.friction.laws[0].mu * state["pressure"], 1e-300),
+            "sticking": state["sticking"], "slipping": state["slipping"]}
+    return {key: np.concatenate(comm.allgather(value)) for key, value in keys.items()}
+
+
+def main_3d(args, comm: MPI.Intracomm) -> dict:
+    """Cattaneo-Mindlin in 3D (``--dim 3``): a sphere pressed onto a block by P, then
+    pulled along x by Q = ``--tangential-ratio`` mu P at fixed P; half model y >= 0,
+    equal materials (the normal and tangential problems decouple), gmsh tetrahedra
+    (dolfinx_mortar.meshes3d.hertz_sphere with ``half=True``)."""
+    refinement = 0 if args.refinement is None else args.refinement
+    exact = exact_solution_3d(LOAD_3D, args.mu, args.tangential_ratio)
+    tangential_load = args.tangential_ratio * args.mu * LOAD_3D
+    start = time.perf_counter()
+    tagged = meshes3d.hertz_sphere(case="block", refinement=refinement,
+                                   contact_radius=exact["a"], half=True, comm=comm)
+    markers = tagged.markers
+    V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (3,)))
+    u = dolfinx.fem.Function(V, name="displacement")
+    F, (normal, tangential), bcs = bulk_problem_3d(tagged, u)
+    pair = ContactPair(tagged.facet_tags, markers["contact_slave"], markers["contact_master"],
+                       name="sphere-block")
+    problem = ContactProblem(F, u, bcs, [pair], configuration="reference",
+                             **cli.problem_options(args))
+    sphere_cells = tagged.cell_tags.find(markers["sphere"])
+    initial = hertz_sphere.INITIAL_RADIUS
+    indentation = (initial * exact["a"]) ** 2 / (2.0 * exact["R_star"])
+    u.interpolate(lambda x: np.vstack([0.0 * x[0], 0.0 * x[0], -indentation + 0.0 * x[0]]),
+                  sphere_cells)
+    u.x.scatter_forward()
+
+    def press(t: float) -> None:
+        # the Hertz radius grows linearly in t from the initial overlap's to a
+        normal.value = (initial + (1.0 - initial) * t) ** 3 * LOAD_3D
+
+    def pull(t: float) -> None:
+        tangential.value = t * tangential_load
+
+    dissipation = []
+
+    def record(step) -> None:
+        work = problem.friction_state()["dissipation"]
+        dissipation.append((comm.allreduce(float(work.min(initial=0.0)), op=MPI.MIN),
+                            comm.allreduce(float(np.abs(work).max(initial=0.0)), op=MPI.MAX)))
+
+    steps = args.steps or hertz_sphere.automatic_steps(meshes3d.ELEMENTS_PER_RADIUS, refinement)
+    output = ContactOutput(problem, args.output / "paraview") if args.output else None
+    law = problem.friction.laws[0]
+    if args.normal_phase == "frictionless":
+        problem.friction.laws[0] = None
+    records = solve_load_steps(problem, press, steps, output=output, on_step=record,
+                               predictor=args.predictor)
+    problem.friction.laws[0] = law
+    records += solve_load_steps(problem, pull, args.tangential_steps, output=output,
+                                on_step=record, predictor=args.predictor)
+    if output is not None:
+        output.close()
+    wall_time = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
+
+    nodes = tangential_tractions(problem, comm)
+    r = np.hypot(nodes["coordinates"][:, 0], nodes["coordinates"][:, 1])
+    order = np.argsort(r)
+    r = r[order]
+    traction, ratio, sticking, slipping = (
+        nodes[key][order] for key in ("traction", "coulomb_ratio", "sticking", "slipping"))
+    h = tagged.h_contact
+    stick_radius = float(r[sticking].max()) if sticking.any() else 0.0
+    zone = r < 1.5 * exact["a"]
+    q_exact = exact_traction_3d(r, exact)
+    # the traction's x component against |q|: Mindlin's traction is parallel to Q
+    error_rel = float(np.sqrt(np.sum((traction[zone, 0] - q_exact[zone]) ** 2)
+                              / np.sum(q_exact[zone] ** 2)))
+    coordinates, pressure = problem.gathered_pressure()
+    in_contact = pressure > 1e-8 * exact["p0"]
+    r_pressure = np.hypot(coordinates[:, 0], coordinates[:, 1])
+    a_contact = float(r_pressure[in_contact].max()) if in_contact.any() else 0.0
+    slave_force, master_force = problem.contact_forces()
+    # the full model's forces on the sphere (twice the half model's)
+    tangential_force, normal_force = 2.0 * float(slave_force[0]), 2.0 * float(slave_force[2])
+    summary = {
+        "dim": 3,
+        "mu": args.mu,
+        "tangential_ratio": args.tangential_ratio,
+        "load": LOAD_3D,
+        "tangential_load": tangential_load,
+        "normal_phase": args.normal_phase,
+        **cli.option_record(args),
+        "linear_solver": problem.linear_solver,
+        "c_n": problem.c_n,
+        "c_t": problem.c_t,
+        "refinement": refinement,
+        "num_ranks": comm.size,
+        "num_dofs": V.dofmap.index_map.size_global * 3,
+        "h_contact": h,
+        "a_exact": exact["a"],
+        "a_contact": a_contact,
+        "p0_exact": exact["p0"],
+        "p_max": float(pressure.max()),
+        "stick_radius": stick_radius,
+        "stick_radius_exact": exact["c"],
+        "stick_error_in_elements": abs(stick_radius - exact["c"]) / h,
+        "num_sticking": int(sticking.sum()),
+        "num_slipping": int(slipping.sum()),
+        "q_max": float(np.max(traction[zone, 0])),
+        "q_max_exact": float(np.max(q_exact[zone])),
+        # |y_j| / (mu z_j): 1 at slipping nodes, below 1 at sticking ones (Coulomb's law)
+        "coulomb_ratio_slipping": [float(ratio[slipping].min(initial=1.0)),
+                                   float(ratio[slipping].max(initial=1.0))],
+        "coulomb_ratio_sticking_max": float(ratio[sticking].max(initial=0.0)),
+        "max_traction_y_rel": float(np.max(np.abs(traction[zone, 1]))
+                                    / (exact["mu"] * exact["p0"])),
+        "l2_traction_error_rel": error_rel,
+        "total_force": normal_force,
+        "total_force_error_rel": abs(normal_force - LOAD_3D) / LOAD_3D,
+        "total_tangential_force": tangential_force,
+        "total_tangential_force_error_rel": (
+            abs(tangential_force + tangential_load) / tangential_load
+            if tangential_load > 0 else abs(tangential_force) / LOAD_3D),
+        "force_balance": float(np.linalg.norm(slave_force + master_force) * 2.0 / LOAD_3D),
+        "newton_iterations": [rec.iterations for rec in records],
+        "min_nodal_dissipation_rel": float(
+            min(low for low, _ in dissipation)
+            / max(max(high for _, high in dissipation), 1e-300)),
+        "cutbacks": sum(rec.cutbacks for rec in records),
+        "wall_time_s": wall_time,
+        "profile": {"r": r[zone].tolist(), "traction_x": traction[zone, 0].tolist(),
+                    "sticking": sticking[zone].astype(int).tolist()},
+    }
+    if comm.rank == 0:
+        print(
+            f"Cattaneo-Mindlin 3D mu {args.mu}, Q/(mu P) {args.tangential_ratio}: stick radius "
+            f"{stick_radius:.4f} (exact {exact['c']:.4f}, "
+            f"{summary['stick_error_in_elements']:.2f} elements), q_max {summary['q_max']:.4f} "
+            f"(exact {summary['q_max_exact']:.4f}), L2 traction error {100 * error_rel:.2f} %, "
+            f"tangential force {tangential_force:.10g} (-Q = {-tangential_load:g}), Newton "
+            f"{summary['newton_iterations']}", flush=True)
+        write_summary(args.json, summary)
+        if args.output:
+            plot_3d(args.output / "cattaneo_mindlin_3d.png", r[zone], traction[zone, 0],
+                    sticking[zone], exact, summary)
+            write_profile_3d(args.output / "cattaneo_mindlin_3d.csv", r[zone], traction[zone],
+                             sticking[zone], exact)
+    problem.destroy()
+    return summary
+
+
+def write_profile_3d(path: pathlib.Path, r, traction, sticking, exact) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as stream:
+        writer = csv.writer(stream)
+        writer.writerow(["r", "traction_x", "traction_y", "sticking", "traction_exact"])
+        for r_j, q, stick, q_exact in zip(r, traction, sticking, exact_traction_3d(r, exact),
+                                          strict=True):
+            writer.writerow([repr(float(r_j)), repr(float(q[0])), repr(float(q[1])), int(stick),
+                             repr(float(q_exact))])
+
+
+def plot_3d(path: pathlib.Path, r_nodes, traction_x, sticking, exact, summary) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    a, mu = exact["a"], exact["mu"]
+    r = np.linspace(0.0, 1.5 * a, 601)
+    fig, ax = plt.subplots(figsize=(6.5, 4))
+    ax.plot(r, mu * exact["p0"] * np.sqrt(np.clip(1 - (r / a) ** 2, 0, None)), "k:",
+            label="mu p (Hertz)")
+    ax.plot(r, exact_traction_3d(r, exact), "k-", label="Mindlin q")
+    ax.plot(r_nodes[~sticking], traction_x[~sticking], ".", ms=4, label="slipping or inactive")
+    ax.plot(r_nodes[sticking], traction_x[sticking], "s", ms=3, mfc="none", label="sticking")
+    ax.axvline(exact["c"], color="k", lw=0.5)
+    ax.set_xlabel("r")
+    ax.set_ylabel("tangential traction (x)")
+    ax.set_title(f"3D, mu {summary['mu']}, Q/(mu P) {summary['tangential_ratio']}: c "
+                 f"{summary['stick_radius']:.4f} vs {exact['c']:.4f}")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     cli.save_figure(fig, path)

@@ -141,6 +141,13 @@ def add_common_arguments(
         "for large 3D problems with dual multipliers, else direct",
     )
     parser.add_argument(
+        "--slave-side",
+        choices=("auto", "given"),
+        default="auto",
+        help="auto (default): in 3D, a slave much stiffer than its master is solved as the "
+        "master (the multipliers on the softer side); given: as the demo assigns them",
+    )
+    parser.add_argument(
         "--search-margin",
         type=float,
         default=None,
@@ -191,6 +198,7 @@ def problem_options(args: argparse.Namespace) -> dict[str, Any]:
         "search_margin": args.search_margin,
         "friction": friction_option(args),
         "c_t": args.c_t,
+        "slave_side": args.slave_side,
     }
 
 

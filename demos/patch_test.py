@@ -165,6 +165,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
         "dim": gdim,
         "ratio": list(ratio),
         "slave": args.slave,
+        "swapped": problem.swapped[0],
         "refinement": args.refinement,
         "cell_type": args.cell_type,
         "material": args.material,

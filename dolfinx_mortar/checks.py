@@ -30,6 +30,11 @@ warning advising the swap: the dual multipliers of a stiff curved slave on a muc
 curved master oscillate (docs/benchmarks.md, "Contrast sweep in 3D")."""
 
 
+COARSE_MASTER_RATIO = 2.0
+"""``slave_side="auto"`` keeps a stiff slave whose master's facets are this many times
+longer than its own: a coarse slave lets the master's nodes through it."""
+
+
 class ProblemWarnings:
     """The ContactWarnings of one problem: each cause warns once, then logs.
 
@@ -163,7 +168,27 @@ def check_stiff_slave(warnings: ProblemWarnings, pairs, gdim: int, ratio: float)
         "body can oscillate node to node (the mean pressure and the force stay "
         "right); the softer body as the slave does not. Swap the two tags in "
         "ContactPair(facet_tags, slave, master) unless the soft side is flat or much "
-        "coarser.",
+        "coarser (slave_side='auto', the default, swaps them unless the soft side's facets "
+        f"are {COARSE_MASTER_RATIO:g} times longer).",
+    )
+
+
+def report_swap(warnings: ProblemWarnings, pair, ratio: float, normals: str,
+                solved_normals: str) -> None:
+    """Say once, at set-up, that ``pair`` is solved with its sides swapped
+    (``slave_side="auto"``), why, and how to keep them."""
+    normals_note = ("" if normals == solved_normals else
+                    f" normals={normals!r} is read as {solved_normals!r}, the same body's.")
+    warnings.warn(
+        ("swapped", pair.slave, pair.master, pair.name),
+        f"{pair_name(pair)}: the slave side is about {ratio:.3g} times stiffer than the "
+        "master side, so the pair is solved with the two sides swapped (master tag "
+        f"{pair.master} as the slave): the contact pressure of a stiff curved slave on a "
+        "much softer body oscillates node to node, the softer side's does not. Contact "
+        "pressures and friction states are then at the nodes of tag "
+        f"{pair.master}; contact_forces() keeps the order of the ContactPair "
+        f"(ContactProblem.swapped, solved_pair()).{normals_note} Pass slave_side='given' "
+        "to keep the sides as given.",
     )
 
 

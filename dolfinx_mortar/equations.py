@@ -85,6 +85,9 @@ class ContactEquations:
             np.zeros(i.num_owned_multipliers, dtype=bool) for i in interfaces]
         self.gaps: list[np.ndarray] = [np.zeros(i.num_owned_multipliers) for i in interfaces]
         self.areas: list[np.ndarray] = [np.zeros(i.num_owned_multipliers) for i in interfaces]
+        self._zero_gaps = [-1] * len(interfaces)
+        """Per pair, the interface's pattern version whose gaps and areas (all zero: no pair
+        on any rank) are assembled already; -1 if none."""
         self.b_u = compat.create_vector(F_form)
         self.inversion_check = diagnostics.InversionCheck(self.V)
         self.last_inversion = diagnostics.Inversion()
@@ -152,8 +155,12 @@ class ContactEquations:
 
     def assemble_gaps(self, k: int) -> None:
         """Pair k's weighted gaps g~_j and areas A_j at its owned slave nodes, from the last
-        :meth:`MortarInterface.update`."""
+        :meth:`MortarInterface.update`. Collective; an interface without pairs on any rank
+        has zero gaps and areas until its next search: assembled once."""
         interface = self.interfaces[k]
+        if interface.without_pairs and self._zero_gaps[k] == interface._pattern_version:
+            return
+        self._zero_gaps[k] = interface._pattern_version if interface.without_pairs else -1
         q = interface.quantities
         for name, values, into in (("gap", q.gap.value, self.gaps),
                                    ("area", q.area.value, self.areas)):
@@ -299,38 +306,44 @@ class SnesCallbacks:
         self._equations().monitor(snes, iteration, norm)
 
 
-def stiffness_scales(K: PETSc.Mat, J_form, interfaces, comm: MPI.Intracomm,
-                     gdim: int) -> tuple[float, float, float, float]:
-    """(s, h, s_master, h_master): s about E/h of the slave side (the mean bulk
-    stiffness diagonal at slave dofs over h^(d-1), h the mean slave facet length in the
-    reference configuration) and the same of the master side. ``K`` (the bulk Jacobian's
-    matrix) is assembled here. Collective."""
+def bulk_diagonal(K: PETSc.Mat, J_form) -> tuple[np.ndarray, int]:
+    """The bulk Jacobian's diagonal at this rank's owned rows, and the first row's global
+    index. ``K`` (the bulk Jacobian's matrix) is assembled here. Collective."""
     K.zeroEntries()
     dolfinx.fem.petsc.assemble_matrix(K, J_form)
     K.assemble()
     diagonal = K.getDiagonal()
-    start = K.getOwnershipRange()[0]
-    scales = []
     try:
-        for side in ("slave", "master"):
-            sums = np.zeros(4)
-            for interface in interfaces:
-                surface = getattr(interface, side)
-                dofs = surface.node_dofs()[surface.node_owned].reshape(-1) - start
-                values = np.abs(diagonal.getArray()[dofs])
-                X = surface.reference_coordinates[surface.facets]
-                lengths = np.linalg.norm(X[:, 1] - X[:, 0], axis=1)
-                sums += [values.sum(), values.size, lengths.sum(), lengths.size]
-            sums = comm.allreduce(sums, op=MPI.SUM)
-            if sums[1] == 0 or sums[3] == 0 or not sums[0] > 0 or not sums[2] > 0:
-                raise ValueError(
-                    f"cannot estimate the stiffness scale at the {side} nodes: the bulk "
-                    f"Jacobian has a zero diagonal there (is the {side} surface on a body of "
-                    "the form?)"
-                )
-            length = float(sums[2] / sums[3])
-            # a stiffness diagonal is about E h^(d-2)
-            scales.append((float(sums[0] / sums[1]) / length ** (gdim - 1), length))
+        return diagonal.getArray().copy(), K.getOwnershipRange()[0]
     finally:
         diagonal.destroy()
+
+
+def stiffness_scales(diagonal: tuple[np.ndarray, int], interfaces, comm: MPI.Intracomm,
+                     gdim: int) -> tuple[float, float, float, float]:
+    """(s, h, s_master, h_master): s about E/h of the slave side (the mean bulk
+    stiffness diagonal at slave dofs over h^(d-1), h the mean slave facet length in the
+    reference configuration) and the same of the master side; ``diagonal`` from
+    :func:`bulk_diagonal`. Collective."""
+    values_all, start = diagonal
+    scales = []
+    for side in ("slave", "master"):
+        sums = np.zeros(4)
+        for interface in interfaces:
+            surface = getattr(interface, side)
+            dofs = surface.node_dofs()[surface.node_owned].reshape(-1) - start
+            values = np.abs(values_all[dofs])
+            X = surface.reference_coordinates[surface.facets]
+            lengths = np.linalg.norm(X[:, 1] - X[:, 0], axis=1)
+            sums += [values.sum(), values.size, lengths.sum(), lengths.size]
+        sums = comm.allreduce(sums, op=MPI.SUM)
+        if sums[1] == 0 or sums[3] == 0 or not sums[0] > 0 or not sums[2] > 0:
+            raise ValueError(
+                f"cannot estimate the stiffness scale at the {side} nodes: the bulk "
+                f"Jacobian has a zero diagonal there (is the {side} surface on a body of "
+                "the form?)"
+            )
+        length = float(sums[2] / sums[3])
+        # a stiffness diagonal is about E h^(d-2)
+        scales.append((float(sums[0] / sums[1]) / length ** (gdim - 1), length))
     return scales[0][0], scales[0][1], scales[1][0], scales[1][1]

@@ -80,15 +80,15 @@ def _hertz_arguments(case, slave, refinement, elements_per_radius, radius, conta
     return level, n0, unit, a, L
 
 
-def _quarter_half_ball(occ, sign: float, cap: float) -> list[int]:
-    """The quarter of the half ball of radius 1 centred at (0, 0, sign) on the side of
-    z = 0, as two conforming volumes: the cap of radius CAP_RADIUS (height ``cap``) and
-    the rest."""
+def _quarter_half_ball(occ, sign: float, cap: float, x0: float = 0.0) -> list[int]:
+    """The quarter (x >= 0, y >= 0; with ``x0 = -1`` the half y >= 0) of the half ball of
+    radius 1 centred at (0, 0, sign) on the side of z = 0, as two conforming volumes: the
+    cap of radius CAP_RADIUS (height ``cap``) and the rest."""
     pieces = []
     for low, high in ((0.0, cap), (cap, 1.0)):
         ball = occ.addSphere(0.0, 0.0, sign, 1.0)
         z0 = low if sign > 0 else -high
-        box = occ.addBox(0.0, 0.0, z0, 1.0, 1.0, high - low)
+        box = occ.addBox(x0, 0.0, z0, 1.0 - x0, 1.0, high - low)
         result, _ = occ.intersect([(3, ball)], [(3, box)])
         assert len(result) == 1, result
         pieces.append(result[0])
@@ -98,9 +98,10 @@ def _quarter_half_ball(occ, sign: float, cap: float) -> list[int]:
 
 
 def _sphere_physical_groups(gmsh, upper: list[int], lower: list[int], names: list[str],
-                            markers: dict[str, int]) -> None:
+                            markers: dict[str, int], half: bool = False) -> None:
     """:func:`hertz_sphere`'s physical groups: each boundary face of the two bodies sorted
-    by its bounding box and type (plane or not), checked against the expected count."""
+    by its bounding box and type (plane or not), checked against the expected count (no
+    x = 0 plane in the ``half`` model)."""
     groups: dict[str, list[int]] = {name: [] for name in [*names[2:], "free"]}
     tol = _OCC_TOLERANCE
     for body, volumes in (("sphere", upper), ("block", lower)):
@@ -125,7 +126,7 @@ def _sphere_physical_groups(gmsh, upper: list[int], lower: list[int], names: lis
                 groups["support"].append(face)
     free = groups.pop("free")
     expected = {"sphere_surface": 1, "block_top": 1, "load": 1, "support": 1,
-                "symmetry_x": len(upper) + len(lower),
+                "symmetry_x": 0 if half else len(upper) + len(lower),
                 "symmetry_y": len(upper) + len(lower)}
     found = {name: len(faces) for name, faces in groups.items()}
     if found != expected:
@@ -135,7 +136,8 @@ def _sphere_physical_groups(gmsh, upper: list[int], lower: list[int], names: lis
     if free:
         gmsh.model.addPhysicalGroup(2, free, markers["free"], name="free")
     for name, faces in groups.items():
-        gmsh.model.addPhysicalGroup(2, faces, markers[name], name=name)
+        if faces:
+            gmsh.model.addPhysicalGroup(2, faces, markers[name], name=name)
 
 
 def _sphere_size_field(gmsh, upper: list[int], lower: list[int], h_contact: float,
@@ -179,18 +181,19 @@ def _sphere_size_field(gmsh, upper: list[int], lower: list[int], h_contact: floa
 
 def _sphere_model(gmsh, case: str, L: float, cap: float, names: list[str],
                   markers: dict[str, int], sizes: tuple[float, float, float, float],
-                  ratio: float) -> None:
+                  ratio: float, half: bool = False) -> None:
     """:func:`hertz_sphere`'s gmsh model on rank 0: the two bodies (OCC), their physical
     groups, the size field (``sizes``: h_contact, h_max, the zone, the growth) and the
     tetrahedra."""
     occ = gmsh.model.occ
-    upper = _quarter_half_ball(occ, 1.0, cap)
+    x0 = -1.0 if half else 0.0
+    upper = _quarter_half_ball(occ, 1.0, cap, x0)
     if case == "block":
-        lower = [occ.addBox(0.0, 0.0, -L, L, L, L)]
+        lower = [occ.addBox(x0 * L, 0.0, -L, (1.0 - x0) * L, L, L)]
     else:
-        lower = _quarter_half_ball(occ, -1.0, cap)
+        lower = _quarter_half_ball(occ, -1.0, cap, x0)
     occ.synchronize()
-    _sphere_physical_groups(gmsh, upper, lower, names, markers)
+    _sphere_physical_groups(gmsh, upper, lower, names, markers, half)
     _sphere_size_field(gmsh, upper, lower, *sizes, ratio)
     gmsh.model.mesh.generate(3)
     types = set(gmsh.model.mesh.getElementTypes(3))
@@ -209,8 +212,11 @@ def hertz_sphere(
     elements_per_radius: int = ELEMENTS_PER_RADIUS,
     comm: MPI.Comm = MPI.COMM_WORLD,
     lower_size_ratio: float = 1.0,
+    half: bool = False,
 ) -> TaggedMesh:
-    """Quarter model (x >= 0, y >= 0) of a sphere pressed onto a block or onto a sphere.
+    """Quarter model (x >= 0, y >= 0) of a sphere pressed onto a block or onto a sphere;
+    with ``half`` the half model y >= 0 (x in [-R, R], the block's x in [-L, L]), for
+    loads that are not symmetric about x = 0 (a tangential force along x).
 
     The upper body is the lower half of the ball of radius R centred at (0, 0, R), cut to
     x, y >= 0: it touches z = 0 at the origin and carries the load on its flat face z = R.
@@ -241,6 +247,7 @@ def hertz_sphere(
         elements_per_radius: n0.
         comm: Communicator of the mesh.
         lower_size_ratio: The lower body's element sizes over the upper body's, > 0.
+        half: The half model y >= 0 (no "symmetry_x" facets) instead of the quarter.
 
     Returns:
         The mesh with cells "sphere", "block" and facets "sphere_surface" (the upper
@@ -265,9 +272,9 @@ def hertz_sphere(
 
     def construct(gmsh) -> None:
         _sphere_model(gmsh, case, L, cap, names, markers, (h_contact, h_max, zone, growth),
-                      ratio)
+                      ratio, half)
 
-    data = _build_3d(comm, f"hertz_sphere_{case}", construct)
+    data = _build_3d(comm, f"hertz_sphere_{case}{'_half' if half else ''}", construct)
     if unit != 1.0:
         data.mesh.geometry.x[:] *= unit
     every = _with_contact_aliases({name: markers[name] for name in names}, slave)

@@ -118,6 +118,10 @@ class MortarInterface:
             to pair with linear elasticity).
     """
 
+    _facing_pairs: np.ndarray | None = None
+    """A self-contact surface's facing pairs at the last search (sorted global blocks of the
+    slave facet, then the master facet's): they keep facing while penetrated."""
+
     @renamed_keywords(slave_marker="slave", master_marker="master")
     def __init__(
         self,
@@ -187,11 +191,11 @@ class MortarInterface:
         self._crosspoint_blocks = np.zeros(0, dtype=np.int64)
         self._fold_blocks = np.zeros(0, dtype=np.int64)
         self._slave_side_facets: np.ndarray | None = None
-        self._facing_pairs: np.ndarray | None = None
-        """A self-contact surface's facing pairs at the last search (sorted global blocks
-        of the slave facet, then the master facet's): they keep facing while penetrated."""
         self._pair_dofs: np.ndarray | None = None
         self.stencil: stencils.PairStencil | None = None
+        self.without_pairs = False
+        """No pair on any rank at the last search (one allreduce): every rank alike skips this
+        interface's evaluation, gaps, forces and blocks (a self-contact surface far away)."""
         self.scalar_gradients = False
         """3D: the kernel also keeps the gradients of D and M, and the stencils hold the
         averaged normals' stars whatever the normal option (friction's tangent frames;
@@ -316,7 +320,7 @@ class MortarInterface:
         stats = self.statistics
         start = time.perf_counter()
         slave_x = self.slave.current_coordinates(u)
-        master_x = self.master.current_coordinates(u)
+        master_x = slave_x if self.self_contact else self.master.current_coordinates(u)
         moving = np.concatenate([slave_x, master_x])
         reference = self.configuration == "reference"
         if self.reuse.needs_search(moving, self.comm) or (
@@ -353,9 +357,11 @@ class MortarInterface:
                 self._reference_quantities = self._evaluate(self._reference_node_x)
             self.quantities = self._with_current_gap(self._reference_quantities)
         elif (self.quantities is not None and self._evaluated_version == self._pattern_version
-              and np.array_equal(self._evaluated_x, self._node_x)):
+              and (self.stencil.num_pairs == 0
+                   or np.array_equal(self._evaluated_x, self._node_x))):
             # nothing moved since the last evaluation (a Jacobian after its
-            # residual, a repeated line-search point): keep the quantities
+            # residual, a repeated line-search point), or no pair here whose quantities
+            # could change: keep the quantities
             stats.evaluations_skipped += 1
             self._widen_partly_covered()
             stats.time_integration += time.perf_counter() - start
@@ -476,11 +482,13 @@ class MortarInterface:
         """New candidate pairs at the positions ``x``; with ``origin`` positions
         (the last search's), the boxes are swept from there (:mod:`search`)."""
         # what belongs to the last search's pairs (their quantities, the assembly patterns'
-        # lookups) goes before the new pairs' arrays are made
-        self.quantities = None
-        for _, matrix in self._matrices.values():
-            matrix.release_pattern()
-        self._pair_block_sides.clear()
+        # lookups) goes before the new pairs' arrays are made (an interface without pairs
+        # has none: it keeps them, in case this search finds none again)
+        if not self.without_pairs:
+            self.quantities = None
+            for _, matrix in self._matrices.values():
+                matrix.release_pattern()
+            self._pair_block_sides.clear()
         slave, master = self.slave, self.master
         parallel = self.comm.size > 1
         swept = slave_origin is not None
@@ -527,14 +535,26 @@ class MortarInterface:
                 slave_origin, master_origin,
                 remote_master_origin.reshape(-1, gdim), remote_slave_origin.reshape(-1, gdim),
             ])
-        pairs = search.candidate_pairs(
-            self._node_x, slave.facets, self._node_x, all_master_facets, self.reuse.margin,
-            slave_previous=node_origin, master_previous=node_origin, depth=self.search_depth,
-        )
+        faced_before = self._facing_pairs is not None and self._facing_pairs.shape[0] > 0
+        if self.self_contact and not faced_before and not self_contact.may_face(
+                self._node_x, self._node_blocks, slave.facets, all_master_facets,
+                self.reuse.margin, node_origin, self.search_depth):
+            pairs = np.zeros((0, 2), dtype=np.int64)  # far from itself here: nothing to find
+        else:
+            pairs = search.candidate_pairs(
+                self._node_x, slave.facets, self._node_x, all_master_facets, self.reuse.margin,
+                slave_previous=node_origin, master_previous=node_origin,
+                depth=self.search_depth)
         if self.self_contact:
             pairs, all_slave_facets = self._one_sided(pairs, all_slave_facets,
                                                       all_master_facets)
+        found = self.comm.allreduce(pairs.shape[0], op=MPI.SUM)
+        if found == 0 and self.without_pairs and self.stencil is not None:
+            # no pair before, none now (on any rank): the empty stencil, its pattern version
+            # (the system keeps its matrix) and its empty quantities still hold
+            return
         self._set_pairs(pairs, all_slave_facets, all_master_facets)
+        self.without_pairs = found == 0
 
     def _one_sided(self, pairs: np.ndarray, all_slave_facets: np.ndarray,
                    all_master_facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -552,6 +572,11 @@ class MortarInterface:
         facing = self_contact.facing(slave_blocks, master_blocks, slave_x, master_x,
                                      self.search_depth, faced)
         self._facing_pairs = keys[facing]
+        if self.comm.allreduce(int(np.count_nonzero(facing)), op=MPI.SUM) == 0:
+            # no zone anywhere: what slave_side would decide, without gathering
+            self._slave_side_facets = np.zeros((0, slave_nodes.shape[1]), dtype=np.int64)
+            self._fold_blocks = np.zeros(0, dtype=np.int64)
+            return pairs[:0], all_slave_facets
         pairs, slave_nodes, master_nodes = (
             pairs[facing], slave_nodes[facing], master_nodes[facing])
         sizes = [self_contact.facet_frames(self._node_x, nodes)[2]
@@ -846,7 +871,9 @@ class MortarInterface:
         return self._assemble_gradients(matrix, rows, self.force_jacobian_terms(z_pair))
 
     def contact_force(self, z: PETSc.Vec, vector: PETSc.Vec) -> PETSc.Vec:
-        """Add -B^T z to ``vector`` (displacement layout), without forming B."""
+        """Add -B^T z to ``vector`` (displacement layout), without forming B. Collective."""
+        if self.without_pairs:
+            return vector
         rows = self.contributing_pairs()
         z_pair = self.node_values(z)[self.pair_slave_nodes[rows]]
         force = -np.einsum("nj,njkc->nkc", z_pair, self.force_coefficients(rows))

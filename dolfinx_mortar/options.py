@@ -21,6 +21,7 @@ Normals = typing.Literal["averaged", "slave", "master"]
 Basis = typing.Literal["dual", "standard"]
 Configuration = typing.Literal["current", "reference"]
 LinearSolver = typing.Literal["auto", "direct", "iterative"]
+SlaveSide = typing.Literal["auto", "given"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -136,6 +137,14 @@ class ContactOptions:
             (:mod:`dolfinx_mortar.recovery`) or the multipliers; None: recovered in 3D,
             where the multipliers of tetrahedral meshes scatter, the multipliers in 2D,
             where the fit would only add its curvature error (docs/benchmarks.md).
+        slave_side: ``auto``: in 3D, a pair whose slave side is
+            :data:`~dolfinx_mortar.checks.STIFF_SLAVE_RATIO` times stiffer than its master,
+            and whose master is not much coarser, is solved with the two sides swapped
+            (the multipliers on the softer side; a ContactWarning says so at set-up), since
+            the multipliers of a stiff curved slave on a much softer body oscillate
+            (docs/benchmarks.md, "Contrast sweep in 3D"); ``given``: the sides as the
+            :class:`~dolfinx_mortar.problem.ContactPair` says (a stiff slave then gets the
+            set-up advice to swap).
     """
 
     method: Method = "lagrange"
@@ -155,6 +164,7 @@ class ContactOptions:
     friction: Coulomb | Tresca | tuple | None = None
     c_t: float | None = None
     pressure_recovery: bool | None = None
+    slave_side: SlaveSide = "auto"
 
     def __post_init__(self):
         hints = typing.get_type_hints(ContactOptions)

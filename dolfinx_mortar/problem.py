@@ -37,7 +37,7 @@ from petsc4py import PETSc
 from . import checks, compat, diagnostics, enforcement, solvers
 from . import friction as friction_rules
 from .deprecation import moved
-from .equations import ContactEquations, stiffness_scales
+from .equations import ContactEquations, bulk_diagonal, stiffness_scales
 from .layout import BlockLayout, dirichlet_dofs
 from .mortar import MortarInterface
 from .newton import ContactNewton
@@ -129,20 +129,60 @@ class ContactProblem(ContactResults):
         self.J_form = dolfinx.fem.form(
             J if J is not None else ufl.derivative(F, u, ufl.TrialFunction(self.V)))
         self._destroyed = True  # nothing to free until the PETSc objects exist
-        self.interfaces = [
-            MortarInterface(self.V, pair.facet_tags, pair.slave, pair.master,
-                            normals=options.normals, integration=options.integration,
-                            basis=options.basis,
-                            num_gauss_points=options.num_gauss_points,
-                            search_margin=options.search_margin,
-                            configuration=options.configuration)
-            for pair in self.pairs]
+        self.swapped = [False] * len(self.pairs)
+        """Per pair, whether it is solved with its slave and master swapped
+        (``slave_side="auto"``): its multipliers, pressures and friction state are then on
+        the surface the ContactPair calls master (:meth:`solved_pair`)."""
+        self.interfaces = [self._mortar_interface(pair, options) for pair in self.pairs]
         self._destroyed = False
         try:
             self._build(options, petsc_options or {}, petsc_options_prefix)
         except BaseException:
             self.destroy()
             raise
+
+    def _mortar_interface(self, pair: ContactPair, options: ContactOptions) -> MortarInterface:
+        """The mortar interface of ``pair`` as given (its slave side the slave)."""
+        return MortarInterface(self.V, pair.facet_tags, pair.slave, pair.master,
+                               normals=options.normals, integration=options.integration,
+                               basis=options.basis,
+                               num_gauss_points=options.num_gauss_points,
+                               search_margin=options.search_margin,
+                               configuration=options.configuration)
+
+    def solved_pair(self, k: int = 0) -> ContactPair:
+        """Pair k as it is solved: the ContactPair given, or with its slave and master tags
+        swapped where ``slave_side="auto"`` swapped them (:attr:`swapped`). The slave side
+        carries the multipliers: :meth:`contact_pressure` and :meth:`friction_state` are
+        at its nodes."""
+        pair = self.pairs[k]
+        if not self.swapped[k]:
+            return pair
+        return dataclasses.replace(pair, slave=pair.master, master=pair.slave)
+
+    def _choose_slave_sides(self, options: ContactOptions, diagonal, gdim: int) -> None:
+        """With ``slave_side="auto"``, in 3D, swap the sides of each pair whose slave is
+        STIFF_SLAVE_RATIO times stiffer than its master, unless the master's facets are
+        COARSE_MASTER_RATIO times longer (a coarse slave lets the master's nodes through
+        it). Collective."""
+        if options.slave_side != "auto" or gdim != 3:
+            return
+        for k, (pair, interface) in enumerate(zip(self.pairs, self.interfaces, strict=True)):
+            if pair.slave == pair.master:
+                continue
+            s, h, s_master, h_master = stiffness_scales(diagonal, [interface], self.comm, gdim)
+            ratio = s * h / (s_master * h_master)
+            if not (ratio >= checks.STIFF_SLAVE_RATIO
+                    and h_master <= checks.COARSE_MASTER_RATIO * h):
+                continue
+            normals = {"slave": "master", "master": "slave"}.get(options.normals,
+                                                                 options.normals)
+            swapped = dataclasses.replace(pair, slave=pair.master, master=pair.slave)
+            interface.destroy()
+            self.interfaces[k] = self._mortar_interface(
+                swapped, dataclasses.replace(options, normals=normals))
+            self.swapped[k] = True
+            checks.report_swap(self._warnings, pair, ratio, options.normals, normals)
 
     def _choose_linear_solver(self, options: ContactOptions) -> None:
         """The linear solver ``auto`` stands for, and whether it condenses; raise for the
@@ -169,10 +209,14 @@ class ContactProblem(ContactResults):
                 interface.scalar_gradients = True  # friction's tangent frames
         self._warnings = checks.ProblemWarnings(self.comm)
         self.setup_warnings = self._warnings.setup
+        self._K = compat.create_matrix(self.J_form)
+        diagonal = bulk_diagonal(self._K, self.J_form)
+        self._choose_slave_sides(options, diagonal, gdim)
+        pairs = [self.solved_pair(k) for k in range(len(self.pairs))]
         body_labels = surface_body_labels(self.V.mesh)
-        checks.check_slave_body(self.comm, self.pairs, self.interfaces, body_labels)
-        checks.check_facing(self._warnings, self.pairs, self.interfaces, self.u)
-        checks.check_initial_overlap(self._warnings, self.pairs, self.interfaces, self.u)
+        checks.check_slave_body(self.comm, pairs, self.interfaces, body_labels)
+        checks.check_facing(self._warnings, pairs, self.interfaces, self.u)
+        checks.check_initial_overlap(self._warnings, pairs, self.interfaces, self.u)
         bs = self.V.dofmap.index_map_bs
         self._fixed_dofs = dirichlet_dofs(self.bcs, self.V)
         fixed_blocks = np.unique(self._fixed_dofs // bs)
@@ -184,12 +228,11 @@ class ContactProblem(ContactResults):
         components = (gdim - 1) if self.has_friction else 0
         self.layout = BlockLayout(self.comm, self.interfaces[0].num_owned_dofs,
                                   counts + [c for c in counts for _ in range(components)])
-        self._K = compat.create_matrix(self.J_form)
         self.x = self.layout.create_vector()
         self.b = self.layout.create_vector()
         row_scale, slave_length, master_scale, master_length = stiffness_scales(
-            self._K, self.J_form, self.interfaces, self.comm, gdim)
-        checks.check_stiff_slave(self._warnings, self.pairs, gdim, row_scale * slave_length
+            diagonal, self.interfaces, self.comm, gdim)
+        checks.check_stiff_slave(self._warnings, pairs, gdim, row_scale * slave_length
                                  / (master_scale * master_length))
         free_bodies = diagnostics.free_translations(self.V, self._K, body_labels, self.bcs)
         scales = enforcement.Scales(row_scale, slave_length, gdim)
@@ -212,7 +255,7 @@ class ContactProblem(ContactResults):
             self.equations, self.x, self.b, prefix, petsc_options, self._linear_solver,
             self._condensation, 1e-11 * self._force_scale * slave_length,
             automatic=self._automatic_linear_solver)
-        checks.check_free_bodies(self._warnings, self.pairs, self.interfaces, body_labels,
+        checks.check_free_bodies(self._warnings, pairs, self.interfaces, body_labels,
                                  free_bodies, self.equations.smallest_gap, slave_length)
         self._warnings.building = False
 
@@ -374,7 +417,8 @@ class ContactProblem(ContactResults):
         accepted step.
         """
         return checks.check_penetration(
-            self._warnings, self.pairs, self.interfaces, self.u, threshold,
+            self._warnings, [self.solved_pair(k) for k in range(len(self.pairs))],
+            self.interfaces, self.u, threshold,
             None if self.method == "lagrange" else self.penalty)
 
     # -- PETSc objects -------------------------------------------------------

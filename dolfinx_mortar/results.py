@@ -17,7 +17,7 @@ from . import recovery
 class ContactResults:
     """The results of a contact problem (a base class of
     :class:`~dolfinx_mortar.problem.ContactProblem`, whose state it reads: ``comm``,
-    ``V``, ``pairs``, ``interfaces``, ``multipliers``, ``active``, ``areas``,
+    ``V``, ``pairs``, ``swapped``, ``interfaces``, ``multipliers``, ``active``, ``areas``,
     ``friction``, ``pressure_recovery`` and ``equations``)."""
 
     def num_active(self) -> int:
@@ -28,6 +28,8 @@ class ContactResults:
         """(reference coordinates, contact pressure) of pair k's slave nodes owned by this
         rank: coordinates (n, gdim), pressures (n,); :meth:`gathered_pressure` gives all of
         them on every rank. The rows are those of :meth:`friction_state`, in the same order.
+        The slave side is the one pair k is solved with (``solved_pair(k).slave``: the
+        ContactPair's master where ``slave_side="auto"`` swapped the sides).
 
         With ``pressure_recovery`` (the default in 3D) the pressure is the nodal
         multipliers recovered on their patches (:mod:`dolfinx_mortar.recovery`): the linear
@@ -53,7 +55,8 @@ class ContactResults:
         return coordinates[order], pressure[order]
 
     def contact_forces(self, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
-        """Total contact force on the slave and on the master side of pair k.
+        """Total contact force on the slave and on the master side of pair k, as the
+        ContactPair names them (also where ``slave_side="auto"`` swapped the sides).
 
         Each is a vector of gdim components ((x, y) in 2D, (x, y, z) in 3D): the force the
         other body exerts on that side, the normal pressure's and, with friction, the
@@ -73,7 +76,8 @@ class ContactResults:
         if self.friction is not None:
             slave_friction, master_friction = self.friction.forces(k, rows)
             slave, master = slave + slave_friction, master + master_friction
-        return (self.comm.allreduce(slave, op=MPI.SUM), self.comm.allreduce(master, op=MPI.SUM))
+        forces = (self.comm.allreduce(slave, op=MPI.SUM), self.comm.allreduce(master, op=MPI.SUM))
+        return forces[::-1] if self.swapped[k] else forces
 
     def friction_state(self, k: int = 0) -> dict:
         """Pair k's frictional state at this rank's owned slave nodes (not collective in 2D,

@@ -20,9 +20,14 @@ the slave (so that a growing zone does not swap its multipliers from one wall to
 other), and a new zone takes the finer, or on a tie the side of its first facet. The graph
 is gathered on every rank and coloured identically there, so that the ranks agree. A pair
 whose facets got one colour (an odd cycle: a zone that curls round onto itself) is
-dropped. A surface far from itself still pays its search against itself (its own
-neighbours are candidates until :func:`facing` drops them) and an interface's fixed
-costs (docs/benchmarks.md, "Self-contact").
+dropped. A surface far from itself (no two facets whose search boxes overlap face each
+other: :func:`may_face`) skips the search and the gathering, and its interface, without
+pairs on any rank, skips its evaluation and assembly (docs/benchmarks.md, "Self-contact:
+a surface far from itself").
+
+Friction needs nothing of its own here: the tangents are those of the slave side's
+normals, as for two bodies, and the slips are measured from the start of each solve,
+through the pairs of the current search.
 
 This follows the two-pass-free, one-sided treatment of 4C's self-contact (a binary tree
 search, then a master/slave assignment of the contacting elements per search) with a
@@ -66,6 +71,43 @@ def facet_frames(x: np.ndarray, facets: np.ndarray) -> tuple[np.ndarray, np.ndar
     length = np.linalg.norm(normal, axis=1)
     unit = normal / np.where(length > 0.0, length, 1.0)[:, None]
     return centres, unit, size
+
+
+DENSE_PAIRS = 40000
+""":func:`may_face` compares the boxes of all facet pairs at once up to this many pairs;
+above, it leaves the decision to the search."""
+
+
+def may_face(x: np.ndarray, blocks: np.ndarray, slave_facets: np.ndarray,
+             master_facets: np.ndarray, margin: float, origin: np.ndarray | None = None,
+             depth: float = 0.0) -> bool:
+    """Whether the search of a surface against itself may keep a pair (``slave_facets``
+    against ``master_facets``: node indices into ``x``, the nodes' global dof blocks
+    ``blocks``); False only if it cannot, so that the search can be skipped. The search's
+    candidates (:func:`~dolfinx_mortar.search.candidate_pairs`: boxes swept from
+    ``origin``, reaching ``depth`` behind each facet, overlapping once grown by
+    ``margin``, then only those near now or crossed) are a subset of the pairs whose boxes
+    overlap, which a small surface finds here with a few array comparisons, all pairs at
+    once, instead of the search's k-d trees per size class; :func:`facing` keeps a pair of
+    those or none (it decides each pair alone, the same way in either set). A surface far
+    from itself has candidates (each facet's own neighbours) but none that faces."""
+    num_slave, num_master = slave_facets.shape[0], master_facets.shape[0]
+    if num_slave == 0 or num_master == 0:
+        return False
+    if num_slave * num_master > DENSE_PAIRS:
+        return True
+    from . import search
+
+    slave_lower, slave_upper = search.facet_boxes(x, slave_facets, origin, depth)
+    master_lower, master_upper = search.facet_boxes(x, master_facets, origin, depth)
+    overlap = np.ones((num_slave, num_master), dtype=bool)
+    for k in range(x.shape[1]):  # the comparisons of candidate_pairs, for all pairs
+        overlap &= (slave_lower[:, k] - margin)[:, None] <= (master_upper[:, k] + margin)
+        overlap &= (master_lower[:, k] - margin) <= (slave_upper[:, k] + margin)[:, None]
+    slave, master = np.nonzero(overlap)
+    slave_nodes, master_nodes = slave_facets[slave], master_facets[master]
+    return bool(facing(blocks[slave_nodes], blocks[master_nodes], x[slave_nodes],
+                       x[master_nodes], depth).any())
 
 
 def facing(slave_blocks: np.ndarray, master_blocks: np.ndarray, slave_x: np.ndarray,

@@ -171,7 +171,7 @@ class ContactSystem:
         k's dense block per candidate pair (2D: 10 x 14); rows of Dirichlet dofs are dropped
         (-1), they are identity rows."""
         interface = self.interfaces[k]
-        if interface.quantities is None:
+        if interface.quantities is None or interface.without_pairs:
             return np.zeros((0, 0), dtype=np.int64), np.zeros((0, 0), dtype=np.int64)
         layout = self.layout
         force_dofs = layout.u(interface.pair_force_dofs)
@@ -240,8 +240,8 @@ class ContactSystem:
         None before the first evaluation (no pairs yet).
         """
         interface = self.interfaces[k]
-        if interface.quantities is None:
-            return None
+        if interface.quantities is None or interface.without_pairs:
+            return None  # (the same on every rank: no collective call below is skipped alone)
         contributing = interface.contributing_pairs()
         z_nodes = interface.node_values(z)
         _, alpha, beta, _ = normal_condition

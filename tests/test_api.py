@@ -61,7 +61,7 @@ def test_options_are_frozen_and_their_choices_literal_typed():
     hints = typing.get_type_hints(ContactOptions)
     literal = {name for name, hint in hints.items() if typing.get_origin(hint) is typing.Literal}
     assert literal == {"method", "integration", "normals", "active_set", "basis",
-                       "configuration", "linear_solver"}
+                       "configuration", "linear_solver", "slave_side"}
     for name in literal:
         allowed = typing.get_args(hints[name])
         assert getattr(ContactOptions(), name) in allowed

@@ -59,22 +59,29 @@ def test_patch_test_segment_lagrange_is_exact(cell, ratio, slave):
 @pytest.mark.parametrize("cell", CELLS)
 @pytest.mark.parametrize("moduli", [("1e5", "1e3"), ("1e3", "1e5")])
 @pytest.mark.parametrize("slave", ["top", "bottom"])
-def test_patch_test_is_exact_with_moduli_100_to_1(cell, moduli, slave):
+@pytest.mark.parametrize("slave_side", ["auto", "given"])
+def test_patch_test_is_exact_with_moduli_100_to_1(cell, moduli, slave, slave_side):
     """Punch and foundation 100 times stiffer than the other, either slave side: the state
     stays uniform (the bodies' lateral strains differ, the interface slides) and exact.
-    The stiff slave gets the set-up advice to swap (once), the soft one none."""
+    A stiff slave is solved swapped with ``slave_side="auto"`` (one warning that says so;
+    the forces keep the ContactPair's order, the pressure is at the other surface's
+    nodes), and gets the set-up advice to swap with ``given``; a soft one gets neither.
+    assert_exact checks the forces in the ContactPair's order (up on the punch)."""
     args = ("--cell", cell, "--ratio", "3:2", "--slave", slave,
-            "--E-punch", moduli[0], "--E-foundation", moduli[1])
+            "--E-punch", moduli[0], "--E-foundation", moduli[1], "--slave-side", slave_side)
     stiff_slave = (slave == "top") == (float(moduli[0]) > float(moduli[1]))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         summary = patch_test(*args)
-    advice = [str(w.message) for w in caught if issubclass(w.category, ContactWarning)
-              and "times stiffer than the master" in str(w.message)]
-    assert len(advice) == (1 if stiff_slave else 0), advice
+    messages = [str(w.message) for w in caught if issubclass(w.category, ContactWarning)]
+    advice = [m for m in messages if "Swap the two tags" in m]
+    swap = [m for m in messages if "solved with the two sides swapped" in m]
+    assert len(advice) == (1 if stiff_slave and slave_side == "given" else 0), messages
+    assert len(swap) == (1 if stiff_slave and slave_side == "auto" else 0), messages
+    assert summary["swapped"] == (stiff_slave and slave_side == "auto")
     if stiff_slave:  # the estimate from the stiffness diagonals (non-matching 3:2 meshes)
-        ratio = float(re.search(r"about ([0-9.e+]+) times stiffer", advice[0]).group(1))
-        assert 50.0 < ratio < 200.0, advice[0]
+        ratio = float(re.search(r"about ([0-9.e+]+) times stiffer", (advice + swap)[0]).group(1))
+        assert 50.0 < ratio < 200.0, messages
     assert_exact(summary)
 
 

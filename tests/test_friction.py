@@ -224,6 +224,31 @@ def test_cattaneo_mindlin_stick_zone_and_tangential_force(ratio):
     assert summary["min_nodal_dissipation_rel"] > -1e-10
 
 
+@pytest.mark.timeout(300)
+def test_cattaneo_mindlin_3d_stick_radius_and_coulomb_law(tmp_path):
+    """3D (--dim 3), refinement 0 (4,320 dofs, half model): a stick core and a slip ring;
+    the stick radius within one element of Mindlin's a (1 - Q/(mu P))^(1/3) (measured
+    0.32); the friction force on the sphere -Q and the normal force P to 1e-8 (the loads
+    are exact on the faceted top); the traction |y_j| = mu z_j at every slipping node to
+    1e-8 and below it at the sticking ones; no negative frictional work; the outputs."""
+    summary = load_demo("cattaneo_mindlin").main(
+        ["--dim", "3", "--output", str(tmp_path), "--json", str(tmp_path / "cm3d.json")],
+        comm=MPI.COMM_SELF)
+    assert summary["num_sticking"] > 0 and summary["num_slipping"] > 0
+    assert summary["stick_error_in_elements"] < 1.0
+    assert summary["total_tangential_force_error_rel"] < 1e-8
+    assert summary["total_force_error_rel"] < 1e-8
+    assert summary["force_balance"] < 1e-10
+    low, high = summary["coulomb_ratio_slipping"]
+    assert 1.0 - 1e-8 < low <= high < 1.0 + 1e-8
+    assert summary["coulomb_ratio_sticking_max"] < 1.0
+    assert summary["min_nodal_dissipation_rel"] > -1e-8
+    assert max(summary["newton_iterations"]) <= 10 and summary["cutbacks"] == 0
+    for name in ("cattaneo_mindlin_3d.png", "cattaneo_mindlin_3d.csv", "cm3d.json",
+                 "paraview/tangential_traction.bp"):
+        assert (tmp_path / name).exists(), name
+
+
 def test_cattaneo_mindlin_outputs(tmp_path):
     """PNG, CSV, JSON and the ParaView files of the frictional state."""
     load_demo("cattaneo_mindlin").main(

@@ -1,7 +1,9 @@
 """Self-contact (dolfinx_mortar/self_contact.py): which facet pairs of one surface face each
 other, which side of each zone is the slave, and the self-contact patch test
 (demos/self_contact.py): a uniform pressure across a slit whose non-matching lips are one
-surface, exact in 2D and 3D, serial and parallel; the linearization (Taylor)."""
+surface, exact in 2D and 3D, serial and parallel; the linearization (Taylor); Coulomb friction
+across the slit (the stick state exact, the slip law, Taylor); a surface far from itself,
+whose search and interface are skipped."""
 
 from __future__ import annotations
 
@@ -13,8 +15,18 @@ from mpi4py import MPI
 from petsc4py import PETSc
 from test_contact import assert_taylor_second_order, demo
 
-from dolfinx_mortar import ContactPair, ContactProblem, Material, compat, internal_work, meshes
+from dolfinx_mortar import (
+    ContactPair,
+    ContactProblem,
+    Coulomb,
+    Material,
+    compat,
+    internal_work,
+    meshes,
+    search,
+)
 from dolfinx_mortar import self_contact as sc
+from dolfinx_mortar.mortar import MortarInterface
 
 
 def segment(a, b):
@@ -319,6 +331,262 @@ def test_crush_without_the_self_contact_pair():
     assert max(without["inner_active"]) == 0 == max(with_pair["inner_active"])
     np.testing.assert_allclose(without["plate_force"], with_pair["plate_force"], rtol=1e-8)
 
+
+# -- friction on a self-contact surface ---------------------------------------------------
+
+SHEAR = 0.002
+"""gamma of the sheared slit's displacement (-squeeze (x - 1), gamma (x - 1), 0)."""
+
+
+def sheared_slit(dim: int, cell: str, basis: str, mu: float, comm=MPI.COMM_WORLD):
+    """The slit block (linear material), its whole outer boundary held at the uniform strain
+    u = (-0.01 (x - 1), SHEAR (x - 1), 0): without the slit this is the solution, sigma_xx =
+    -p = -(lambda + 2 G) 0.01 and sigma_xy = G SHEAR everywhere. With Coulomb friction mu
+    across the slit the lips stick if G SHEAR < mu p (then nothing changes: the exact
+    state), else they slip. Returns the solved problem, its report, (p, sigma) and the
+    exact displacement."""
+    E, nu, squeeze = 1000.0, 0.3, 0.01
+    tagged = meshes.slit_block((4, 6) if dim == 3 else (5, 7), cell, comm)
+    mesh, markers = tagged.mesh, tagged.markers
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (dim,)))
+    u = dolfinx.fem.Function(V)
+    F = internal_work(u, ufl.TestFunction(V), {markers["block"]: Material(E, nu, "linear")},
+                      tagged.cell_tags)
+
+    def uniform(x):
+        return np.vstack([-squeeze * (x[0] - 1.0), SHEAR * (x[0] - 1.0)]
+                         + ([np.zeros_like(x[0])] if dim == 3 else []))
+
+    def outer(x):
+        on = np.isclose(x[0], 0.0) | np.isclose(x[0], 2.0) | np.isclose(x[1], 0.0)
+        on |= np.isclose(x[1], 2.0)
+        return on | (np.isclose(x[2], 0.0) | np.isclose(x[2], 0.5) if dim == 3 else False)
+
+    exact = dolfinx.fem.Function(V)
+    exact.interpolate(uniform)
+    facets = dolfinx.mesh.locate_entities_boundary(mesh, dim - 1, outer)
+    bc = dolfinx.fem.dirichletbc(exact, dolfinx.fem.locate_dofs_topological(V, dim - 1, facets))
+    pair = ContactPair(tagged.facet_tags, markers["slit"], markers["slit"])
+    problem = ContactProblem(F, u, [bc], [pair], configuration="reference", basis=basis,
+                             friction=Coulomb(mu))
+    report = problem.solve()
+    lam, shear = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+    sigma = np.zeros((dim, dim))
+    sigma[0, 0], sigma[0, 1] = -(lam + 2 * shear) * squeeze, shear * SHEAR
+    sigma[1, 0] = sigma[0, 1]
+    return problem, report, (lam + 2 * shear) * squeeze, sigma, exact
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("dim, cell, basis", [(2, "triangle", "dual"),
+                                              (2, "quadrilateral", "standard"),
+                                              (3, "tetrahedron", "dual"),
+                                              (3, "hexahedron", "standard")])
+def test_frictional_self_contact_stick_is_exact(dim, cell, basis):
+    """The sheared slit with mu = 0.5 (G SHEAR / p = 0.057): the lips stick, the displacement
+    is the uniform strain, every carrying node has z = p and the tangential multipliers of
+    the slave side's traction sigma n, y^a = -(sigma n) . tau^a (2D: tau = R n, so y =
+    -G SHEAR whichever lip is the slave; 3D: on the nodes' frames), the slips zero."""
+    comm = MPI.COMM_WORLD
+    problem, report, p, sigma, exact = sheared_slit(dim, cell, basis, mu=0.5)
+    with problem:
+        assert report.converged
+        error = np.abs(problem.u.x.array - exact.x.array).max(initial=0.0)
+        assert comm.allreduce(error, op=MPI.MAX) < 1e-14
+        active = problem.active[0]
+        # the finer lip's nodes but those at the held boundary and the tip (no multiplier)
+        expected_active = 6 if dim == 2 else 5
+        assert comm.allreduce(int(active.sum()), op=MPI.SUM) == expected_active
+        z = problem.multipliers[0].getArray(readonly=True)[active]
+        np.testing.assert_allclose(z, p, rtol=1e-10)
+        state = problem.friction_state()
+        y = state["traction"][active]
+        if dim == 2:
+            expected = np.full(z.size, -sigma[0, 1])
+        else:
+            frames = state["frames"][active]  # (n, a, c)
+            normal = np.cross(frames[:, 0], frames[:, 1])
+            expected = -np.einsum("nac,nc->na", frames, normal @ sigma)
+        np.testing.assert_allclose(y, expected, rtol=0.0, atol=1e-10 * p)
+        assert state["sticking"][active].all()
+        assert np.abs(state["slip"][active]).max(initial=0.0) < 1e-14
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("dim, cell", [(2, "triangle"), (3, "tetrahedron")])
+def test_frictional_self_contact_slips_by_coulomb(dim, cell):
+    """The sheared slit with mu = 0.02 (below G SHEAR / p = 0.057): the lips slip; at every
+    slipping node |y| = mu z (the gap closed: the bound mu max(0, z - c_n g^) is mu z), at
+    every sticking node |y| <= mu z, and the friction dissipates (y . u~ > 0 where slipping).
+    """
+    comm = MPI.COMM_WORLD
+    mu = 0.02
+    problem, report, p, _, _ = sheared_slit(dim, cell, "dual", mu=mu)
+    with problem:
+        assert report.converged
+        active = problem.active[0]
+        z = problem.multipliers[0].getArray(readonly=True)[active]
+        state = problem.friction_state()
+        y = state["traction"][active].reshape(z.size, problem.friction.components)
+        size = np.linalg.norm(y, axis=1)
+        slipping = state["slipping"][active]
+        assert comm.allreduce(int(slipping.sum()), op=MPI.SUM) > 0
+        np.testing.assert_allclose(size[slipping], mu * z[slipping], rtol=1e-8)
+        assert np.all(size[~slipping] <= mu * z[~slipping] * (1 + 1e-8))
+        assert np.all(state["dissipation"][active][slipping] > 0.0)
+
+
+def tangential_multipliers_along_the_slips(problem: ContactProblem, seed: int) -> None:
+    """Random tangential multipliers 5 <= |y^a_j| <= 10 (per-rank seed) of the sign of
+    the slip u~^a_j, so that |v| = |y + c_t s| >= 5 at every node: a Taylor step (at
+    most 1e-4 in a random direction) changes c_t s by about 1 at a small corner node of
+    the slit (c_t ~ 2300), which, with y of the other sign (test_friction's
+    with_random_tangential_multipliers), took v through 0 (the kink) on 3 ranks."""
+    problem.equations.residual(problem.snes, problem.x, problem.b)
+    m = problem.friction.components
+    slip = problem.friction_state()["slip"].reshape(-1, m)
+    rng = np.random.default_rng(seed + problem.comm.rank)
+    for a, y in enumerate(problem.tangential):
+        y.setArray(np.where(slip[:, a] < 0.0, -1.0, 1.0)
+                   * rng.uniform(5.0, 10.0, y.getLocalSize()))
+    problem.equations.read_state(problem.x)
+
+
+def put_active_nodes_in(problem: ContactProblem, state: str) -> None:
+    """Set the Coulomb mu so that every active node is in ``state`` ("slipping" or
+    "sticking") with a margin of 2 from the kink: |v| = |y + c_t s| against the bound
+    mu (z - c_n g^) (test_friction.put_every_active_node_in, with the components held by a
+    prescribed displacement left out of v, as the law leaves them: the slit's bottom
+    nodes in 3D, whose tau^1 lies along the held u_y); checks it."""
+    comm = problem.comm
+    problem.equations.residual(problem.snes, problem.x, problem.b)
+    active = problem.active[0]
+    z = problem.multipliers[0].getArray(readonly=True)[active]
+    z = z - problem.c_n * problem.gaps[0][active] / problem.areas[0][active]
+    now = problem.friction_state()
+    m = problem.friction.components
+    held = problem.friction.held[0]
+    free = 1.0 if held is None else ~held[active]
+    v = (now["traction"][active].reshape(z.size, m)
+         + problem.c_t * now["slip"][active].reshape(z.size, m)) * free
+    v = np.linalg.norm(v, axis=1)
+    if state == "slipping":
+        mu = 0.5 * comm.allreduce(float(np.min(v, initial=np.inf)), op=MPI.MIN) / \
+            comm.allreduce(float(np.max(z, initial=0.0)), op=MPI.MAX)
+    else:
+        mu = 2.0 * comm.allreduce(float(np.max(v, initial=0.0)), op=MPI.MAX) / \
+            comm.allreduce(float(np.min(z, initial=np.inf)), op=MPI.MIN)
+    problem.friction.laws[0] = Coulomb(mu)
+    problem.equations.residual(problem.snes, problem.x, problem.b)
+    counts = comm.allreduce(np.array([int(active.sum()),
+                                      int(problem.friction_state()[state][active].sum())]),
+                            op=MPI.SUM)
+    assert counts[0] > 0 and counts[1] == counts[0]
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("state", ["slipping", "sticking"])
+@pytest.mark.parametrize("dim, cell", [(2, "triangle"), (3, "tetrahedron")])
+def test_frictional_self_contact_jacobian_taylor(dim, cell, state):
+    """|R(x + e h) - R(x) - e J h| = O(e^2) with Coulomb friction on the pressed slit (the
+    lips pushed into each other, sheared, random normal and tangential multipliers),
+    every active node slipping or every one sticking: the tangents of the slave side's
+    normals (2D: turned; 3D: the frames through the averaged normals' stars, which leave
+    the master side out), the slips between the lips, the tip's node in both roles."""
+    problem = pressed_slit(dim, cell, friction=Coulomb(1.0))
+    tangential_multipliers_along_the_slips(problem, seed=5)
+    put_active_nodes_in(problem, state)
+    assert_taylor_second_order(problem, seed=11)
+    problem.destroy()
+
+
+# -- a surface far from itself costs (almost) nothing -------------------------------------
+
+def stadium_hole(gap: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The boundary of a stadium-shaped hole: walls y = +-gap/2 for -1 <= x <= 1 joined by
+    half circles, facets about 0.1 long, the nodes jittered by 0.002; as nodes and facets
+    oriented as the body around the hole orients them (self_contact.facet_frames' normal
+    (t_y, -t_x) into the hole: clockwise)."""
+    radius = 0.5 * gap
+    wall = np.linspace(1.0, -1.0, 20, endpoint=False)
+    turn = np.linspace(0.5 * np.pi, 1.5 * np.pi, max(4, int(np.pi * radius / 0.1)),
+                       endpoint=False)
+    x = np.concatenate([np.column_stack([wall, np.full(wall.size, radius)]),
+                        np.column_stack([radius * np.cos(turn) - 1.0, radius * np.sin(turn)]),
+                        np.column_stack([-wall, np.full(wall.size, -radius)]),
+                        np.column_stack([1.0 - radius * np.cos(turn), -radius * np.sin(turn)])])
+    x += 0.002 * np.random.default_rng(seed).standard_normal(x.shape)
+    n = x.shape[0]
+    return x, np.column_stack([(np.arange(n) + 1) % n, np.arange(n)])
+
+
+def test_the_far_surface_precheck_misses_no_pair():
+    """self_contact.may_face is False only where the search against itself keeps no facing
+    pair: a hole whose walls are ``gap`` apart, the margin 0.1, with and without a sweep
+    and a search depth; both answers occur."""
+    answers = set()
+    for gap in (0.05, 0.15, 0.21, 0.3, 0.6):
+        for seed in range(3):
+            x, facets = stadium_hole(gap, seed=seed)
+            for origin, depth in ((None, 0.0), (x + 0.03, 0.0), (None, 0.05)):
+                pairs = search.candidate_pairs(x, facets, x, facets, 0.1,
+                                               slave_previous=origin, master_previous=origin,
+                                               depth=depth)
+                kept = sc.facing(facets[pairs[:, 0]], facets[pairs[:, 1]],
+                                 x[facets[pairs[:, 0]]], x[facets[pairs[:, 1]]], depth)
+                may = sc.may_face(x, np.arange(x.shape[0]), facets, facets, 0.1, origin,
+                                  depth)
+                assert may or not kept.any(), (gap, seed, origin is None, depth)
+                answers.add(may)
+    assert answers == {True, False}
+
+
+@pytest.mark.parallel
+def test_a_ring_far_from_itself_skips_its_interface_until_it_closes():
+    """The crushed ring's inner surface (demos/self_contact.py --case crush) undeformed and
+    squeezed to 0.9 and 0.8 of its height: the search finds no facing pair on any rank, so
+    the interface holds no pair (``without_pairs``, the same on every rank), evaluates
+    nothing after the first update, keeps its pattern through new searches and adds no
+    force; squeezed to 0.02 of its height, the walls face each other and the next search
+    finds the same pairs as an interface that was never apart."""
+    comm = MPI.COMM_WORLD
+    tagged = meshes.crushed_ring(0, comm=comm)
+    V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (2,)))
+    inner = tagged.markers["ring_inner"]
+    interface = MortarInterface(V, tagged.facet_tags, inner, inner)
+    u = dolfinx.fem.Function(V)
+
+    def squeezed(height: float) -> None:
+        u.interpolate(lambda x: np.vstack([0.0 * x[0], (height - 1.0) * x[1]]))
+
+    interface.update(u)
+    assert interface.without_pairs and interface.stencil.num_pairs == 0
+    version, evaluations = interface._pattern_version, interface.statistics.evaluations
+    for height in (0.9, 0.8):
+        squeezed(height)
+        interface.reuse.invalidate()  # a new search, which finds nothing again
+        interface.update(u)
+        assert interface.without_pairs
+    assert interface.statistics.searches_done == 3
+    assert interface._pattern_version == version
+    assert interface.statistics.evaluations == evaluations
+    force = dolfinx.fem.Function(V)  # (kept: its PETSc vector wraps its array)
+    z = interface.create_multiplier_vector()
+    z.set(1.0)
+    interface.contact_force(z, force.x.petsc_vec)
+    assert force.x.petsc_vec.norm() == 0.0
+    squeezed(0.02)
+    interface.update(u)
+    fresh = MortarInterface(V, tagged.facet_tags, inner, inner)
+    fresh.update(u)
+    assert not interface.without_pairs
+    found = [comm.allreduce(i.stencil.num_pairs, op=MPI.SUM) for i in (interface, fresh)]
+    assert found[0] == found[1] > 0
+    np.testing.assert_array_equal(interface.contributing_pairs(), fresh.contributing_pairs())
+    np.testing.assert_array_equal(interface.quantities.gap.value, fresh.quantities.gap.value)
+    z.destroy()
+    interface.destroy()
+    fresh.destroy()
 
 # --- the crushed tube (3D) and the walls' facing history (issue 29) --------------------
 
