@@ -12,13 +12,16 @@ that face each other, the finer lip becomes the slave (the tip's node, on both l
 carries no multiplier), and the mortar integrals pass the uniform pressure through the
 non-matching lips exactly.
 
-``--case crush`` (2D): half a Neo-Hookean ring (radii 0.7 and 1, E = 1, the plane x = 0
-a symmetry plane) between two plates (E = 100) that touch it; the upper plate is driven
+``--case crush``: half a Neo-Hookean ring (radii 0.7 and 1, E = 1, the plane x = 0 a
+symmetry plane) between two plates (E = 100) that touch it; the upper plate is driven
 down by ``--depth`` (1.5: the plates end 0.5 apart) in ``--steps`` equal steps. The ring's
 outer arc is the slave of one pair with each plate; its inner arc is one self-contact
 surface, ``ContactPair(tags, inner, inner)``: its walls meet at about 0.9 of the travel and
-flatten against each other from the middle out. The plate force against its travel goes
-to a CSV and a PNG, the displacement to ParaView at every step (``--output``).
+flatten against each other from the middle out. ``--dim 3``: the same cross-section as a
+slice of a tube, ``--length`` long (default the wall thickness, 0.3), its ends and the
+plates' held in z (a slice of a long tube; tetrahedra, ``meshes3d.crushed_tube``); the
+inner cylinder is the self-contact surface. The plate force against its travel goes to
+a CSV and a PNG, the displacement to ParaView at every step (``--output``).
 
 JSON (``--json``), patch: ``max_pressure_deviation_rel`` (largest |p_node - p| / p over the
 slave lip's nodes, linear material; with a nonlinear material the spread
@@ -33,6 +36,7 @@ contact) per step.
 
 Run:  python3 demos/self_contact.py --ratio 5:7 --json self.json
       python3 demos/self_contact.py --case crush --output crush
+      python3 demos/self_contact.py --dim 3 --case crush --output tube
       mpirun -n 3 python3 demos/self_contact.py --dim 3 --cell hexahedron --ratio 4:6
 """
 
@@ -55,6 +59,7 @@ from dolfinx_mortar import (
     diagnostics,
     internal_work,
     meshes,
+    meshes3d,
     solve_load_steps,
 )
 
@@ -86,6 +91,8 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     parser.add_argument("--steps", type=int, default=60, help="load steps (crush)")
     parser.add_argument("--depth", type=float, default=1.5, help="plate travel (crush)")
     parser.add_argument("--refinement", type=int, default=0, help="halves h per level (crush)")
+    parser.add_argument("--length", type=float, default=None,
+                        help="the slice's length (3D crush; default: the wall thickness)")
     parser.add_argument("--no-self-contact", dest="self_contact", action="store_false",
                         help="crush without the inner walls' pair (what self-contact costs "
                         "while the walls are apart: --depth 1.3)")
@@ -93,8 +100,8 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     cli.add_common_arguments(parser)
     args = parser.parse_args(argv)
     if args.case == "crush":
-        if args.dim != 2:
-            parser.error("--case crush is 2D (--dim 2)")
+        if args.cell_type not in (None, "triangle", "tetrahedron"):
+            parser.error("--case crush is meshed with triangles (2D) or tetrahedra (3D)")
         return crush(args, comm)
     allowed = meshes.CELL_TYPES if args.dim == 2 else meshes.CELL_TYPES_3D
     if args.cell_type is None:
@@ -166,9 +173,11 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
 def crush(args, comm) -> dict:
     """``--case crush``: see the module docstring."""
     start = time.perf_counter()
-    tagged = meshes.crushed_ring(args.refinement, comm=comm)
+    gdim = args.dim
+    tagged = (meshes.crushed_ring(args.refinement, comm=comm) if gdim == 2
+              else meshes3d.crushed_tube(args.refinement, length=args.length, comm=comm))
     mesh, markers, facet_tags = tagged.mesh, tagged.markers, tagged.facet_tags
-    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (gdim,)))
     u = dolfinx.fem.Function(V, name="displacement")
     materials = {markers["ring"]: Material(1.0, NU, "neo-hookean"),
                  markers["plate_top"]: Material(100.0, NU, "neo-hookean"),
@@ -177,13 +186,16 @@ def crush(args, comm) -> dict:
 
     def dofs(name: str, component: int | None = None):
         space = V if component is None else V.sub(component)
-        return dolfinx.fem.locate_dofs_topological(space, 1, facet_tags.find(markers[name]))
+        return dolfinx.fem.locate_dofs_topological(space, gdim - 1,
+                                                   facet_tags.find(markers[name]))
 
     travel = dolfinx.fem.Constant(mesh, 0.0)
     bcs = [dolfinx.fem.dirichletbc(np.float64(0.0), dofs("symmetry", 0), V.sub(0)),
-           dolfinx.fem.dirichletbc(np.zeros(2), dofs("plate_bottom_support"), V),
+           dolfinx.fem.dirichletbc(np.zeros(gdim), dofs("plate_bottom_support"), V),
            dolfinx.fem.dirichletbc(np.float64(0.0), dofs("plate_top_load", 0), V.sub(0)),
            dolfinx.fem.dirichletbc(travel, dofs("plate_top_load", 1), V.sub(1))]
+    if gdim == 3:  # the slice's ends held in z: a slice of a long tube
+        bcs.append(dolfinx.fem.dirichletbc(np.float64(0.0), dofs("ends", 2), V.sub(2)))
     pairs = [ContactPair(facet_tags, markers["ring_outer_top"], markers["plate_top_contact"],
                          name="ring-top plate"),
              ContactPair(facet_tags, markers["ring_outer_bottom"],
@@ -199,7 +211,7 @@ def crush(args, comm) -> dict:
 
         def record(step) -> None:
             top, bottom = (problem.contact_forces(k)[0] for k in (0, 1))
-            slave, master = problem.contact_forces(2) if inner else (np.zeros(2),) * 2
+            slave, master = problem.contact_forces(2) if inner else (np.zeros(gdim),) * 2
             penetration = (diagnostics.penetration_report(comm, 0.0, *inner.pair_sides())
                            if inner else diagnostics.Penetration())
             history.append({
@@ -221,7 +233,7 @@ def crush(args, comm) -> dict:
     top = np.array([h["plate_force"] for h in history])
     bottom = np.array([h["bottom_force"] for h in history])
     summary = {
-        "case": "crush", "dim": 2, "refinement": args.refinement, **option_record(args),
+        "case": "crush", "dim": gdim, "refinement": args.refinement, **option_record(args),
         "num_ranks": comm.size, "steps": args.steps, "depth": args.depth,
         "self_contact": args.self_contact,
         "converged": bool(records) and abs(records[-1].load - 1.0) < 1e-12,
@@ -235,23 +247,24 @@ def crush(args, comm) -> dict:
         "plate_travel": [h["plate_travel"] for h in history],
         "plate_force": top.tolist(), "inner_force": [h["inner_force"] for h in history],
         "inner_active": [h["inner_active"] for h in history],
-        "num_dofs": V.dofmap.index_map.size_global * 2,
+        "num_dofs": V.dofmap.index_map.size_global * gdim,
         "wall_time_s": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
     }
     if comm.rank == 0:
-        print(f"crushed ring: {len(history)} steps, Newton iterations per step at most "
-              f"{max(summary['newton_iterations'])}, {sum(summary['cutbacks'])} cut-backs, "
+        print(f"crushed {'ring' if gdim == 2 else 'tube'}: {len(history)} steps, Newton "
+              f"iterations per step at most {max(summary['newton_iterations'])}, "
+              f"{sum(summary['cutbacks'])} cut-backs, "
               f"plate force {top[-1]:.4g} at travel {args.depth:g}, "
               f"{summary['inner_active'][-1]} inner nodes in contact, deepest penetration "
               f"{summary['max_penetration_rel']:.3g} facet "
               f"lengths, force balance {summary['force_balance']:.1e}", flush=True)
         write_summary(args.json, summary)
         if args.output:
-            _plot_crush(args.output, history)
+            _plot_crush(args.output, history, gdim)
     return summary
 
 
-def _plot_crush(folder: pathlib.Path, history: list[dict]) -> None:
+def _plot_crush(folder: pathlib.Path, history: list[dict], gdim: int) -> None:
     import csv
 
     import matplotlib
@@ -272,7 +285,8 @@ def _plot_crush(folder: pathlib.Path, history: list[dict]) -> None:
     ax.plot(travel, [h["inner_force"] for h in history], "s--", ms=3,
             label="inner walls' contact force")
     ax.set_xlabel("plate travel")
-    ax.set_ylabel("force (half model, per unit thickness)")
+    ax.set_ylabel("force (half model, per unit thickness)" if gdim == 2
+                  else "force (half model, the slice)")
     ax.legend()
     ax.grid(True, alpha=0.3)
     cli.save_figure(fig, folder / "crush_force.png")

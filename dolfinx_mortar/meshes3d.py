@@ -418,3 +418,138 @@ def hertz_sphere_hexahedral(
         merged.mesh.geometry.x[:] *= unit
     markers = _with_contact_aliases(markers, slave)
     return TaggedMesh(merged.mesh, merged.cell_tags, facet_tags, markers, h_contact * unit)
+
+
+def _tube_groups(gmsh, ring: list[int], plates: dict[str, int], length: float,
+                 r_in: float, markers: dict[str, int]) -> None:
+    """:func:`crushed_tube`'s physical groups: each boundary face of the ring (its two
+    halves as one body: the face y = 0 between them is inside) and of the plates sorted by
+    its bounding box, checked against the expected count."""
+    tol = _OCC_TOLERANCE
+    groups: dict[str, list[int]] = {name: [] for name in markers if markers[name] > 10}
+    free: list[int] = []
+    bodies = [("ring", ring)] + [(f"plate_{name}", [v]) for name, v in plates.items()]
+    for body, volumes in bodies:
+        boundary = gmsh.model.getBoundary([(3, v) for v in volumes], combined=True,
+                                          oriented=False)
+        for _, face in boundary:
+            x0, y0, z0, x1, y1, z1 = gmsh.model.getBoundingBox(2, face)
+            if x1 - x0 < tol and abs(x0) < tol:
+                groups["symmetry"].append(face)
+            elif z1 - z0 < tol and (abs(z0) < tol or abs(z0 - length) < tol):
+                groups["ends"].append(face)
+            elif body == "ring":
+                side = "top" if y0 > -tol else "bottom"
+                groups["ring_inner" if x1 < r_in + tol else f"ring_outer_{side}"].append(face)
+            elif y1 - y0 < tol:
+                near = min(abs(y0), abs(y1)) < 1.1  # the face at |y| = R, else 1.2 R
+                far = "load" if body == "plate_top" else "support"
+                groups[f"{body}_contact" if near else f"{body}_{far}"].append(face)
+            else:
+                free.append(face)  # the plates' far ends x = 1.6 R
+    expected = {"ring_outer_top": 1, "ring_outer_bottom": 1, "ring_inner": 2,
+                "plate_top_contact": 1, "plate_bottom_contact": 1, "plate_top_load": 1,
+                "plate_bottom_support": 1, "symmetry": 4, "ends": 8}
+    found = {name: len(faces) for name, faces in groups.items()}
+    if found != expected or len(free) != 2:
+        raise RuntimeError(f"unexpected faces of the tube model: {found}, {len(free)} free")
+    gmsh.model.addPhysicalGroup(3, ring, markers["ring"], name="ring")
+    for name, volume in plates.items():
+        gmsh.model.addPhysicalGroup(3, [volume], markers[f"plate_{name}"], name=f"plate_{name}")
+    for name, faces in groups.items():
+        gmsh.model.addPhysicalGroup(2, faces, markers[name], name=name)
+
+
+def crushed_tube(refinement: int = 0, inner_radius: float = 0.7, outer_radius: float = 1.0,
+                 length: float | None = None, comm: MPI.Comm = MPI.COMM_WORLD) -> TaggedMesh:
+    """A slice of half a tube (x >= 0, axis z) between two plates that touch it at
+    (0, +-outer_radius, z): ``demos/self_contact.py --dim 3 --case crush``, the 3D twin of
+    :func:`meshes.crushed_ring` (the plane x = 0 a symmetry plane; the ends z = 0 and
+    z = ``length`` are to be held in z, so that the slice behaves as a long tube's).
+
+    The slice is ``length`` long (default: the wall thickness); the plates are
+    [0, 1.6 R] x [R, 1.2 R] x [0, length] and its mirror in y = 0. The ring is two
+    volumes, its halves above and below y = 0, meshed conformingly (so that its outer
+    surface splits at y = 0 into the two plates' slave surfaces). Its cross-section is
+    meshed with triangles of size h_ring = thickness / 4 (over 2**refinement) and swept
+    along z in layers of about h_ring, each prism cut into tetrahedra: every layer the
+    same, as the solution of a slice held at its ends does not vary along z (free
+    tetrahedra made the fold where the inner walls close wave along z, and left a node
+    there 0.11 facet lengths behind the other wall instead of 0.0072, docs/benchmarks.md).
+    The plates are free tetrahedra of size 2 h_ring.
+
+    Returns:
+        Cells "ring", "plate_top", "plate_bottom"; facets "ring_outer_top",
+        "ring_outer_bottom" (the outer cylinder above and below y = 0), "ring_inner" (the
+        whole inner cylinder: the self-contact surface), "plate_top_contact",
+        "plate_bottom_contact", "plate_top_load" (the top plate's upper face),
+        "plate_bottom_support", "symmetry" (every face on x = 0), "ends" (every face on
+        z = 0 or z = length); ``h_contact`` = h_ring.
+    """
+    level = _check_refinement(refinement)
+    r_in = _check_positive("inner_radius", inner_radius)
+    r_out = _check_positive("outer_radius", outer_radius)
+    if r_in >= r_out:
+        raise ValueError(f"inner_radius {inner_radius} must be below outer_radius {outer_radius}")
+    thickness = r_out - r_in
+    L = thickness if length is None else _check_positive("length", length)
+    h_ring = thickness / 4.0 * 0.5**level
+    names_cells = ["ring", "plate_top", "plate_bottom"]
+    names_facets = ["ring_outer_top", "ring_outer_bottom", "ring_inner", "plate_top_contact",
+                    "plate_bottom_contact", "plate_top_load", "plate_bottom_support",
+                    "symmetry", "ends"]
+    markers = meshes._numbered(names_cells, names_facets)
+
+    def construct(gmsh) -> None:
+        occ = gmsh.model.occ
+        halves = []
+        for y0 in (0.0, -2.0 * r_out):  # the cross-section's halves above and below y = 0
+            outer = occ.addDisk(0.0, 0.0, 0.0, r_out, r_out)
+            hole = occ.addDisk(0.0, 0.0, 0.0, r_in, r_in)
+            annulus, _ = occ.cut([(2, outer)], [(2, hole)])
+            quarter = occ.addRectangle(0.0, y0, 0.0, 2.0 * r_out, 2.0 * r_out)
+            result, _ = occ.intersect(annulus, [(2, quarter)])
+            assert len(result) == 1, result
+            halves.append(result[0])
+        result, _ = occ.fragment([halves[0]], [halves[1]])
+        assert len(result) == 2, result
+
+        def extruded(surfaces, size):
+            """The volumes swept by ``surfaces`` along z in layers of about ``size``: the
+            cross-section's mesh repeated, each prism cut into tetrahedra."""
+            layers = max(1, round(L / size))
+            swept = occ.extrude(surfaces, 0.0, 0.0, L, numElements=[layers], recombine=False)
+            return [tag for dim, tag in swept if dim == 3]
+
+        ring = extruded(result, h_ring)
+        plates = {"top": occ.addBox(0.0, r_out, 0.0, 1.6 * r_out, 0.2 * r_out, L),
+                  "bottom": occ.addBox(0.0, -1.2 * r_out, 0.0, 1.6 * r_out, 0.2 * r_out, L)}
+        occ.synchronize()
+        _tube_groups(gmsh, ring, plates, L, r_in, markers)
+        field = gmsh.model.mesh.field
+        sizes = []
+        for size, volumes in ((h_ring, ring), (2.0 * h_ring, list(plates.values()))):
+            constant = field.add("MathEval")
+            field.setString(constant, "F", f"{size!r}")
+            restricted = field.add("Restrict")
+            field.setNumber(restricted, "InField", constant)
+            field.setNumbers(restricted, "VolumesList", volumes)
+            entities = [(3, v) for v in volumes]
+            for dim, key in ((2, "SurfacesList"), (1, "CurvesList"), (0, "PointsList")):
+                entities = gmsh.model.getBoundary(entities, combined=False, oriented=False)
+                entities = sorted({e for e in entities if e[0] == dim})
+                field.setNumbers(restricted, key, [tag for _, tag in entities])
+            sizes.append(restricted)
+        smallest = field.add("Min")
+        field.setNumbers(smallest, "FieldsList", sizes)
+        field.setAsBackgroundMesh(smallest)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 2.0 * h_ring)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", 0.0)
+        gmsh.model.mesh.generate(3)
+        types = set(gmsh.model.mesh.getElementTypes(3))
+        if types != {4}:
+            raise RuntimeError(f"gmsh produced element types {sorted(types)}, expected "
+                               "only type 4 (tetrahedra)")
+
+    data = _build_3d(comm, "crushed_tube", construct)
+    return TaggedMesh(data.mesh, data.cell_tags, data.facet_tags, markers, h_ring)

@@ -118,6 +118,10 @@ class MortarInterface:
             to pair with linear elasticity).
     """
 
+    _facing_pairs: np.ndarray | None = None
+    """A self-contact surface's facing pairs at the last search (sorted global blocks of the
+    slave facet, then the master facet's): they keep facing while penetrated."""
+
     @renamed_keywords(slave_marker="slave", master_marker="master")
     def __init__(
         self,
@@ -531,7 +535,8 @@ class MortarInterface:
                 slave_origin, master_origin,
                 remote_master_origin.reshape(-1, gdim), remote_slave_origin.reshape(-1, gdim),
             ])
-        if self.self_contact and not self_contact.may_face(
+        faced_before = self._facing_pairs is not None and self._facing_pairs.shape[0] > 0
+        if self.self_contact and not faced_before and not self_contact.may_face(
                 self._node_x, self._node_blocks, slave.facets, all_master_facets,
                 self.reuse.margin, node_origin, self.search_depth):
             pairs = np.zeros((0, 2), dtype=np.int64)  # far from itself here: nothing to find
@@ -561,8 +566,12 @@ class MortarInterface:
         slave_blocks = self._node_blocks[slave_nodes]
         master_blocks = self._node_blocks[master_nodes]
         slave_x, master_x = self._node_x[slave_nodes], self._node_x[master_nodes]
+        keys = np.column_stack([np.sort(slave_blocks, axis=1), np.sort(master_blocks, axis=1)])
+        faced = (self_contact.rows_in(keys, self._facing_pairs)
+                 if self._facing_pairs is not None else None)
         facing = self_contact.facing(slave_blocks, master_blocks, slave_x, master_x,
-                                     self.search_depth)
+                                     self.search_depth, faced)
+        self._facing_pairs = keys[facing]
         if self.comm.allreduce(int(np.count_nonzero(facing)), op=MPI.SUM) == 0:
             # no zone anywhere: what slave_side would decide, without gathering
             self._slave_side_facets = np.zeros((0, slave_nodes.shape[1]), dtype=np.int64)

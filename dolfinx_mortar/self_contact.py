@@ -5,8 +5,10 @@ searches the surface against itself. Of the candidate pairs the search finds, a 
 facets is kept when the two facets can meet from the front (:func:`facing`): they are
 different facets, their outward normals point against each other, and each lies in front
 of the other (not back to back, as the two faces of a wall thicker than the search's
-depth); facets that share a node
-only when they are folded onto each other (the two lips of a slit at its tip).
+depth), or they faced each other at the last search (a wall that one load step or Newton
+update carried through the other is a penetration to undo, not the back of a wall);
+facets that share a node only when they are folded onto each other (the two lips of a
+slit at its tip).
 
 Each pair of facing facets is found twice, once from each facet. Which facet is the slave
 is decided per contact zone, so that every zone is counted once and its multipliers sit
@@ -109,12 +111,16 @@ def may_face(x: np.ndarray, blocks: np.ndarray, slave_facets: np.ndarray,
 
 
 def facing(slave_blocks: np.ndarray, master_blocks: np.ndarray, slave_x: np.ndarray,
-           master_x: np.ndarray, depth: float = 0.0) -> np.ndarray:
+           master_x: np.ndarray, depth: float = 0.0,
+           faced: np.ndarray | None = None) -> np.ndarray:
     """Which candidate pairs of one surface's facets can meet from the front (see the
     module docstring). ``*_blocks`` (n, k): each pair's facet nodes' global dof blocks;
     ``*_x`` (n, k, gdim): their positions, in the surface's node order; ``depth``: how
     far behind each other the search pairs facets (a penetration the contact is to undo,
-    not the back of a wall)."""
+    not the back of a wall); ``faced`` (n,): which pairs faced each other at the last
+    search. Those keep facing while their normals oppose, however deep they are now: a
+    load step or a Newton update that carried a wall through the other by more than the
+    reach is a penetration to undo, and the back of a wall never faced its front."""
     n, k = slave_blocks.shape
     if n == 0:
         return np.zeros(0, dtype=bool)
@@ -129,6 +135,8 @@ def facing(slave_blocks: np.ndarray, master_blocks: np.ndarray, slave_x: np.ndar
     reach = np.maximum(BEHIND_SHARE * 0.5 * (slave_size + master_size), depth)
     in_front = ((np.einsum("ij,ij->i", offset, slave_normal) > -reach)
                 & (np.einsum("ij,ij->i", offset, master_normal) < reach))
+    if faced is not None:
+        in_front |= faced
     return in_front & np.where(shares, cosine < FOLDED_COSINE, cosine < 0.0)
 
 

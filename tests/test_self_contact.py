@@ -303,9 +303,9 @@ def test_crushed_ring_closes_and_carries_the_plates():
     """The ring crushed until its inner walls flatten on each other (demos/self_contact.py
     --case crush, its defaults): every step converges without a cut-back in at most 10
     Newton iterations, the walls come into contact only near the end, the plates' forces
-    balance, and one rank and all ranks give the same forces. The deepest node behind
-    the other wall is 0.026 facet lengths (a master node at the fold's end; the issue asks
-    for 0.01): bounded here at 0.05 so that it cannot grow unseen."""
+    balance, no node of either wall is deeper than 0.01 facet lengths behind the other
+    (the issue's bound; measured 1.8e-6 on the mirror-symmetric mesh, 0.026 on the former
+    asymmetric one), and one rank and all ranks give the same forces."""
     comm = MPI.COMM_WORLD
     serial = demo("self_contact").main(["--case", "crush"], comm=MPI.COMM_SELF)
     assert serial["converged"] and sum(serial["cutbacks"]) == 0
@@ -313,7 +313,7 @@ def test_crushed_ring_closes_and_carries_the_plates():
     active = np.array(serial["inner_active"])
     assert active[: len(active) * 4 // 5].max() == 0 and active[-1] > 10
     assert serial["force_balance"] < 1e-9
-    assert serial["max_penetration_rel"] < 0.05
+    assert serial["max_penetration_rel"] < 0.01
     if comm.size > 1:
         parallel = demo("self_contact").main(["--case", "crush"], comm=comm)
         assert parallel["newton_iterations"] == serial["newton_iterations"]
@@ -587,3 +587,89 @@ def test_a_ring_far_from_itself_skips_its_interface_until_it_closes():
     z.destroy()
     interface.destroy()
     fresh.destroy()
+
+# --- the crushed tube (3D) and the walls' facing history (issue 29) --------------------
+
+
+def test_a_pair_that_faced_keeps_facing_while_penetrated():
+    """A facet pushed through the other deeper than the reach (half a facet: the back of a
+    wall would look the same) faces it only if it faced it at the last search; a pair
+    whose normals no longer oppose does not, whatever it did before."""
+    up = segment([1.0, 0.0], [0.0, 0.0])  # normal +y
+    cases = [([0, 1], up, [2, 3], segment([0.2, -0.8], [1.2, -0.8])),  # 0.8 deep
+             ([0, 1], up, [2, 3], segment([1.2, 0.1], [0.2, 0.1]))]  # facing the same way
+    sb, sx, mb, mx = (np.array([c[i] for c in cases]) for i in range(4))
+    assert sc.facing(sb, mb, sx, mx).tolist() == [False, False]
+    assert sc.facing(sb, mb, sx, mx, faced=np.array([False, True])).tolist() == [False, False]
+    assert sc.facing(sb, mb, sx, mx, faced=np.array([True, True])).tolist() == [True, False]
+
+
+def test_crush_in_half_the_steps():
+    """The ring crushed in 30 steps instead of 60: the closing step carries the walls
+    through each other by more than half a facet within one Newton update; the pairs that
+    faced before keep facing, so the contact pushes them back: no cut-back, and no node
+    deeper than 0.01 facet lengths (measured 5.9e-8; before the facing history, the walls
+    went through each other and the step failed with inverted elements after 6
+    cut-backs)."""
+    summary = demo("self_contact").main(["--case", "crush", "--steps", "30"],
+                                        comm=MPI.COMM_SELF)
+    assert summary["converged"] and sum(summary["cutbacks"]) == 0
+    assert max(summary["newton_iterations"]) <= 10
+    assert summary["max_penetration_rel"] < 0.01
+
+
+@pytest.mark.parallel
+def test_crushed_tube_mesh():
+    """meshes3d.crushed_tube: the ring's volume and its surfaces' areas are the half
+    tube's (to the chords' error), the plates' faces 1.6 x length, and no facet is in two
+    groups."""
+    from dolfinx_mortar import meshes3d
+
+    tagged = meshes3d.crushed_tube(comm=MPI.COMM_WORLD)
+    mesh, markers = tagged.mesh, tagged.markers
+    dx = ufl.Measure("dx", domain=mesh, subdomain_data=tagged.cell_tags)
+    ds = ufl.Measure("ds", domain=mesh, subdomain_data=tagged.facet_tags)
+
+    def integral(measure) -> float:
+        value = dolfinx.fem.assemble_scalar(dolfinx.fem.form(1.0 * measure))
+        return mesh.comm.allreduce(value)
+
+    L = 0.3
+    np.testing.assert_allclose(integral(dx(markers["ring"])), np.pi / 2 * 0.51 * L, rtol=1e-2)
+    np.testing.assert_allclose(integral(ds(markers["ring_inner"])), np.pi * 0.7 * L, rtol=1e-2)
+    for name in ("ring_outer_top", "ring_outer_bottom"):
+        np.testing.assert_allclose(integral(ds(markers[name])), np.pi / 2 * L, rtol=1e-2)
+    for name in ("plate_top_contact", "plate_bottom_contact", "plate_top_load",
+                 "plate_bottom_support"):
+        np.testing.assert_allclose(integral(ds(markers[name])), 1.6 * L, rtol=1e-12)
+    np.testing.assert_allclose(integral(ds(markers["symmetry"])), 2 * 0.3 * L + 2 * 0.2 * L,
+                               rtol=1e-12)
+    ends = 2 * (np.pi / 2 * 0.51 + 2 * 1.6 * 0.2)
+    np.testing.assert_allclose(integral(ds(markers["ends"])), ends, rtol=1e-2)
+    tags = tagged.facet_tags
+    assert np.unique(tags.indices).size == tags.indices.size
+
+
+@pytest.mark.parallel
+def test_crushed_tube_closes_and_carries_the_plates():
+    """A coarse, short 3D crush (demos/self_contact.py --dim 3 --case crush, a slice one
+    tetrahedron long, 30 steps): every step converges without a cut-back in at most 10
+    Newton iterations, the inner walls meet only near the end, the plates' forces balance,
+    no node of either wall deeper than 0.02 facet lengths behind the other (measured
+    0.0090; the issue asks for 0.01), and one rank and all ranks give the same forces. The
+    slice's ends are held in z (plane strain): the end force is the 2D ring's, 0.265 to
+    0.267 per unit length (two meshes; 0.01989 / 0.075 = 0.2652 measured here)."""
+    arguments = ["--dim", "3", "--case", "crush", "--length", "0.075", "--steps", "30"]
+    comm = MPI.COMM_WORLD
+    serial = demo("self_contact").main(arguments, comm=MPI.COMM_SELF)
+    assert serial["converged"] and sum(serial["cutbacks"]) == 0
+    assert max(serial["newton_iterations"]) <= 10
+    active = np.array(serial["inner_active"])
+    assert active[: len(active) * 4 // 5].max() == 0 and active[-1] > 20
+    assert serial["force_balance"] < 1e-9
+    assert serial["max_penetration_rel"] < 0.02
+    np.testing.assert_allclose(serial["plate_force"][-1] / 0.075, 0.265, rtol=0.01)
+    if comm.size > 1:
+        parallel = demo("self_contact").main(arguments, comm=comm)
+        assert parallel["converged"] and sum(parallel["cutbacks"]) == 0
+        np.testing.assert_allclose(parallel["plate_force"], serial["plate_force"], rtol=1e-8)
