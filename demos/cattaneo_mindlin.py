@@ -145,6 +145,33 @@ def bulk_problem(tagged, u):
     return F, (normal, tangential), bcs
 
 
+def press_then_pull(problem, press, pull, steps: int, args) -> tuple[list, list]:
+    """The normal load in ``steps`` steps (without friction unless ``--normal-phase
+    frictional``), then the tangential one in ``--tangential-steps``, ParaView output of
+    each step with ``--output``: the step records and, per step, the smallest and the
+    largest nodal frictional work (over all ranks). Collective."""
+    comm = problem.comm
+    dissipation = []
+
+    def record(step) -> None:
+        work = problem.friction_state()["dissipation"]
+        dissipation.append((comm.allreduce(float(work.min(initial=0.0)), op=MPI.MIN),
+                            comm.allreduce(float(np.abs(work).max(initial=0.0)), op=MPI.MAX)))
+
+    output = ContactOutput(problem, args.output / "paraview") if args.output else None
+    law = problem.friction.laws[0]
+    if args.normal_phase == "frictionless":
+        problem.friction.laws[0] = None
+    records = solve_load_steps(problem, press, steps, output=output, on_step=record,
+                               predictor=args.predictor)
+    problem.friction.laws[0] = law
+    records += solve_load_steps(problem, pull, args.tangential_steps, output=output,
+                                on_step=record, predictor=args.predictor)
+    if output is not None:
+        output.close()
+    return records, dissipation
+
+
 def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     parser = cli.parser(__doc__)
     parser.add_argument(
@@ -203,25 +230,7 @@ def main(argv=None, comm: MPI.Intracomm = MPI.COMM_WORLD) -> dict:
     def pull(t: float) -> None:
         tangential.value = t * tangential_load
 
-    dissipation = []
-
-    def record(step) -> None:
-        """The smallest and the largest nodal frictional work of the step."""
-        work = problem.friction_state()["dissipation"]
-        dissipation.append((comm.allreduce(float(work.min(initial=0.0)), op=MPI.MIN),
-                            comm.allreduce(float(np.abs(work).max(initial=0.0)), op=MPI.MAX)))
-
-    output = ContactOutput(problem, args.output / "paraview") if args.output else None
-    law = problem.friction.laws[0]
-    if args.normal_phase == "frictionless":
-        problem.friction.laws[0] = None
-    records = solve_load_steps(problem, press, args.steps, output=output, on_step=record,
-                               predictor=args.predictor)
-    problem.friction.laws[0] = law
-    records += solve_load_steps(problem, pull, args.tangential_steps, output=output,
-                                on_step=record, predictor=args.predictor)
-    if output is not None:
-        output.close()
+    records, dissipation = press_then_pull(problem, press, pull, args.steps, args)
     wall_time = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
 
     coordinates, pressure = problem.gathered_pressure()
@@ -450,25 +459,8 @@ def main_3d(args, comm: MPI.Intracomm) -> dict:
     def pull(t: float) -> None:
         tangential.value = t * tangential_load
 
-    dissipation = []
-
-    def record(step) -> None:
-        work = problem.friction_state()["dissipation"]
-        dissipation.append((comm.allreduce(float(work.min(initial=0.0)), op=MPI.MIN),
-                            comm.allreduce(float(np.abs(work).max(initial=0.0)), op=MPI.MAX)))
-
     steps = args.steps or hertz_sphere.automatic_steps(meshes3d.ELEMENTS_PER_RADIUS, refinement)
-    output = ContactOutput(problem, args.output / "paraview") if args.output else None
-    law = problem.friction.laws[0]
-    if args.normal_phase == "frictionless":
-        problem.friction.laws[0] = None
-    records = solve_load_steps(problem, press, steps, output=output, on_step=record,
-                               predictor=args.predictor)
-    problem.friction.laws[0] = law
-    records += solve_load_steps(problem, pull, args.tangential_steps, output=output,
-                                on_step=record, predictor=args.predictor)
-    if output is not None:
-        output.close()
+    records, dissipation = press_then_pull(problem, press, pull, steps, args)
     wall_time = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
 
     nodes = tangential_tractions(problem, comm)
