@@ -140,6 +140,21 @@ def _sphere_physical_groups(gmsh, upper: list[int], lower: list[int], names: lis
             gmsh.model.addPhysicalGroup(2, faces, markers[name], name=name)
 
 
+def _restricted(gmsh, size_field: int, volumes: list[int]) -> int:
+    """A gmsh field equal to ``size_field`` in ``volumes`` and on their boundaries (faces,
+    curves, points), and not elsewhere."""
+    field = gmsh.model.mesh.field
+    restricted = field.add("Restrict")
+    field.setNumber(restricted, "InField", size_field)
+    field.setNumbers(restricted, "VolumesList", volumes)
+    entities = [(3, v) for v in volumes]
+    for dim, key in ((2, "SurfacesList"), (1, "CurvesList"), (0, "PointsList")):
+        entities = gmsh.model.getBoundary(entities, combined=False, oriented=False)
+        entities = sorted({e for e in entities if e[0] == dim})
+        field.setNumbers(restricted, key, [tag for _, tag in entities])
+    return restricted
+
+
 def _sphere_size_field(gmsh, upper: list[int], lower: list[int], h_contact: float,
                        h_max: float, zone: float, growth: float, ratio: float) -> None:
     """:func:`hertz_sphere`'s background size field: h_contact within ``zone`` of the
@@ -162,15 +177,7 @@ def _sphere_size_field(gmsh, upper: list[int], lower: list[int], h_contact: floa
         field.setNumber(threshold, "DistMin", zone)
         field.setNumber(threshold, "DistMax",
                         zone + factor * max(h_max - h_contact, 0.0) / growth)
-        restricted = field.add("Restrict")
-        field.setNumber(restricted, "InField", threshold)
-        field.setNumbers(restricted, "VolumesList", volumes)
-        entities = [(3, v) for v in volumes]
-        for dim, key in ((2, "SurfacesList"), (1, "CurvesList"), (0, "PointsList")):
-            entities = gmsh.model.getBoundary(entities, combined=False, oriented=False)
-            entities = sorted({e for e in entities if e[0] == dim})
-            field.setNumbers(restricted, key, [tag for _, tag in entities])
-        return restricted
+        return _restricted(gmsh, threshold, volumes)
 
     smallest = field.add("Min")
     field.setNumbers(smallest, "FieldsList", [sizes(1.0, upper), sizes(ratio, lower)])
@@ -531,15 +538,7 @@ def crushed_tube(refinement: int = 0, inner_radius: float = 0.7, outer_radius: f
         for size, volumes in ((h_ring, ring), (2.0 * h_ring, list(plates.values()))):
             constant = field.add("MathEval")
             field.setString(constant, "F", f"{size!r}")
-            restricted = field.add("Restrict")
-            field.setNumber(restricted, "InField", constant)
-            field.setNumbers(restricted, "VolumesList", volumes)
-            entities = [(3, v) for v in volumes]
-            for dim, key in ((2, "SurfacesList"), (1, "CurvesList"), (0, "PointsList")):
-                entities = gmsh.model.getBoundary(entities, combined=False, oriented=False)
-                entities = sorted({e for e in entities if e[0] == dim})
-                field.setNumbers(restricted, key, [tag for _, tag in entities])
-            sizes.append(restricted)
+            sizes.append(_restricted(gmsh, constant, volumes))
         smallest = field.add("Min")
         field.setNumbers(smallest, "FieldsList", sizes)
         field.setAsBackgroundMesh(smallest)
