@@ -129,8 +129,8 @@ class ContactOptions:
             one solves that load step again and the rest of the run, with a
             ContactWarning; an explicit ``iterative`` is kept (the step is cut back).
         friction: None (frictionless), a :class:`Coulomb` or :class:`Tresca` law, or a
-            list of these (or None), one per pair, kept as a tuple (direct linear solver, with
-            ``lagrange`` semismooth or ``penalty``).
+            list of these (or None), one per pair, kept as a tuple (with ``lagrange``
+            semismooth or ``penalty``; any linear solver).
         c_t: the tangential complementarity parameter (default c_n), or with ``penalty``
             the tangential penalty (default the normal one).
         pressure_recovery: whether ``contact_pressure`` gives the recovered pressure
