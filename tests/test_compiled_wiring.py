@@ -91,6 +91,27 @@ def test_screened_candidates_are_far():
     np.testing.assert_array_equal(got.rows, expected.rows)
 
 
+@pytest.mark.parametrize(("ns", "nm"), [(3, 3), (4, 3), (4, 4)])
+@pytest.mark.parametrize("scalar_gradients", [False, True])
+def test_kept_gradients_are_those_made_again(monkeypatch, ns, nm, scalar_gradients):
+    """The gradients kept from the evaluation are the bits the kernel makes again on demand
+    (any rows, any order, zero outside the contributing ones); above the budget none are
+    kept."""
+    slave, master, nodal, cross = random_facets(200, ns, nm, seed=9)
+    geometry = PairGeometry(slave, master, nodal)
+    options = KernelOptions(kernels="compiled", scalar_gradients=scalar_gradients)
+    kept = Surface3Kernel().evaluate(geometry, options, crosspoint=cross)
+    monkeypatch.setattr(surface3_compiled, "KEPT_GRADIENTS_BYTES", 0)
+    made = Surface3Kernel().evaluate(geometry, options, crosspoint=cross)
+    assert kept.gradients_on_demand.kept is not None and made.gradients_on_demand.kept is None
+    assert kept.rows.size > 20
+    rows = np.random.default_rng(1).permutation(200)[:120]
+    for a, b in zip(kept.gradients_on_demand.gradients(rows),
+                    made.gradients_on_demand.gradients(rows), strict=True):
+        assert np.abs(b).max() > 0.0
+        np.testing.assert_array_equal(a, b)
+
+
 def test_gradients_survive_later_requests():
     """``grad`` of an output stays what it was when other rows were asked for since."""
     slave, master, nodal, _ = random_pairs(100, seed=8)
@@ -211,9 +232,10 @@ def test_covers_every_3d_configuration():
                             KernelOptions(kernels="compiled", **options))
 
 
-def test_evaluation_keeps_no_gradients():
-    """The evaluation's memory: the values and reused kernel buffers, not the ~13.6 kB of
-    gradients a pair."""
+def test_evaluation_keeps_no_gradients(monkeypatch):
+    """The evaluation's memory above the kept gradients' budget: the values and reused kernel
+    buffers, not the ~13.6 kB of gradients a pair."""
+    monkeypatch.setattr(surface3_compiled, "KEPT_GRADIENTS_BYTES", 2**20)
     slave, master, nodal, _ = random_pairs(20000, seed=2)
     geometry = PairGeometry(slave, master, nodal)
     kernel = Surface3Kernel()
@@ -228,10 +250,11 @@ def test_evaluation_keeps_no_gradients():
 
 
 @pytest.mark.parametrize("integration", ["segment", "element"])
-def test_quadrilateral_evaluation_keeps_no_gradients(integration):
+def test_quadrilateral_evaluation_keeps_no_gradients(monkeypatch, integration):
     """The same for quadrilateral pairs (~39 kB of gradients a pair with those of D and M):
     the buffers hold as many gradient numbers as the triangles' (fewer pairs), the rest is
     the values, the contributing pairs' coordinates and (element-based) their Gauss points."""
+    monkeypatch.setattr(surface3_compiled, "KEPT_GRADIENTS_BYTES", 2**20)
     slave, master, nodal, _ = random_facets(12000, 4, 4, seed=9, noise=0.04)
     geometry = PairGeometry(slave, master, nodal)
     options = KernelOptions(kernels="compiled", integration=integration, scalar_gradients=True)
@@ -294,6 +317,7 @@ def test_interface_equals_numpy(monkeypatch, cell, options):
     runs the compiled kernel with the standard basis and its D gradients), configuration and
     a few rules, with gradients made again in chunks of 16 triangle pairs (9 quadrilateral)."""
     monkeypatch.setattr(surface3_compiled.CompiledGradients, "chunk", 16)
+    monkeypatch.setattr(surface3_compiled, "KEPT_GRADIENTS_BYTES", 0)
     tagged = two_blocks(cell, 3, 4, comm=MPI.COMM_SELF)
     u = bent_displacement(tagged)
     configuration = options.get("configuration", "current")
@@ -363,8 +387,10 @@ def test_flat_element_ties_force_jacobian(monkeypatch, options):
                          ids=["averaged-segment", "slave-element"])
 def test_friction_gradients_equal_numpy(monkeypatch, cell, options):
     """What 3D friction takes of the kernel (``scalar_gradients``: the gradients of D and M,
-    on the stencil with the normals' stars, and the nodal normals) equals numpy's."""
+    on the stencil with the normals' stars, and the nodal normals) equals numpy's, made again
+    in chunks."""
     monkeypatch.setattr(surface3_compiled.CompiledGradients, "chunk", 16)
+    monkeypatch.setattr(surface3_compiled, "KEPT_GRADIENTS_BYTES", 0)
     tagged = two_blocks(cell, 3, 4, comm=MPI.COMM_SELF)
     u = bent_displacement(tagged)
     results = {}

@@ -2,12 +2,13 @@
 
 The C kernel (``surface3.c`` through :mod:`.compiled`) integrates one pair in a few
 microseconds, values and gradients over the pair's 3 (2 ns + nm) variables together. Kept for
-every pair of an evaluation, the gradients would be the evaluation's memory (~1,700 numbers a
-triangle pair, ~4,900 a quadrilateral pair); so :func:`evaluate` keeps the values only (D, M,
-Dn, Mn, gaps, areas, valid, overlap) and the coordinates of the contributing pairs, and
-:class:`CompiledGradients` runs the kernel again on the pairs a consumer asks for (the
-stencils, a chunk at a time), hands over their gradients and forgets them. The values and
-gradients are the same bits as the first run's: the kernel is deterministic per pair.
+every pair of a large evaluation, the gradients would be its memory (~1,700 numbers a triangle
+pair, ~4,900 a quadrilateral pair); so :func:`evaluate` keeps the values (D, M, Dn, Mn, gaps,
+areas, valid, overlap), the coordinates of the contributing pairs, and their gradients only
+while these fit in :data:`KEPT_GRADIENTS_BYTES`; above it :class:`CompiledGradients` runs the
+kernel again on the pairs a consumer asks for (the stencils, a chunk at a time), hands over
+their gradients and forgets them. The values and gradients are the same bits as the first
+run's: the kernel is deterministic per pair.
 
 Covered (:func:`covers`): every 3D pair the numpy kernel (:mod:`.surface3`) takes: triangle
 and quadrilateral slave and master facets (a triangle on a triangle by the C corner-value
@@ -37,6 +38,9 @@ EVALUATION_CHUNK = 2048
 together); fewer quadrilateral pairs, as many gradient numbers (:func:`_pairs_per_call`)."""
 GRADIENT_CHUNK = 2048
 """Triangle pairs whose gradients a consumer gets at once (:attr:`CompiledGradients.chunk`)."""
+KEPT_GRADIENTS_BYTES = 128 * 2**20
+"""The contributing pairs' gradients are kept from the evaluation while they fit in this
+many bytes (a small interface then never runs the kernel again); above it, made again."""
 _SEGMENT_RULES = (1, 3, 7)
 _ELEMENT_RULES = {3: (1, 3, 7), 4: (1, 3, 4, 7, 9)}
 _VALUES = ("D", "M", "Dn", "Mn", "gap", "area")
@@ -163,17 +167,18 @@ def _contiguous(array: np.ndarray) -> np.ndarray:
 
 
 class CompiledGradients:
-    """The gradients of the contributing pairs of one compiled evaluation, made on demand
-    (:class:`~.contract.GradientsOnDemand`): the kernel run again on the asked pairs'
-    coordinates (kept for the contributing pairs only, with their Gauss points when
-    element-based)."""
+    """The gradients of the contributing pairs of one compiled evaluation
+    (:class:`~.contract.GradientsOnDemand`): ``kept`` from the evaluation, or else made
+    again by the kernel on the asked pairs' coordinates (kept for the contributing pairs
+    only, with their Gauss points when element-based)."""
 
     chunk = GRADIENT_CHUNK
     """Triangle pairs asked for at once; quadrilateral pairs fewer, as many numbers."""
 
     def __init__(self, rows: np.ndarray, call: _Call, slave_x, master_x, slave_normals,
-                 crosspoint, on_master):
+                 crosspoint, on_master, kept: dict[str, np.ndarray] | None = None):
         self.rows = rows
+        self.kept = kept
         self.call = call
         self.slave_x = _contiguous(slave_x[rows])
         self.master_x = _contiguous(master_x[rows])
@@ -202,6 +207,12 @@ class CompiledGradients:
         kept = self.rows
         position = np.minimum(np.searchsorted(kept, rows), max(kept.size - 1, 0))
         found = kept[position] == rows if kept.size else np.zeros(rows.shape, dtype=bool)
+        if self.kept is not None:
+            result = [np.zeros((rows.size,) + grad.shape[1:]) for grad in
+                      (self.kept[name] for name in self._names())]
+            for grad, name in zip(result, self._names(), strict=True):
+                grad[found] = self.kept[name][position[found]]
+            return result
         if self._buffers is None:
             self._buffers = _Buffers(self.chunk, self.call)
         size = self._buffers.size
@@ -217,6 +228,35 @@ class CompiledGradients:
             for name in self._names():
                 result[name][part] = out[name]
         return [result[name] for name in self._names()]
+
+
+class _KeptGradients:
+    """The contributing pairs' gradients of an evaluation, copied out of the kernel's buffers
+    chunk by chunk (in the order of the candidates, that of the rows) while they fit in
+    :data:`KEPT_GRADIENTS_BYTES`; given up, and then made again on demand, above it."""
+
+    def __init__(self, call: _Call):
+        self.names = _GRADIENTS if call.scalar_gradients else _GRADIENTS[:4]
+        shapes = call.shapes()
+        self.pair_bytes = 8 * sum(int(np.prod(shapes[name])) for name in self.names)
+        self.parts: dict[str, list[np.ndarray]] | None = {name: [] for name in self.names}
+        self.count = 0
+
+    def add(self, out: dict) -> None:
+        if self.parts is None:
+            return
+        valid = out["valid"].view(bool)
+        self.count += int(valid.sum())
+        if self.count * self.pair_bytes > KEPT_GRADIENTS_BYTES:
+            self.parts = None
+            return
+        for name in self.names:
+            self.parts[name].append(out[name][valid])
+
+    def arrays(self) -> dict[str, np.ndarray] | None:
+        if self.parts is None or not self.parts[self.names[0]]:
+            return None
+        return {name: np.concatenate(parts) for name, parts in self.parts.items()}
 
 
 def _field_directions(slave_x: np.ndarray, master_x: np.ndarray, slave_normals: np.ndarray,
@@ -317,6 +357,7 @@ def evaluate(geometry: PairGeometry, options: KernelOptions,
         candidates = _near(slave_x, master_x, slave_normals, options.normals)
     size = _pairs_per_call(EVALUATION_CHUNK, call.num_variables)
     buffers = _Buffers(min(size, max(candidates.size, 1)), call)
+    kept = _KeptGradients(call)
     for start in range(0, candidates.size, buffers.size):
         part = candidates[start:start + buffers.size]
         out = buffers.run(slave_x[part], master_x[part], slave_normals[part],
@@ -326,9 +367,11 @@ def evaluate(geometry: PairGeometry, options: KernelOptions,
             values[name][part] = out[name]
         valid[part] = out["valid"].view(bool)
         overlap[part] = out["overlap"]
+        kept.add(out)
     del buffers
     rows = np.flatnonzero(valid)
-    source = CompiledGradients(rows, call, slave_x, master_x, slave_normals, cross, on_master)
+    source = CompiledGradients(rows, call, slave_x, master_x, slave_normals, cross, on_master,
+                               kept.arrays())
     names = ("Dn", "Mn", "area", "gap") + (("D", "M") if options.scalar_gradients else ())
     cached: list = []
 
