@@ -197,6 +197,7 @@ class ContactProblem(ContactResults):
                 options.basis, self.has_friction)
         self._linear_solver = linear_solver
         self._condensation = options.condensation or linear_solver == "iterative"
+        solvers.advise_blas(self.comm)
         if self.has_friction:
             friction_rules.check_options(options.method, options.active_set,
                                          self._condensation, linear_solver)

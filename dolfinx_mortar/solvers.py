@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import logging
 import typing
 
 import numpy as np
@@ -59,6 +60,43 @@ DEFAULT_OPTIONS = {
 }
 
 LINEAR_SOLVERS = typing.get_args(LinearSolver)
+
+REFERENCE_BLAS_DIRECTORY = "/blas/"
+"""Where Debian installs the reference (netlib) BLAS, ``/usr/lib/<triplet>/blas/libblas.so.3``:
+the optimized ones (OpenBLAS, BLIS, ATLAS) live in directories of their own names."""
+
+_blas_advised = False
+
+
+def reference_blas(maps: str = "/proc/self/maps") -> str | None:
+    """The path of the reference BLAS if this process has it loaded (from the memory map:
+    the library the loader resolved the ``libblas.so.3`` alternative to), else None (also
+    where there is no ``/proc``)."""
+    try:
+        with open(maps) as lines:
+            paths = {line.split()[-1] for line in lines if "libblas.so" in line}
+    except OSError:
+        return None
+    found = sorted(path for path in paths if REFERENCE_BLAS_DIRECTORY in path)
+    return found[0] if found else None
+
+
+def advise_blas(comm, maps: str = "/proc/self/maps") -> None:
+    """Once per process, on rank 0: a WARNING on the ``dolfinx_mortar`` logger (printed by
+    Python where no handler is set) when MUMPS would factorize with the reference BLAS,
+    which makes its dense frontal matrices several times slower (docs/benchmarks.md,
+    "The BLAS under MUMPS"). Not a ContactWarning: nothing is wrong with the answer."""
+    global _blas_advised
+    if _blas_advised or comm.rank != 0:
+        return
+    _blas_advised = True
+    path = reference_blas(maps)
+    if path is not None:
+        logging.getLogger("dolfinx_mortar").warning(
+            "the direct solver (MUMPS) runs on the reference BLAS (%s), several times slower "
+            "than an optimized one: install one (Debian: apt install libopenblas0-serial, "
+            "single-threaded, for MPI runs) and start the program again", path)
+
 
 AUTO_ITERATIVE_MIN_DOFS = 20_000
 """``linear_solver="auto"`` takes the iterative solver from this many displacement dofs

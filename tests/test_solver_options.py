@@ -85,3 +85,37 @@ def test_a_users_atol_in_the_database_wins():
     configure(snes)
     assert snes.getTolerances()[1] == pytest.approx(1e-10)
     snes.destroy()
+
+
+NETLIB = "/usr/lib/x86_64-linux-gnu/blas/libblas.so.3.12.0"
+OPENBLAS = "/usr/lib/x86_64-linux-gnu/openblas-serial/libblas.so.3"
+
+
+def _maps(tmp_path, *paths) -> str:
+    lines = [f"7f0000000000-7f0000001000 r-xp 00000000 fe:01 {i} {path}"
+             for i, path in enumerate(("/usr/lib/x86_64-linux-gnu/libpetsc_real.so.3.22",)
+                                      + paths)]
+    file = tmp_path / "maps"
+    file.write_text("\n".join(lines + ["7ffd00000000-7ffd00001000 rw-p 00000000 00:00 0"]))
+    return str(file)
+
+
+def test_reference_blas_found_in_the_memory_map(tmp_path):
+    assert solvers.reference_blas(_maps(tmp_path, NETLIB)) == NETLIB
+    assert solvers.reference_blas(_maps(tmp_path, OPENBLAS)) is None
+    assert solvers.reference_blas(_maps(tmp_path)) is None
+    assert solvers.reference_blas(str(tmp_path / "no_such_file")) is None
+
+
+def test_reference_blas_advised_once(tmp_path, monkeypatch, caplog):
+    from mpi4py import MPI
+
+    monkeypatch.setattr(solvers, "_blas_advised", False)
+    with caplog.at_level("WARNING", logger="dolfinx_mortar"):
+        solvers.advise_blas(MPI.COMM_SELF, _maps(tmp_path, OPENBLAS))
+        assert not caplog.records
+        monkeypatch.setattr(solvers, "_blas_advised", False)
+        for _ in range(2):
+            solvers.advise_blas(MPI.COMM_SELF, _maps(tmp_path, NETLIB))
+    assert len(caplog.records) == 1 and NETLIB in caplog.records[0].getMessage()
+    assert "libopenblas0-serial" in caplog.records[0].getMessage()
