@@ -190,7 +190,7 @@ def markdown(record: dict) -> str:
             f"{head} {r['dofs']} | {percent(r['p_max_error_rel'])}{'' if within else ' (!)'} | "
             f"{percent(r['p0_fit_error_rel'])} | {r['a_error_in_elements']:+.2f} | "
             f"{100.0 * r['l2_pressure_error_rel']:.2f} % | "
-            f"{percent(r['l2_multiplier_error_rel']).lstrip('+')} | "
+            f"{percent(r.get('l2_multiplier_error_rel')).lstrip('+')} | "
             f"{r['total_force_error_rel']:.1e} | "
             f"{', '.join(map(str, r['newton_iterations']))} | {r['cutbacks']} | "
             f"{r['linear_solver']} | {r['wall_time_s']:.1f} |"
