@@ -104,7 +104,8 @@ def test_serial_equals_parallel():
     assert parallel["num_ranks"] == MPI.COMM_WORLD.size
     assert parallel["num_dofs"] == serial["num_dofs"]
     assert parallel["active_nodes"] == serial["active_nodes"]
-    for key in ("p_max", "total_force", "a_contact", "l2_pressure_error_rel"):
+    for key in ("p_max", "total_force", "a_contact", "l2_pressure_error_rel",
+                "l2_multiplier_error_rel"):
         assert parallel[key] == pytest.approx(serial[key], rel=1e-8), key
     assert parallel["total_force"] == pytest.approx(parallel["load"], rel=1e-8)
 
@@ -220,7 +221,8 @@ def test_hexahedral_serial_equals_parallel():
     parallel = hertz_sphere(args, comm=MPI.COMM_WORLD)
     assert parallel["num_dofs"] == serial["num_dofs"]
     assert parallel["active_nodes"] == serial["active_nodes"]
-    for key in ("p_max", "total_force", "a_contact", "l2_pressure_error_rel"):
+    for key in ("p_max", "total_force", "a_contact", "l2_pressure_error_rel",
+                "l2_multiplier_error_rel"):
         assert parallel[key] == pytest.approx(serial[key], rel=1e-8), key
 
 
