@@ -23,6 +23,7 @@ from dolfinx_mortar import (
     compat,
     internal_work,
     meshes,
+    newton,
     search,
 )
 from dolfinx_mortar import self_contact as sc
@@ -587,6 +588,59 @@ def test_a_ring_far_from_itself_skips_its_interface_until_it_closes():
     z.destroy()
     interface.destroy()
     fresh.destroy()
+
+
+@pytest.mark.parallel
+def test_a_surface_coming_into_contact_enters_the_layout(monkeypatch):
+    """The ring crushed to 1.45 in 10 steps: its inner walls, apart until the last steps,
+    have no rows in the layout from the first solve on; a search inside a later Newton
+    solve finds them facing, and that solve goes on from that iterate with their rows.
+    The run equals, step by step (Newton iterations, forces, active nodes), the run that
+    keeps the rows throughout (``ContactNewton.compact_layout = False``), to 1e-10 on all
+    ranks, and serially."""
+    comm = MPI.COMM_WORLD
+    arguments = ["--case", "crush", "--depth", "1.45", "--steps", "10"]
+    events = []
+    fit = newton.ContactNewton.fit_layout
+
+    def recorded(self) -> None:
+        before = list(self.equations.in_layout)
+        fit(self)
+        if self.equations.in_layout != before:
+            events.append((list(self.equations.in_layout), len(self.equations.residual_history),
+                           self.equations.layout.num_global))
+    monkeypatch.setattr(newton.ContactNewton, "fit_layout", recorded)
+    compact = demo("self_contact").main(arguments, comm=comm)
+    layouts = list(events)
+    monkeypatch.setattr(newton.ContactNewton, "compact_layout", False)
+    kept = demo("self_contact").main(arguments, comm=comm)
+    assert events == layouts  # (none while every pair keeps its rows)
+    assert [e[0] for e in layouts] == [[True, True, False], [True, True, True]]
+    assert layouts[1][1] > 0  # within a Newton solve, after a step
+    assert layouts[1][2] - layouts[0][2] == interface_multipliers(comm)
+    assert compact["converged"] and max(compact["inner_active"]) > 0
+    for key in ("newton_iterations", "cutbacks", "inner_active"):
+        assert compact[key] == kept[key], key
+    for key in ("plate_force", "inner_force"):
+        np.testing.assert_allclose(compact[key], kept[key], rtol=1e-10,
+                                   atol=1e-10 * max(kept[key]))
+    if comm.size > 1:
+        monkeypatch.setattr(newton.ContactNewton, "compact_layout", True)
+        serial = demo("self_contact").main(arguments, comm=MPI.COMM_SELF)
+        assert serial["newton_iterations"] == compact["newton_iterations"]
+        np.testing.assert_allclose(serial["plate_force"], compact["plate_force"], rtol=1e-8)
+
+
+def interface_multipliers(comm) -> int:
+    """The number of multipliers of the crushed ring's inner surface (its nodes)."""
+    tagged = meshes.crushed_ring(0, comm=comm)
+    V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (2,)))
+    inner = tagged.markers["ring_inner"]
+    interface = MortarInterface(V, tagged.facet_tags, inner, inner)
+    try:
+        return interface.num_global_multipliers
+    finally:
+        interface.destroy()
 
 # --- the crushed tube (3D) and the walls' facing history (issue 29) --------------------
 
