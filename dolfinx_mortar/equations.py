@@ -170,6 +170,8 @@ class ContactEquations:
             before = interface.statistics.time_search
             interface.update(self.u)
             searching += interface.statistics.time_search - before
+            if not self.in_layout[k]:
+                continue  # no pair anywhere (or a stale layout: the residual stops)
             self.assemble_gaps(k)
             self.active[k] = self.decide_active(k)
             if self.friction is not None:

@@ -343,7 +343,9 @@ class MortarInterface:
             else:
                 origin = self.reuse.sweep_start(moving, undeformed)
                 self._search(slave_x, master_x, origin[:ns], origin[ns:])
-                self.reuse.searched(moving, origin, self.comm)
+                # a long sweep's pairs are dropped by searching again at the next update;
+                # a sweep that kept none on any rank has none to drop: its search holds
+                self.reuse.searched(moving, None if self.without_pairs else origin, self.comm)
         else:
             self.reuse.skipped()
             if not self.without_pairs:  # (no pair reads the node table: not refreshed)

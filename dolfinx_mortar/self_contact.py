@@ -103,11 +103,12 @@ def may_face(x: np.ndarray, blocks: np.ndarray, slave_facets: np.ndarray,
         return False
     if num_slave * num_master > DENSE_PAIRS:
         return True
-    from . import normals, search
+    from . import search
 
     slave_lower, slave_upper = search.facet_boxes(x, slave_facets, origin, depth)
     master_lower, master_upper = search.facet_boxes(x, master_facets, origin, depth)
-    may = (normals.facet_normals(x, slave_facets) @ normals.facet_normals(x, master_facets).T
+    # (the unit normals of facet_frames, as the search's depth takes them)
+    may = (search._facet_outward(x, slave_facets) @ search._facet_outward(x, master_facets).T
            < OPPOSED_ALLOWANCE)
     for k in range(x.shape[1]):  # the comparisons of candidate_pairs, for all pairs
         may &= (slave_lower[:, k] - margin)[:, None] <= (master_upper[:, k] + margin)

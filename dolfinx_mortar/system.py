@@ -139,7 +139,8 @@ class ContactSystem:
         zeroing = time.perf_counter() - zeroing
         group_values, groups = [], []
         offset = 0
-        normal_conditions = [enforcement_rows(k) for k in range(len(self.interfaces))]
+        normal_conditions = [enforcement_rows(k) if present else None
+                             for k, present in enumerate(self.in_layout)]
         conditions = ([tangential.conditions(k) for k in range(len(self.interfaces))]
                       if self.friction else None)
         for k in range(len(self.interfaces)):
