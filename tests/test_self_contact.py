@@ -11,6 +11,7 @@ import dolfinx
 import numpy as np
 import pytest
 import ufl
+from friction_states import put_active_nodes_in
 from mpi4py import MPI
 from petsc4py import PETSc
 from test_contact import assert_taylor_second_order, demo
@@ -451,38 +452,6 @@ def tangential_multipliers_along_the_slips(problem: ContactProblem, seed: int) -
         y.setArray(np.where(slip[:, a] < 0.0, -1.0, 1.0)
                    * rng.uniform(5.0, 10.0, y.getLocalSize()))
     problem.equations.read_state(problem.x)
-
-
-def put_active_nodes_in(problem: ContactProblem, state: str) -> None:
-    """Set the Coulomb mu so that every active node is in ``state`` ("slipping" or
-    "sticking") with a margin of 2 from the kink: |v| = |y + c_t s| against the bound
-    mu (z - c_n g^) (test_friction.put_every_active_node_in, with the components held by a
-    prescribed displacement left out of v, as the law leaves them: the slit's bottom
-    nodes in 3D, whose tau^1 lies along the held u_y); checks it."""
-    comm = problem.comm
-    problem.equations.residual(problem.snes, problem.x, problem.b)
-    active = problem.active[0]
-    z = problem.multipliers[0].getArray(readonly=True)[active]
-    z = z - problem.c_n * problem.gaps[0][active] / problem.areas[0][active]
-    now = problem.friction_state()
-    m = problem.friction.components
-    held = problem.friction.held[0]
-    free = 1.0 if held is None else ~held[active]
-    v = (now["traction"][active].reshape(z.size, m)
-         + problem.c_t * now["slip"][active].reshape(z.size, m)) * free
-    v = np.linalg.norm(v, axis=1)
-    if state == "slipping":
-        mu = 0.5 * comm.allreduce(float(np.min(v, initial=np.inf)), op=MPI.MIN) / \
-            comm.allreduce(float(np.max(z, initial=0.0)), op=MPI.MAX)
-    else:
-        mu = 2.0 * comm.allreduce(float(np.max(v, initial=0.0)), op=MPI.MAX) / \
-            comm.allreduce(float(np.min(z, initial=np.inf)), op=MPI.MIN)
-    problem.friction.laws[0] = Coulomb(mu)
-    problem.equations.residual(problem.snes, problem.x, problem.b)
-    counts = comm.allreduce(np.array([int(active.sum()),
-                                      int(problem.friction_state()[state][active].sum())]),
-                            op=MPI.SUM)
-    assert counts[0] > 0 and counts[1] == counts[0]
 
 
 @pytest.mark.parallel
