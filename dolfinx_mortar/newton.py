@@ -136,6 +136,10 @@ class ContactNewton:
         equations.system.set_layout(layout, wanted)
         self.x, self.b = layout.create_vector(), layout.create_vector()
         equations.read_state(self.x)
+        # the gaps, active sets and slips at this state (a pair back in the layout was not
+        # updated while out; friction's slips are reset at each solve's start), for the
+        # matrix the set-up assembles
+        equations.update_contact()
         self.setup()
 
     compact_layout = True

@@ -600,6 +600,21 @@ def test_a_surface_coming_into_contact_enters_the_layout(monkeypatch):
         np.testing.assert_allclose(serial["plate_force"], compact["plate_force"], rtol=1e-8)
 
 
+def test_a_frictional_surface_coming_into_contact_enters_the_layout(monkeypatch):
+    """The same with Coulomb friction (mu = 0.1, crushed to 1.4 in 10 steps, which takes
+    cut-backs): each new layout's matrix is assembled from gaps, active sets and slips of
+    the current state (friction's slips restart at each solve; a pair that was out was
+    not updated), and the run equals the one that keeps the rows, step by step."""
+    arguments = ["--case", "crush", "--depth", "1.4", "--steps", "10", "--mu", "0.1"]
+    compact = demo("self_contact").main(arguments, comm=MPI.COMM_SELF)
+    monkeypatch.setattr(newton.ContactNewton, "compact_layout", False)
+    kept = demo("self_contact").main(arguments, comm=MPI.COMM_SELF)
+    assert compact["converged"] and max(compact["inner_active"]) > 0
+    for key in ("newton_iterations", "cutbacks", "inner_active"):
+        assert compact[key] == kept[key], key
+    np.testing.assert_allclose(compact["plate_force"], kept["plate_force"], rtol=1e-10)
+
+
 def interface_multipliers(comm) -> int:
     """The number of multipliers of the crushed ring's inner surface (its nodes)."""
     tagged = meshes.crushed_ring(0, comm=comm)
