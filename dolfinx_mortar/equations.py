@@ -93,6 +93,14 @@ class ContactEquations:
         self.last_inversion = diagnostics.Inversion()
         """Inverted cells of the last iterate whose residual was refused (NaN)."""
         self.residual_history: list[float] = []
+        self.in_layout = [True] * len(interfaces)
+        """Per pair, whether its multiplier fields are unknowns of the layout (an interface
+        without pairs on any rank may be left out: :meth:`~dolfinx_mortar.newton.
+        ContactNewton.fit_layout`); the multipliers of a pair left out are zero."""
+        self.stale_state: dict | None = None
+        """The state of the iterate at which a pair left out of the layout found pairs (its
+        residual needs the pair's rows: the SNES is stopped there, and the solve goes on
+        from this state in a layout with them), or None."""
         self.callbacks = SnesCallbacks(self)
 
     @property
@@ -102,13 +110,28 @@ class ContactEquations:
 
     # -- state <-> iterate ---------------------------------------------------
 
+    def _fields(self) -> list[tuple[int, PETSc.Vec, bool]]:
+        """(layout field, multiplier vector, whether in the layout) of every multiplier
+        field: the normal ones pair by pair, then the tangential ones (pair by pair, d - 1
+        each)."""
+        num_pairs = len(self.interfaces)
+        components = len(self.tangential) // max(num_pairs, 1)
+        pair_of = list(range(num_pairs)) + [k for k in range(num_pairs)
+                                            for _ in range(components)]
+        return [(field, vector, self.in_layout[pair_of[field - 1]]) for field, vector
+                in enumerate(self.multipliers + self.tangential, start=1)]
+
     def read_state(self, x: PETSc.Vec) -> None:
-        """Put u and the multipliers into ``x``."""
+        """Put u and the multipliers into ``x``; the multipliers of a pair out of the
+        layout are set to zero."""
         array = x.getArray()
         owned = self.layout.num_u[self.layout.comm.rank]
         array[self.layout.owned_u] = self.u.x.array[:owned]
-        for field, z in enumerate(self.multipliers + self.tangential, start=1):
-            array[self.layout.owned(field)] = z.getArray(readonly=True)
+        for field, z, present in self._fields():
+            if present:
+                array[self.layout.owned(field)] = z.getArray(readonly=True)
+            else:
+                z.zeroEntries()
 
     def write_state(self, x: PETSc.Vec) -> None:
         """Set u and the multipliers from ``x``."""
@@ -116,8 +139,9 @@ class ContactEquations:
         owned = self.layout.num_u[self.layout.comm.rank]
         self.u.x.array[:owned] = array[self.layout.owned_u]
         self.u.x.scatter_forward()
-        for field, z in enumerate(self.multipliers + self.tangential, start=1):
-            z.getArray()[:] = array[self.layout.owned(field)]
+        for field, z, present in self._fields():
+            if present:
+                z.getArray()[:] = array[self.layout.owned(field)]
 
     def save_state(self) -> dict:
         """This rank's part of u, the multipliers and the Uzawa multipliers."""
@@ -146,6 +170,8 @@ class ContactEquations:
             before = interface.statistics.time_search
             interface.update(self.u)
             searching += interface.statistics.time_search - before
+            if not self.in_layout[k]:
+                continue  # no pair anywhere (or a stale layout: the residual stops)
             self.assemble_gaps(k)
             self.active[k] = self.decide_active(k)
             if self.friction is not None:
@@ -219,7 +245,12 @@ class ContactEquations:
 
     def residual(self, snes: PETSc.SNES, x: PETSc.Vec, b: PETSc.Vec) -> None:
         """b = R(x); NaN where an element of the iterate is inverted (SNES then stops with
-        DIVERGED_FNORM_NAN, and the report names the inverted cells)."""
+        DIVERGED_FNORM_NAN, and the report names the inverted cells). Where a pair left
+        out of the layout found pairs (:attr:`stale_state`), NaN too: the SNES stops,
+        and its solve goes on from that iterate with the pair's rows."""
+        if self.stale_state is not None:
+            b.set(np.nan)  # (a line search trying further points)
+            return
         self.write_state(x)
         inversion = self.inversion_check(self.u.x.array)
         if inversion.count:
@@ -227,6 +258,12 @@ class ContactEquations:
             b.set(np.nan)
             return
         self.update_contact()
+        if not all(present or interface.without_pairs
+                   for present, interface in zip(self.in_layout, self.interfaces,
+                                                 strict=True)):
+            self.stale_state = self.save_state()
+            b.set(np.nan)
+            return
         start = time.perf_counter()
         b_u = self.b_u
         with b_u.localForm() as local:
@@ -246,6 +283,8 @@ class ContactEquations:
         array = b.getArray()
         array[self.layout.owned_u] = b_u.getArray(readonly=True)
         for k in range(len(self.interfaces)):
+            if not self.in_layout[k]:
+                continue
             array[self.layout.owned(k + 1)] = self.multiplier_rows(k)[0]
             if self.friction is not None:
                 residual = self.tangential_rows(k).residual

@@ -343,10 +343,13 @@ class MortarInterface:
             else:
                 origin = self.reuse.sweep_start(moving, undeformed)
                 self._search(slave_x, master_x, origin[:ns], origin[ns:])
-                self.reuse.searched(moving, origin, self.comm)
+                # a long sweep's pairs are dropped by searching again at the next update;
+                # a sweep that kept none on any rank has none to drop: its search holds
+                self.reuse.searched(moving, None if self.without_pairs else origin, self.comm)
         else:
             self.reuse.skipped()
-            self._refresh_coordinates(slave_x, master_x)
+            if not self.without_pairs:  # (no pair reads the node table: not refreshed)
+                self._refresh_coordinates(slave_x, master_x)
         stats.searches_done = self.reuse.searches_done
         stats.searches_skipped = self.reuse.searches_skipped
         stats.time_search += time.perf_counter() - start
@@ -383,8 +386,8 @@ class MortarInterface:
         were given their coupling to the facet's other master nodes
         (:class:`covered.CoveredStencil`): then every rank takes the new pattern.
         Collective: every rank calls it at every update of the current configuration."""
-        if self.basis != "dual" or self.configuration == "reference":
-            return  # only the covered dual basis of the current configuration widens
+        if self.basis != "dual" or self.configuration == "reference" or self.without_pairs:
+            return  # only the covered dual basis of the current configuration widens pairs
         stencil = self.stencil
         changed = stencil.widenings != self._stencil_widenings
         if not self.comm.allreduce(changed, op=MPI.LOR):

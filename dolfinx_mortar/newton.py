@@ -17,6 +17,7 @@ from petsc4py import PETSc
 
 from . import diagnostics, solvers
 from .equations import ContactEquations
+from .layout import BlockLayout
 from .solvers import SolveReport
 
 
@@ -106,20 +107,101 @@ class ContactNewton:
         self.condensation = condensation
         self.setup()
 
+    def fit_layout(self) -> None:
+        """Leave the multiplier rows of each pair without pairs on any rank (at its last
+        search) out of the layout, and put those of a pair with pairs back: a new layout,
+        x, b, matrix and SNES when either changes. Collective (every rank has the same
+        interfaces without pairs).
+
+        Why: a self-contact surface far from itself has multipliers but no pair; its rows
+        (z_j = 0, decoupled from the rest) are unknowns that each factorization orders
+        and factors (docs/benchmarks.md, "Self-contact far from itself: the rows taken
+        out"). Taking them out changes no solution: the multipliers of a pair without
+        pairs are zero and enter no other row."""
+        equations = self.equations
+        wanted = [not self.compact_layout or not i.without_pairs for i in self.interfaces]
+        if wanted == equations.in_layout:
+            return
+        equations.write_state(self.x)
+        equations.in_layout = wanted
+        counts = [i.num_owned_multipliers if present else 0
+                  for i, present in zip(self.interfaces, wanted, strict=True)]
+        components = equations.system.components
+        layout = BlockLayout(self.comm, self.interfaces[0].num_owned_dofs,
+                             counts + [c for c in counts for _ in range(components)])
+        self.destroy()
+        for vector in (self.x, self.b):
+            vector.destroy()
+        equations.layout = layout
+        equations.system.set_layout(layout, wanted)
+        self.x, self.b = layout.create_vector(), layout.create_vector()
+        equations.read_state(self.x)
+        # the gaps, active sets and slips at this state (a pair back in the layout was not
+        # updated while out; friction's slips are reset at each solve's start), for the
+        # matrix the set-up assembles
+        equations.update_contact()
+        self.setup()
+
+    compact_layout = True
+    """Whether :meth:`fit_layout` leaves pairs without pairs out of the layout (False: every
+    pair's rows stay, as before; for comparisons)."""
+
     def newton(self) -> SolveReport:
-        """One SNES solve from the state in x, into the state. Collective."""
+        """One Newton solve from the state in x, into the state. Collective.
+
+        The layout is fitted first (:meth:`fit_layout`). Where a pair left out of it
+        finds pairs at an iterate, the SNES stops there and the solve goes on from that
+        iterate in a layout with the pair's rows: the same iterates as with the rows
+        throughout (the tolerances and the iteration limit of the whole solve hold)."""
+        equations = self.equations
+        equations.stale_state = None
+        self.fit_layout()
+        report = self._snes_solve()
+        while equations.stale_state is not None:
+            done, history = report.iterations, report.residuals
+            linear = report.linear_iterations
+            state, equations.stale_state = equations.stale_state, None
+            equations.restore_state(state)
+            equations.read_state(self.x)
+            self.fit_layout()
+            report = self._snes_solve(done, history)
+            report.linear_iterations += linear
+        return report
+
+    def _snes_solve(self, done: int = 0, history: list[float] | None = None) -> SolveReport:
+        """One SNES solve from the state in x, into the state; ``done`` Newton iterations
+        with the residual norms ``history`` went before it in this solve (then its
+        relative tolerance is of history[0], and no step is forced)."""
         equations = self.equations
         equations.residual_history.clear()
         equations.last_inversion = diagnostics.Inversion()
         if self.condenser is not None:
             self.condenser.inner_failure = ""
+        tolerances = self.snes.getTolerances()
         with solvers.inserted_options(self.prefix, self.solve_options):
-            self.snes.solve(None, self.x)
+            force = PETSc.Options().getBool(f"{self.prefix}snes_force_iteration", False)
+            try:
+                if history:
+                    rtol, atol, _, max_it = tolerances
+                    self.snes.setTolerances(rtol=0.0, atol=max(atol, rtol * history[0]),
+                                            max_it=max(max_it - done, 1))
+                    self.snes.setForceIteration(False)
+                self.snes.solve(None, self.x)
+            finally:
+                if history:
+                    rtol, atol, _, max_it = tolerances
+                    self.snes.setTolerances(rtol=rtol, atol=atol, max_it=max_it)
+                    self.snes.setForceIteration(force)
         reason = self.snes.getConvergedReason()
+        residuals = (history or []) + list(equations.residual_history)
+        if equations.stale_state is not None:  # (its own iterate, whichever the SNES holds)
+            return SolveReport(converged=False, reason=reason, iterations=len(residuals),
+                               residuals=residuals, active=0,
+                               linear_iterations=self.snes.getLinearSolveIterations())
         equations.write_state(self.x)
         report = SolveReport(
-            converged=reason > 0, reason=reason, iterations=self.snes.getIterationNumber(),
-            residuals=list(equations.residual_history), active=0,
+            converged=reason > 0, reason=reason,
+            iterations=done + self.snes.getIterationNumber(), residuals=residuals, active=0,
             linear_iterations=self.snes.getLinearSolveIterations())
         if reason <= 0:
             report.inversion = equations.last_inversion

@@ -227,10 +227,9 @@ class ContactProblem(ContactResults):
             interface.set_crosspoints(fully_fixed)
         counts = [i.num_owned_multipliers for i in self.interfaces]
         components = (gdim - 1) if self.has_friction else 0
-        self.layout = BlockLayout(self.comm, self.interfaces[0].num_owned_dofs,
-                                  counts + [c for c in counts for _ in range(components)])
-        self.x = self.layout.create_vector()
-        self.b = self.layout.create_vector()
+        layout = BlockLayout(self.comm, self.interfaces[0].num_owned_dofs,
+                             counts + [c for c in counts for _ in range(components)])
+        x, b = layout.create_vector(), layout.create_vector()
         row_scale, slave_length, master_scale, master_length = stiffness_scales(
             diagonal, self.interfaces, self.comm, gdim)
         checks.check_stiff_slave(self._warnings, pairs, gdim, row_scale * slave_length
@@ -244,24 +243,28 @@ class ContactProblem(ContactResults):
             MAX_TOLERANCE_FACTOR, max(1.0, master_scale / row_scale))
         self.c_n, self.penalty, self.c_t = enforcement.default_parameters(
             options.method, scales, master_scale, options.c_n, options.penalty, options.c_t)
-        self.equations = self._create_equations(options, scales, components)
-        self.equations.read_state(self.x)
+        self.equations = self._create_equations(options, scales, components, layout)
+        self.equations.read_state(x)
         self.timings = self.equations.timings
         self._slip_origin: np.ndarray | None = None
         self._reference_norm: float | None = None
         # 1e-11 k h: a force that moves a node of the slave by 1e-11 h, times the master's
         # stiffness over the slave's where the master is the stiffer (at most
         # MAX_TOLERANCE_FACTOR)
-        self.solver = ContactNewton(
-            self.equations, self.x, self.b, prefix, petsc_options, self._linear_solver,
-            self._condensation, 1e-11 * self._force_scale * slave_length,
-            automatic=self._automatic_linear_solver)
+        try:
+            self.solver = ContactNewton(
+                self.equations, x, b, prefix, petsc_options, self._linear_solver,
+                self._condensation, 1e-11 * self._force_scale * slave_length,
+                automatic=self._automatic_linear_solver)
+        except BaseException:
+            x.destroy(), b.destroy()
+            raise
         checks.check_free_bodies(self._warnings, pairs, self.interfaces, body_labels,
                                  free_bodies, self.equations.smallest_gap, slave_length)
         self._warnings.building = False
 
     def _create_equations(self, options: ContactOptions, scales: enforcement.Scales,
-                          components: int) -> ContactEquations:
+                          components: int, layout: BlockLayout) -> ContactEquations:
         """The enforcement, the friction state, the Newton matrix and the equations."""
         self.friction: friction_rules.Friction | None = None
         """The frictional state (:class:`~dolfinx_mortar.friction.Friction`), if any."""
@@ -279,17 +282,33 @@ class ContactProblem(ContactResults):
             [i.num_owned_multipliers for i in self.interfaces], c_n=self.c_n,
             penalty=self.penalty, augmented_tolerance=options.augmented_tolerance,
             max_outer_iterations=options.max_outer_iterations)
-        self.system = ContactSystem(self.V, self.layout, self.interfaces, self._K, self.J_form,
+        self.system = ContactSystem(self.V, layout, self.interfaces, self._K, self.J_form,
                                     self.bcs, self._fixed_dofs, scales.dirichlet,
                                     tangential_components=components)
         timings = dict.fromkeys(
             ("bulk assembly", "contact search", "mortar integration", "linear solve"), 0.0)
-        equations = ContactEquations(self.u, self.bcs, self.F_form, self.J_form, self.layout,
+        equations = ContactEquations(self.u, self.bcs, self.F_form, self.J_form, layout,
                                      self.interfaces, self.enforcement, self.friction,
                                      self.system, scales.dirichlet, timings)
         self.multipliers = equations.multipliers
         self.active, self.gaps, self.areas = equations.active, equations.gaps, equations.areas
         return equations
+
+    @property
+    def x(self) -> PETSc.Vec:
+        """The iterate [u | z] (a new vector when the layout changes: ``newton.fit_layout``)."""
+        return self.solver.x
+
+    @property
+    def b(self) -> PETSc.Vec:
+        """The residual vector of the layout."""
+        return self.solver.b
+
+    @property
+    def layout(self) -> BlockLayout:
+        """The monolithic numbering of the unknowns (:class:`~dolfinx_mortar.layout.
+        BlockLayout`; pairs without pairs may be left out of it)."""
+        return self.equations.layout
 
     @property
     def snes(self) -> PETSc.SNES:
@@ -388,6 +407,10 @@ class ContactProblem(ContactResults):
             self.friction.start(current["u"])
         self.equations.read_state(self.x)
         self.equations.residual(self.snes, self.x, self.b)  # where an unpredicted solve starts
+        if self.equations.stale_state is not None:  # a pair out of the layout found pairs
+            self.equations.stale_state = None
+            self.solver.fit_layout()
+            self.equations.residual(self.snes, self.x, self.b)
         self._reference_norm = self.b.norm()
         self.u.x.array[:] += ratio * (current["u"] - previous["u"])
         for z, now, before in zip(self.multipliers + self.tangential,
@@ -435,7 +458,9 @@ class ContactProblem(ContactResults):
         if self._destroyed:
             return
         self._destroyed = True
-        parts = [getattr(self, name, None) for name in ("solver", "equations", "_K", "x", "b")]
+        solver = getattr(self, "solver", None)
+        parts = [solver, getattr(self, "equations", None), getattr(self, "_K", None)]
+        parts += [solver.x, solver.b] if solver is not None else []
         if parts[1] is None:  # a set-up that failed before the equations were made
             parts += [getattr(self, name, None) for name in ("system", "friction")]
         for part in parts + self.interfaces:

@@ -90,7 +90,14 @@ def may_face(x: np.ndarray, blocks: np.ndarray, slave_facets: np.ndarray,
     overlap, which a small surface finds here with a few array comparisons, all pairs at
     once, instead of the search's k-d trees per size class; :func:`facing` keeps a pair of
     those or none (it decides each pair alone, the same way in either set). A surface far
-    from itself has candidates (each facet's own neighbours) but none that faces."""
+    from itself has candidates (each facet's own neighbours) but none that faces.
+
+    :func:`facing` needs opposed normals (a negative cosine); the cosines of all pairs are
+    one small matrix product of the facets' normals, so only the pairs whose boxes overlap
+    and whose normals may oppose (a cosine below a rounding allowance: the product rounds
+    otherwise than :func:`facing`) go to :func:`facing`. On a surface far from itself
+    that is none or a few: the normals of a facet's neighbours, the only pairs whose boxes
+    overlap there, point the same way."""
     num_slave, num_master = slave_facets.shape[0], master_facets.shape[0]
     if num_slave == 0 or num_master == 0:
         return False
@@ -100,14 +107,24 @@ def may_face(x: np.ndarray, blocks: np.ndarray, slave_facets: np.ndarray,
 
     slave_lower, slave_upper = search.facet_boxes(x, slave_facets, origin, depth)
     master_lower, master_upper = search.facet_boxes(x, master_facets, origin, depth)
-    overlap = np.ones((num_slave, num_master), dtype=bool)
+    # (the unit normals of facet_frames, as the search's depth takes them)
+    may = (search._facet_outward(x, slave_facets) @ search._facet_outward(x, master_facets).T
+           < OPPOSED_ALLOWANCE)
     for k in range(x.shape[1]):  # the comparisons of candidate_pairs, for all pairs
-        overlap &= (slave_lower[:, k] - margin)[:, None] <= (master_upper[:, k] + margin)
-        overlap &= (master_lower[:, k] - margin) <= (slave_upper[:, k] + margin)[:, None]
-    slave, master = np.nonzero(overlap)
+        may &= (slave_lower[:, k] - margin)[:, None] <= (master_upper[:, k] + margin)
+        may &= (master_lower[:, k] - margin) <= (slave_upper[:, k] + margin)[:, None]
+    if not may.any():
+        return False
+    slave, master = np.nonzero(may)
     slave_nodes, master_nodes = slave_facets[slave], master_facets[master]
     return bool(facing(blocks[slave_nodes], blocks[master_nodes], x[slave_nodes],
                        x[master_nodes], depth).any())
+
+
+OPPOSED_ALLOWANCE = 1e-12
+""":func:`may_face` sends :func:`facing` the pairs whose normals' cosine, as a matrix
+product rounds it, is below this: every pair :func:`facing` could find opposed (a cosine
+below 0 as it rounds it, which differs from the product's by far less)."""
 
 
 def facing(slave_blocks: np.ndarray, master_blocks: np.ndarray, slave_x: np.ndarray,

@@ -364,7 +364,8 @@ def condensed_preconditioner(ksp: PETSc.KSP, layout, interfaces, block_size: int
     positions = {}
     for k, field in fields:
         owned = layout.owned(field)
-        blocks = interfaces[k].owned_multiplier_blocks
+        # (a pair left out of the layout has no rows: newton.ContactNewton.fit_layout)
+        blocks = interfaces[k].owned_multiplier_blocks[:owned.stop - owned.start]
         node_dofs[owned.start - layout.owned_z.start:owned.stop - layout.owned_z.start] = (
             blocks[:, None] * block_size + np.arange(block_size))
         positions.setdefault(k, []).append(

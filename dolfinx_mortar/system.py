@@ -79,19 +79,33 @@ class ContactSystem:
         blocks = index_map.local_to_global(
             np.arange(index_map.size_local + index_map.num_ghosts, dtype=np.int32))
         local_dofs = (blocks[:, None] * bs + np.arange(bs)).reshape(-1)
-        self._bulk = ((indptr.astype(np.int64), layout.u(indices)), layout.u(local_dofs))
-        fixed = layout.u(fixed_dofs)
-        # (dirichlet_dofs may list a few dofs owned by another rank; their owner has them too)
-        first = int(layout.offsets[self.comm.rank])
-        fixed = fixed[(fixed >= first) & (fixed < first + layout.num_u[self.comm.rank])]
-        self.fixed_rows = fixed
-        self._fixed_all = np.unique(np.concatenate(self.comm.allgather(fixed)))
+        self._bulk_global = (indptr.astype(np.int64), indices, local_dofs, fixed_dofs)
+        self.set_layout(layout, [True] * len(interfaces))
         # per pair, ghosted multiplier-layout vectors that carry the row coefficients of the
         # owned slave nodes to the ghost slave nodes (collective)
         names = ("gap_coefficient", "area_coefficient") + coefficient_names(
             tangential_components)
         self._coefficient_vectors = [{name: i.create_multiplier_vector() for name in names}
                                      for i in interfaces]
+
+    def set_layout(self, layout: BlockLayout, in_layout: list[bool]) -> None:
+        """Number the matrix by ``layout``, in which the pairs k with ``in_layout[k]``
+        False have no multiplier rows (the next assembly builds a new matrix).
+        Collective."""
+        indptr, indices, local_dofs, fixed_dofs = self._bulk_global
+        self.layout = layout
+        self.in_layout = list(in_layout)
+        self._bulk = ((indptr, layout.u(indices)), layout.u(local_dofs))
+        fixed = layout.u(fixed_dofs)
+        # (dirichlet_dofs may list a few dofs owned by another rank; their owner has them too)
+        first = int(layout.offsets[self.comm.rank])
+        fixed = fixed[(fixed >= first) & (fixed < first + layout.num_u[self.comm.rank])]
+        self.fixed_rows = fixed
+        self._fixed_all = np.unique(np.concatenate(self.comm.allgather(fixed)))
+        if self.matrix is not None:
+            self.matrix.destroy()
+            self.matrix = None
+        self._versions, self._pattern = (), None
 
     @property
     def mat(self) -> PETSc.Mat:
@@ -125,7 +139,8 @@ class ContactSystem:
         zeroing = time.perf_counter() - zeroing
         group_values, groups = [], []
         offset = 0
-        normal_conditions = [enforcement_rows(k) for k in range(len(self.interfaces))]
+        normal_conditions = [enforcement_rows(k) if present else None
+                             for k, present in enumerate(self.in_layout)]
         conditions = ([tangential.conditions(k) for k in range(len(self.interfaces))]
                       if self.friction else None)
         for k in range(len(self.interfaces)):
@@ -149,10 +164,13 @@ class ContactSystem:
             group_values = np.zeros(self._block_shape + (0,))
             groups = np.zeros(0, dtype=np.int64)
         diagonal = [np.full(self.fixed_rows.size, self.dirichlet_scale)] + [
-            r[3] for r in normal_conditions]
+            r[3] for r, present in zip(normal_conditions, self.in_layout, strict=True)
+            if present]
         if self.friction:
             # (the order of _update_pattern's diagonal rows and point entries)
             m = self.components
+            conditions = [r for r, present in zip(conditions, self.in_layout, strict=True)
+                          if present]
             diagonal += [r.own[:, a, a] for r in conditions for a in range(m)]
             diagonal += [r.normal[:, a] for r in conditions for a in range(m)]
             diagonal += [r.own[:, a, b] for r in conditions for a in range(m)
@@ -171,7 +189,7 @@ class ContactSystem:
         k's dense block per candidate pair (2D: 10 x 14); rows of Dirichlet dofs are dropped
         (-1), they are identity rows."""
         interface = self.interfaces[k]
-        if interface.quantities is None or interface.without_pairs:
+        if interface.quantities is None or interface.without_pairs or not self.in_layout[k]:
             return np.zeros((0, 0), dtype=np.int64), np.zeros((0, 0), dtype=np.int64)
         layout = self.layout
         force_dofs = layout.u(interface.pair_force_dofs)
@@ -202,8 +220,8 @@ class ContactSystem:
                                                  strict=True))
         if self.comm.allreduce(same, op=MPI.LAND):
             return False  # a search found the same pairs (or none again): keep the matrix
-        owned = [i.multiplier_offset + np.arange(i.num_owned_multipliers)
-                 for i in self.interfaces]
+        owned = [i.multiplier_offset + np.arange(i.num_owned_multipliers if present else 0)
+                 for i, present in zip(self.interfaces, self.in_layout, strict=True)]
         normal_indices = [layout.z(o, k + 1) for k, o in enumerate(owned)]
         diagonal_indices = [self.fixed_rows] + normal_indices
         point_entries = None
@@ -240,7 +258,7 @@ class ContactSystem:
         None before the first evaluation (no pairs yet).
         """
         interface = self.interfaces[k]
-        if interface.quantities is None or interface.without_pairs:
+        if interface.quantities is None or interface.without_pairs or not self.in_layout[k]:
             return None  # (the same on every rank: no collective call below is skipped alone)
         contributing = interface.contributing_pairs()
         z_nodes = interface.node_values(z)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from friction_states import put_active_nodes_in
 from mpi4py import MPI
 from test_contact import assert_taylor_second_order, built_problem, penetrating_blocks
 
@@ -132,36 +133,6 @@ def with_random_tangential_multipliers(problem, seed: int):
     return problem
 
 
-def put_every_active_node_in(problem, state: str, method: str) -> None:
-    """Set pair 0's Coulomb mu so that every active node is in ``state`` ("slipping" or
-    "sticking") with a margin of 2 from the kink: the bound mu (z_j - c_n g^_j)
-    (penalty: mu z_j) against |v_j| (module docstring of friction); checks it."""
-
-    problem.equations.residual(problem.snes, problem.x, problem.b)
-    active = problem.active[0]
-    z = problem.multipliers[0].getArray(readonly=True)[active]
-    if method == "lagrange":
-        z = z - problem.c_n * problem.gaps[0][active] / problem.areas[0][active]
-    state_now = problem.friction_state()
-    m = problem.friction.components  # (a rank may have no active node: no -1 in reshape)
-    s = state_now["slip"][active].reshape(z.size, m)
-    y = state_now["traction"][active].reshape(z.size, m)
-    v = np.linalg.norm((y if method == "lagrange" else 0.0) + problem.c_t * s, axis=1)
-    comm = problem.comm
-    if state == "slipping":
-        mu = 0.5 * comm.allreduce(float(np.min(v, initial=np.inf)), op=MPI.MIN) / \
-            comm.allreduce(float(np.max(z, initial=0.0)), op=MPI.MAX)
-    else:
-        mu = 2.0 * comm.allreduce(float(np.max(v, initial=0.0)), op=MPI.MAX) / \
-            comm.allreduce(float(np.min(z, initial=np.inf)), op=MPI.MIN)
-    problem.friction.laws[0] = Coulomb(mu)
-    problem.equations.residual(problem.snes, problem.x, problem.b)
-    friction = problem.friction_state()
-    counts = comm.allreduce(
-        np.array([int(active.sum()), int(friction[state][active].sum())]), op=MPI.SUM)
-    assert counts[0] > 0 and counts[1] == counts[0]
-
-
 @pytest.mark.parallel
 @pytest.mark.parametrize("method", ["lagrange", "penalty"])
 @pytest.mark.parametrize("state", ["slipping", "sticking"])
@@ -171,7 +142,7 @@ def test_frictional_jacobian_taylor(state, method):
     2 from the kink: bound = mu (z_j - c_n g^_j) (penalty: mu z_j) against |v_j| (module
     docstring of friction)."""
     problem = frictional_blocks(1.0, method)
-    put_every_active_node_in(problem, state, method)
+    put_active_nodes_in(problem, state, method)
     assert_taylor_second_order(problem, seed=11)
 
 

@@ -3,10 +3,11 @@ patch test, mu = 0, serial = parallel."""
 
 import numpy as np
 import pytest
+from friction_states import put_active_nodes_in
 from mpi4py import MPI
 from test_contact import assert_taylor_second_order
 from test_contact3d import curved_punch, penetrating_punch
-from test_friction import load_demo, put_every_active_node_in, with_random_tangential_multipliers
+from test_friction import load_demo, with_random_tangential_multipliers
 
 from dolfinx_mortar import Coulomb, Tresca
 from dolfinx_mortar.friction import tangent_frames
@@ -56,7 +57,7 @@ def test_frictional_jacobian_taylor_3d(state, method, normals):
     the frames' derivative through the averaged normals (with every normal option: the
     frames always come from the averaged normals)."""
     problem = frictional_punch(method, normals=normals)
-    put_every_active_node_in(problem, state, method)
+    put_active_nodes_in(problem, state, method)
     assert_taylor_second_order(problem, seed=11)
     problem.destroy()
 
@@ -69,7 +70,7 @@ def test_frictional_jacobian_taylor_3d_integration_and_basis(integration, basis)
     problem = penetrating_punch(0.02, method="lagrange", friction=Coulomb(1.0),
                                 integration=integration, basis=basis)
     with_random_tangential_multipliers(problem, seed=5)
-    put_every_active_node_in(problem, "slipping", "lagrange")
+    put_active_nodes_in(problem, "slipping", "lagrange")
     assert_taylor_second_order(problem, seed=11)
     problem.destroy()
 

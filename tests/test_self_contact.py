@@ -11,6 +11,7 @@ import dolfinx
 import numpy as np
 import pytest
 import ufl
+from friction_states import put_active_nodes_in
 from mpi4py import MPI
 from petsc4py import PETSc
 from test_contact import assert_taylor_second_order, demo
@@ -23,6 +24,7 @@ from dolfinx_mortar import (
     compat,
     internal_work,
     meshes,
+    newton,
     search,
 )
 from dolfinx_mortar import self_contact as sc
@@ -452,38 +454,6 @@ def tangential_multipliers_along_the_slips(problem: ContactProblem, seed: int) -
     problem.equations.read_state(problem.x)
 
 
-def put_active_nodes_in(problem: ContactProblem, state: str) -> None:
-    """Set the Coulomb mu so that every active node is in ``state`` ("slipping" or
-    "sticking") with a margin of 2 from the kink: |v| = |y + c_t s| against the bound
-    mu (z - c_n g^) (test_friction.put_every_active_node_in, with the components held by a
-    prescribed displacement left out of v, as the law leaves them: the slit's bottom
-    nodes in 3D, whose tau^1 lies along the held u_y); checks it."""
-    comm = problem.comm
-    problem.equations.residual(problem.snes, problem.x, problem.b)
-    active = problem.active[0]
-    z = problem.multipliers[0].getArray(readonly=True)[active]
-    z = z - problem.c_n * problem.gaps[0][active] / problem.areas[0][active]
-    now = problem.friction_state()
-    m = problem.friction.components
-    held = problem.friction.held[0]
-    free = 1.0 if held is None else ~held[active]
-    v = (now["traction"][active].reshape(z.size, m)
-         + problem.c_t * now["slip"][active].reshape(z.size, m)) * free
-    v = np.linalg.norm(v, axis=1)
-    if state == "slipping":
-        mu = 0.5 * comm.allreduce(float(np.min(v, initial=np.inf)), op=MPI.MIN) / \
-            comm.allreduce(float(np.max(z, initial=0.0)), op=MPI.MAX)
-    else:
-        mu = 2.0 * comm.allreduce(float(np.max(v, initial=0.0)), op=MPI.MAX) / \
-            comm.allreduce(float(np.min(z, initial=np.inf)), op=MPI.MIN)
-    problem.friction.laws[0] = Coulomb(mu)
-    problem.equations.residual(problem.snes, problem.x, problem.b)
-    counts = comm.allreduce(np.array([int(active.sum()),
-                                      int(problem.friction_state()[state][active].sum())]),
-                            op=MPI.SUM)
-    assert counts[0] > 0 and counts[1] == counts[0]
-
-
 @pytest.mark.parallel
 @pytest.mark.parametrize("state", ["slipping", "sticking"])
 @pytest.mark.parametrize("dim, cell", [(2, "triangle"), (3, "tetrahedron")])
@@ -587,6 +557,74 @@ def test_a_ring_far_from_itself_skips_its_interface_until_it_closes():
     z.destroy()
     interface.destroy()
     fresh.destroy()
+
+
+@pytest.mark.parallel
+def test_a_surface_coming_into_contact_enters_the_layout(monkeypatch):
+    """The ring crushed to 1.45 in 10 steps: its inner walls, apart until the last steps,
+    have no rows in the layout from the first solve on; a search inside a later Newton
+    solve finds them facing, and that solve goes on from that iterate with their rows.
+    The run equals, step by step (Newton iterations, forces, active nodes), the run that
+    keeps the rows throughout (``ContactNewton.compact_layout = False``), to 1e-10 on all
+    ranks, and serially."""
+    comm = MPI.COMM_WORLD
+    arguments = ["--case", "crush", "--depth", "1.45", "--steps", "10"]
+    events = []
+    fit = newton.ContactNewton.fit_layout
+
+    def recorded(self) -> None:
+        before = list(self.equations.in_layout)
+        fit(self)
+        if self.equations.in_layout != before:
+            events.append((list(self.equations.in_layout), len(self.equations.residual_history),
+                           self.equations.layout.num_global))
+    monkeypatch.setattr(newton.ContactNewton, "fit_layout", recorded)
+    compact = demo("self_contact").main(arguments, comm=comm)
+    layouts = list(events)
+    monkeypatch.setattr(newton.ContactNewton, "compact_layout", False)
+    kept = demo("self_contact").main(arguments, comm=comm)
+    assert events == layouts  # (none while every pair keeps its rows)
+    assert [e[0] for e in layouts] == [[True, True, False], [True, True, True]]
+    assert layouts[1][1] > 0  # within a Newton solve, after a step
+    assert layouts[1][2] - layouts[0][2] == interface_multipliers(comm)
+    assert compact["converged"] and max(compact["inner_active"]) > 0
+    for key in ("newton_iterations", "cutbacks", "inner_active"):
+        assert compact[key] == kept[key], key
+    for key in ("plate_force", "inner_force"):
+        np.testing.assert_allclose(compact[key], kept[key], rtol=1e-10,
+                                   atol=1e-10 * max(kept[key]))
+    if comm.size > 1:
+        monkeypatch.setattr(newton.ContactNewton, "compact_layout", True)
+        serial = demo("self_contact").main(arguments, comm=MPI.COMM_SELF)
+        assert serial["newton_iterations"] == compact["newton_iterations"]
+        np.testing.assert_allclose(serial["plate_force"], compact["plate_force"], rtol=1e-8)
+
+
+def test_a_frictional_surface_coming_into_contact_enters_the_layout(monkeypatch):
+    """The same with Coulomb friction (mu = 0.1, crushed to 1.4 in 10 steps, which takes
+    cut-backs): each new layout's matrix is assembled from gaps, active sets and slips of
+    the current state (friction's slips restart at each solve; a pair that was out was
+    not updated), and the run equals the one that keeps the rows, step by step."""
+    arguments = ["--case", "crush", "--depth", "1.4", "--steps", "10", "--mu", "0.1"]
+    compact = demo("self_contact").main(arguments, comm=MPI.COMM_SELF)
+    monkeypatch.setattr(newton.ContactNewton, "compact_layout", False)
+    kept = demo("self_contact").main(arguments, comm=MPI.COMM_SELF)
+    assert compact["converged"] and max(compact["inner_active"]) > 0
+    for key in ("newton_iterations", "cutbacks", "inner_active"):
+        assert compact[key] == kept[key], key
+    np.testing.assert_allclose(compact["plate_force"], kept["plate_force"], rtol=1e-10)
+
+
+def interface_multipliers(comm) -> int:
+    """The number of multipliers of the crushed ring's inner surface (its nodes)."""
+    tagged = meshes.crushed_ring(0, comm=comm)
+    V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (2,)))
+    inner = tagged.markers["ring_inner"]
+    interface = MortarInterface(V, tagged.facet_tags, inner, inner)
+    try:
+        return interface.num_global_multipliers
+    finally:
+        interface.destroy()
 
 # --- the crushed tube (3D) and the walls' facing history (issue 29) --------------------
 
