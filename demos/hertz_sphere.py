@@ -54,7 +54,7 @@ what scatter remains, not by the mesh size (docs/benchmarks.md, "Contact pressur
 nodal multipliers and their recovery"). ``p0_fit`` (the ellipse p^2 = p0^2 (1 - r^2/a^2)
 fitted to the nodes with r < 0.8 a) is within 1 % of p0. L = 2R moves p_max and p0_fit
 by less than 0.2 % at refinement 1, so the block's size is not the cause. The default
-``--linear-solver auto`` takes the iterative solver from 20,000 dofs on
+``--linear-solver auto`` takes the iterative solver from 50,000 dofs on
 (benchmarks/README.md, "Direct or iterative by default"); both give the same answer.
 
 ``--cell hexahedron`` (dolfinx_mortar.meshes3d.hertz_sphere_hexahedral): structured

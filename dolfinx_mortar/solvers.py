@@ -57,6 +57,11 @@ DEFAULT_OPTIONS = {
     # 5e-10 off uniform after its one Newton step (now 2e-12)
     "mat_mumps_cntl_1": 0.1,
     "mat_mumps_cntl_3": 1e-8,
+    # one step of iterative refinement (an extra solve and product: +11 % of the 3D
+    # ironing's factorizations and solves): on OpenBLAS the 3D finite-strain patch
+    # test's LU solves were otherwise accurate to 3e-4 of the Newton correction, its
+    # last residual 5e-10 (with the step: 3e-13, pressure uniform to 1.5e-14)
+    "mat_mumps_icntl_10": -1,
 }
 
 LINEAR_SOLVERS = typing.get_args(LinearSolver)
@@ -98,7 +103,7 @@ def advise_blas(comm, maps: str = "/proc/self/maps") -> None:
             "single-threaded, for MPI runs) and start the program again", path)
 
 
-AUTO_ITERATIVE_MIN_DOFS = 20_000
+AUTO_ITERATIVE_MIN_DOFS = 50_000
 """``linear_solver="auto"`` takes the iterative solver from this many displacement dofs
 (global) in 3D; see :func:`automatic_linear_solver`."""
 
@@ -113,12 +118,13 @@ def automatic_linear_solver(gdim: int, num_dofs: int, multipliers: str,
     Why, as measured on the Hertz problems (benchmarks/README.md, "Direct or iterative
     by default"): in 2D MUMPS was faster than the condensed GMRES + BoomerAMG solve at
     every size measured, serial and on 2 ranks; in 3D the LU factor fills in far
-    faster with the dofs: the iterative solve was faster per Newton iteration from
-    about this size on, serially and on 2 ranks, by an order of magnitude a few
-    refinements later, and its memory grows about linearly with the dofs. Below the
-    threshold the two are close (on 2 ranks of a loaded machine LU was faster) and LU
-    is the more robust. Both give the same Newton iterates (the iterative solve
-    preconditions FGMRES on the full system, rtol 1e-12). Where the iterative solve
+    faster with the dofs: with an optimized BLAS under MUMPS the iterative solve was
+    faster per Newton iteration from about this size on (serial tetrahedra: LU 1.7x
+    faster at 34k dofs, 1.4x slower at 85k; on the reference BLAS LU was 2.5x slower
+    already at 13k), by an order of magnitude a few refinements later, and its memory
+    grows about linearly with the dofs (at 85k: 2.2 GB against LU's 3.8 GB). Below the
+    threshold LU is faster and the more robust. Both give the same Newton iterates (the
+    iterative solve preconditions FGMRES on the full system, rtol 1e-12). Where the iterative solve
     fails, the problem falls back to the direct one
     (:meth:`~dolfinx_mortar.problem.ContactProblem.solve`): a linear solve that only
     the iterative solver fails does not stop an ``auto`` run.

@@ -1,9 +1,10 @@
 """Assembly of the gradient blocks a chunk of pairs at a time: the same matrices as all at once.
 
-G and K are summed group by group (each pair's entries in the pair's order), so the
-chunk size cannot change a bit of them (in serial; in parallel PETSc's own sums of
-other ranks' rows round differently from run to run); a chunk that dropped or
-repeated pairs would.
+G and K are summed group by group (each pair's entries in the pair's order); what the chunk
+size may change is rounding: an optimized BLAS (OpenBLAS) blocks a product of a chunk's
+rows differently from one of all rows, and in parallel PETSc adds other ranks' rows in an
+order of its own. A chunk that dropped or repeated pairs would change entries by ~1e-2 of
+the largest; the patterns must be the same.
 """
 
 from __future__ import annotations
@@ -56,13 +57,8 @@ def test_chunked_gradient_blocks_equal_all_at_once(cell, basis):
     for expected, got in zip(all_first + all_second, chunk_first + chunk_second, strict=True):
         for a, b in zip(expected[:2], got[:2], strict=True):
             assert np.array_equal(a, b)
-        if MPI.COMM_WORLD.size == 1:
-            assert np.array_equal(expected[2], got[2])
-        else:
-            # PETSc adds the rows other ranks send in an order of its own (two runs with
-            # the same chunk differ by ~1e-16 there): a dropped pair is ~1e-2
-            scale = np.abs(expected[2]).max(initial=0.0)
-            assert np.abs(expected[2] - got[2]).max(initial=0.0) <= 1e-14 * scale
+        scale = np.abs(expected[2]).max(initial=0.0)
+        assert np.abs(expected[2] - got[2]).max(initial=0.0) <= 1e-14 * scale
     largest = max(np.abs(a[2]).max(initial=0.0) for a in all_first)
     assert MPI.COMM_WORLD.allreduce(largest, op=MPI.MAX) > 0
 

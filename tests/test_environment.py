@@ -25,6 +25,15 @@ def test_imports_and_versions():
     assert PETSc.ScalarType == np.float64, "dolfinx_mortar needs real PETSc"
 
 
+def test_blas_is_an_optimized_one():
+    """tools/debian-packages.txt installs OpenBLAS (serial): with Debian's reference BLAS,
+    MUMPS's factorizations were 3 to 6 times slower (docs/benchmarks.md, "The BLAS under
+    MUMPS"); a host without /proc says nothing."""
+    from dolfinx_mortar import solvers
+
+    assert solvers.reference_blas() is None
+
+
 def test_petsc_has_the_direct_solvers():
     """MUMPS is the default solver; SuperLU_dist is an alternative."""
     matrix = PETSc.Mat().createAIJ((2, 2), nnz=1, comm=MPI.COMM_SELF)
