@@ -312,7 +312,8 @@ class ContactProblem(ContactResults):
 
     @property
     def snes(self) -> PETSc.SNES:
-        """The SNES (a new one after the fallback to the direct solver)."""
+        """The SNES (a new one after the fallback to the direct solver, and when the layout
+        changes: ``newton.fit_layout``)."""
         return self.solver.snes
 
     @property
