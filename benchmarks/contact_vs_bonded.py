@@ -17,12 +17,13 @@ this script
 2. runs the demo itself (its options after ``--``) with the condensed preconditioner
    instrumented: per Newton iteration the linear solve, the outer (FGMRES) iterations,
    the inner (GMRES) iterations of each application, the condensation's matrix products
-   (sub-matrices, K_c, its nonzero part), the inner solver's set-up (AMG), the
+   (sub-matrices, the rows near the contact, K_c's products on them, the
+   inner matrix), the inner solver's set-up (AMG), the
    applications (inner solves), the bulk assembly and the mortar search and integration.
 
 and prints the ratio (contact time per Newton iteration) / (bonded solve). With
-friction (``-- --mu 0.3``) the problem takes the direct solver (the iterative path does
-not support friction): the record says which solver ran.
+friction (``-- --mu 0.3``) ``auto`` chooses as without (iterative from
+``solvers.AUTO_ITERATIVE_MIN_DOFS`` dofs on): the record says which solver ran.
 
     tools/run mpirun -n 2 python3 benchmarks/contact_vs_bonded.py --cell hexahedron \\
         --refinement 1 --json scratch/cvb_hex1.json
@@ -261,8 +262,9 @@ class CondensationTimer:
     """Wraps the condensed preconditioner's phases with wall clocks (this rank's), for
     the contact run; ``restore`` puts the originals back."""
 
-    PHASES = {"_split": "sub-matrices", "_condensed_operator": "condensed products",
-              "_nonzero_part": "nonzero part", "setUp": "set-up", "apply": "application"}
+    PHASES = {"_split": "sub-matrices", "_choose_rows": "rows near the contact",
+              "_condensed_rows": "condensed products", "_inner_matrix": "inner matrix",
+              "setUp": "set-up", "apply": "application"}
 
     def __init__(self):
         self.seconds = {label: 0.0 for label in self.PHASES.values()}
@@ -305,7 +307,8 @@ class CondensationTimer:
     def summary(self) -> dict:
         """Seconds per phase; the inner solver's set-up is the set-up less the products."""
         s = dict(self.seconds)
-        products = s["sub-matrices"] + s["condensed products"] + s["nonzero part"]
+        products = (s["sub-matrices"] + s["rows near the contact"] + s["condensed products"]
+                    + s["inner matrix"])
         s["condensation products"] = products
         s["inner solver set-up (AMG)"] = s["set-up"] - products
         inner = list(getattr(self, "inner", []))

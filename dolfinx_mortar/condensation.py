@@ -47,6 +47,12 @@ solved. When T G is diagonal the outer method converges in one iteration.
 The normal n_j is the direction of G's column j at node j's own dofs (the
 diagonal Dn_jj), so that P_jj = |Dn_jj| > 0.
 
+K_c differs from A only in the rows of G (the pairs' slave and master dofs), of T^T
+(the slave nodes') and in the rows with an entry in a slave node's column (E's): the
+products are computed on those rows only, and the inner matrix is A's rows elsewhere.
+No product then has the size of A, which is what the condensation cost when every
+product ran over all rows.
+
 Friction (``node_groups``): a slave node j has d multipliers lambda_j = (z_j, y_j^1 ..
 y_j^(d-1)), and their rows' own block Z_j (d x d: the normal row's delta, a tangential
 row's own entries and its coupling to z_j) is not diagonal: a slipping node's rows tie
@@ -110,11 +116,10 @@ class CondensedPreconditioner:
             each body, for algebraic multigrid); orthonormal.
         keep_products: keep every sub-matrix and product between set-ups, so that
             a Jacobian of the same pattern only recomputes their values (the
-            default). False keeps only what ``apply`` needs (A', G, C, T, E Q^-1
+            default). False keeps only what ``apply`` needs (A, G, C, T, E Q^-1
             and the inner solver's matrix) and frees the rest as soon as it is used: the
-            products are then built anew at every set-up, and the set-up's peak
-            memory and the memory held between set-ups are several
-            displacement-sized matrices smaller (for problems that would not fit).
+            products (of the rows near the contact) are then built anew at every
+            set-up.
     """
 
     def __init__(self, comm: MPI.Intracomm, u_rows, z_rows, z_node_dofs, prefix: str,
@@ -145,8 +150,14 @@ class CondensedPreconditioner:
         self.ksp.setFromOptions()
         self._matrices: dict[str, PETSc.Mat] = {}
         self._vectors: dict[str, PETSc.Vec] = {}
+        self._index_sets: dict[str, PETSc.IS] = {}
+        self._products: dict[str, PETSc.Mat] = {}
+        self._scratch: dict[str, PETSc.Mat] = {}
+        self._inputs_kept: dict[str, tuple] = {}
+        self._sets: tuple | None = None
+        self._inner_layout: dict | None = None
+        self._inner_a_part: dict | None = None
         self._fingerprint = None
-        self._inner_pattern: tuple[np.ndarray, np.ndarray] | None = None
         self.num_active = 0
         self.rebuilds = 0
         """set-ups that built every matrix (J's pattern was new)"""
@@ -156,10 +167,11 @@ class CondensedPreconditioner:
     # -- PC interface ------------------------------------------------------
 
     def setUp(self, pc: PETSc.PC) -> None:  # noqa: N802 (petsc4py's name)
-        # Every product runs over all multipliers, the inactive ones scaled to zero:
-        # then every pattern below follows J's, not the active set. While J's pattern
-        # stays, the sub-matrices, the products (their symbolic part) and K_c are
-        # reused and only their values computed again.
+        # The sub-matrices of J follow J's pattern; the products run over the condensed
+        # multipliers and the eliminated ones with a nonzero C row only, so their
+        # patterns follow those sets. While J's pattern stays, the sub-matrices and the
+        # rows near the contact are reused; while the sets stay too, the products (their
+        # symbolic part) and the inner matrix's layout, and only values are computed.
         J = pc.getOperators()[0]
         fingerprint = _pattern_fingerprint(J, self.comm)
         reuse = (self.keep_products and fingerprint == self._fingerprint
@@ -168,24 +180,29 @@ class CondensedPreconditioner:
             self._release_matrices()
         self._fingerprint = fingerprint
         active = self._split(J, reuse)
-        K_c = self._condensed_operator(active)
+        if not reuse:
+            self._choose_rows()
+        same_sets = self._choose_multipliers(active) and reuse
+        if not same_sets:
+            for matrix in (*self._products.values(), *self._scratch.values(),
+                           *(kept[0] for kept in self._inputs_kept.values())):
+                matrix.destroy()
+            self._products, self._scratch, self._inputs_kept = {}, {}, {}
+            self._inner_layout = None
+        K_rows = self._condensed_rows()
         if reuse:
             self.reuses += 1
         else:
             self.rebuilds += 1
-            K_c.setBlockSize(self.block_size)
-        # K_c's pattern holds every product's, zeros included (2/3 of it on the 3D
-        # Hertz problem); the inner solver gets its nonzeros only, on which
-        # algebraic multigrid builds far sparser coarse levels
         m = self._matrices
-        inner = self._nonzero_part(K_c, m.get("K_inner"))
+        inner = self._inner_matrix(K_rows, m.get("K_inner"))
         if inner is not m.get("K_inner"):
             if "K_inner" in m:
                 m["K_inner"].destroy()
             m["K_inner"] = inner
             self._set_near_nullspace(inner)
             self.ksp.setOperators(inner)
-        _MatrixStore(m, self.keep_products).release("K_c")
+        _MatrixStore(self._products, self.keep_products).release("K_rows")
         self.ksp.setUp()
 
     def apply(self, pc: PETSc.PC, x: PETSc.Vec, y: PETSc.Vec) -> None:
@@ -203,7 +220,11 @@ class CondensedPreconditioner:
         v["rp"].aypx(-1.0, v["ru"])
         # rc = (I - G P^-1 T) r', then rc - T^T (T rc + r_za [- S P^-1 T r'])
         m["T"].mult(v["rp"], v["tr"])
-        m["G_p"].mult(v["tr"], v["rc"])
+        if self.rotate:
+            m["P_inv"].mult(v["tr"], v["sz"])
+        else:
+            v["sz"].pointwiseMult(v["inverse_p"], v["tr"])
+        m["G"].mult(v["sz"], v["rc"])
         v["rc"].aypx(-1.0, v["rp"])
         m["T"].mult(v["rc"], v["tz"])
         v["sz"].pointwiseMult(v["active"], v["rz"])
@@ -215,8 +236,10 @@ class CondensedPreconditioner:
         v["rc"].axpy(-1.0, v["tu"])
         # the column elimination's row operation: rc - E Q^-1 T rc
         m["T"].mult(v["rc"], v["tz"])
-        m["E_q"].mult(v["tz"], v["tu"])
-        v["rc"].axpy(-1.0, v["tu"])
+        if "E_q" in self._products:
+            v["tz_a"].getArray()[:] = v["tz"].getArray(readonly=True)[self._condensed]
+            self._products["E_q"].mult(v["tz_a"], v["t_rows"])
+            v["rc"].getArray()[self._rows] -= v["t_rows"].getArray(readonly=True)
         self.ksp.solve(v["rc"], v["du"])
         self.inner_iterations.append(self.ksp.getIterationNumber())
         reason = self.ksp.getConvergedReason()
@@ -232,8 +255,11 @@ class CondensedPreconditioner:
         m["C"].mult(v["du"], v["sz"])
         v["sz"].aypx(-1.0, v["rz"])
         v["sz"].pointwiseMult(v["sz"], v["inverse_d"])
-        m["A_prime"].mult(v["du"], v["tu"])
-        v["tu"].aypx(-1.0, v["rp"])
+        # r' - A' du = r_u - A du - G d^-1 (r_z - C du)
+        m["A"].mult(v["du"], v["tu"])
+        v["tu"].aypx(-1.0, v["ru"])
+        m["G"].mult(v["sz"], v["rp"])
+        v["tu"].axpy(-1.0, v["rp"])
         m["T"].mult(v["tu"], v["tz"])
         if self.rotate:
             m["P_inv"].multAdd(v["tz"], v["sz"], v["sz"])
@@ -273,7 +299,7 @@ class CondensedPreconditioner:
             active = d == 0.0
         self.num_active = self.comm.allreduce(int(active.sum()), op=MPI.SUM)
         if not reuse:
-            for name in ("inverse_d", "inverse_p", "inverse_q", "active", "rz", "sz", "tz",
+            for name in ("inverse_d", "inverse_p", "active", "rz", "sz", "tz",
                          "tr", "rz_raw"):
                 v[name] = G.createVecRight()
             for name in ("ru", "rp", "rc", "du", "tu"):
@@ -289,7 +315,8 @@ class CondensedPreconditioner:
             frames, lengths = self._normals(G, active)
             v["inverse_p"].getArray()[:] = np.where(active,
                                                     1.0 / np.where(active, lengths, 1.0), 0.0)
-        m["T"] = self._normal_matrix(frames, A, m.get("T"))
+        self._normal_values = frames
+        m["T"] = self._normal_matrix(frames, A.getSizes()[1], m.get("T"))
         return active
 
     def _rotate(self, J: PETSc.Mat) -> np.ndarray:
@@ -323,58 +350,192 @@ class CondensedPreconditioner:
         store.release("G_raw", "C_raw")
         return d
 
-    def _condensed_operator(self, active: np.ndarray) -> PETSc.Mat:
-        """K_c from A, G, C, T and the scalings (the module docstring's products, in
-        order; what ``apply`` needs stays in the store)."""
+    def _choose_rows(self) -> None:
+        """The displacement rows where K_c differs from A: those of G (the slave and master
+        dofs of the pairs), the slave nodes' (T^T) and every row with an entry in a slave
+        node's column (K_r T^T). Elsewhere K_c = A, so the products need these rows only.
+        From the patterns (zeros included), so they hold while J's pattern does."""
+        m = self._matrices
+        A, G = m["A"], m["G"]
+        first = A.getOwnershipRange()[0]
+        slave = np.zeros(A.getSize()[0], dtype=bool)
+        slave[np.concatenate(self.comm.allgather(self.z_node_dofs.reshape(-1)))] = True
+        indptr, indices, _ = A.getValuesCSR()
+        near = np.zeros(self.num_u, dtype=bool)
+        near[np.repeat(np.arange(self.num_u), np.diff(indptr))[slave[indices]]] = True
+        near[np.diff(G.getValuesCSR()[0]) > 0] = True
+        near[self.z_node_dofs.reshape(-1) - first] = True
+        self._rows = np.flatnonzero(near)
+        index_sets = self._index_sets
+        for index_set in index_sets.values():
+            index_set.destroy()
+        index_sets.clear()
+        index_sets["rows"] = PETSc.IS().createGeneral(
+            (first + self._rows).astype(PETSc.IntType), comm=self.comm)
+        index_sets["columns"] = PETSc.IS().createStride(self.num_u, first, 1, comm=self.comm)
+        rows_first = self.comm.exscan(self._rows.size) or 0
+        position = np.full(self.num_u, -1, dtype=np.int64)
+        position[self._rows] = rows_first + np.arange(self._rows.size)
+        self._t_row_columns = position[self.z_node_dofs - first].astype(PETSc.IntType)
+
+    def _choose_multipliers(self, active: np.ndarray) -> bool:
+        """The multipliers the products run over: the condensed ones (``active``) and the
+        eliminated ones whose C row holds a nonzero (penalty, augmented; an inactive
+        Lagrange row is z_j = 0, C_j = 0); returns whether both sets are the last
+        set-up's on every rank. Collective."""
         m, v = self._matrices, self._vectors
-        store = _MatrixStore(m, self.keep_products)
-        A, G, C, T = m["A"], m["G"], m["C"], m["T"]
+        indptr, _, values = m["C"].getValuesCSR()
+        coupled = np.bincount(np.repeat(np.arange(self.num_z), np.diff(indptr)),
+                              weights=values != 0.0, minlength=self.num_z) > 0
+        condensed = np.flatnonzero(active)
+        eliminated = np.flatnonzero(~active & coupled)
+        sets = (condensed.tobytes(), eliminated.tobytes())
+        same = self.comm.allreduce(sets == self._sets, op=MPI.LAND)
+        if same:
+            return True
+        self._sets = sets
+        self._condensed, self._eliminated = condensed, eliminated
+        self._set_sizes = tuple(self.comm.allreduce(part.size, op=MPI.SUM)
+                                for part in (condensed, eliminated))
+        index_sets = self._index_sets
+        for name, part in (("condensed", condensed), ("eliminated", eliminated)):
+            if name in index_sets:
+                index_sets.pop(name).destroy()
+            index_sets[name] = PETSc.IS().createGeneral(
+                (self.z_first + part).astype(PETSc.IntType), comm=self.comm)
+        for name in ("tz_a", "t_rows"):
+            if name in v:
+                v.pop(name).destroy()
+        v["tz_a"] = PETSc.Vec().createMPI((condensed.size, PETSc.DETERMINE), comm=self.comm)
+        return False
+
+    def _inputs(self) -> dict[str, PETSc.Mat]:
+        """The products' factors, their stored zeros dropped: A, G and C on the rows near
+        the contact and the multipliers of ``_choose_multipliers``, T (in the columns of
+        A and of the rows near the contact), with friction P^-1 and S P^-1. J's pattern
+        holds every candidate pair's entries, most of them zero (pairs that do not
+        overlap, inactive nodes), which the products would carry as stored zeros into
+        K_c and algebraic multigrid into its coarse levels. When a factor's pattern
+        changed on any rank, the products are released (built anew). Collective."""
+        m, v, sets = self._matrices, self._vectors, self._index_sets
+        num_condensed, num_eliminated = self._set_sizes
+        wanted = [("A_rows", m["A"], "rows", "columns", None)]
+        if num_eliminated:
+            inverse_d = v["inverse_d"].getArray(readonly=True)[self._eliminated]
+            wanted += [("G_e", m["G"], "rows", "eliminated", None),
+                       ("C_e", m["C"], "eliminated", "columns", inverse_d)]
+        if num_condensed:
+            wanted += [("G_a", m["G"], "rows", "condensed", None),
+                       ("C_a", m["C"], "condensed", "columns", None)]
+            if self.rotate:
+                wanted += [("P_inv_a", m["P_inv"], "condensed", "condensed", None),
+                           ("S_P_inv_a", m["S_P_inv"], "condensed", "condensed", None)]
+        scratch = self._scratch
+        parts = {}
+        for name, source, rows, columns, row_scaling in wanted:
+            sub = scratch[name] = source.createSubMatrix(sets[rows], sets[columns],
+                                                         submat=scratch.get(name))
+            indptr, indices, values = sub.getValuesCSR()
+            if row_scaling is not None:
+                values = values * np.repeat(row_scaling, np.diff(indptr))
+            parts[name] = (indptr, indices, values, sub.getSizes())
+        if num_condensed:
+            condensed = self._condensed
+            normals = self._normal_values[condensed]
+            width = normals.shape[1]
+            indptr = np.arange(0, width * condensed.size + 1, width)
+            row_sizes, column_sizes = parts["A_rows"][3]
+            for name, columns, sizes in (("T_rows", self._t_row_columns, row_sizes),
+                                         ("T_cols", self.z_node_dofs, column_sizes)):
+                parts[name] = (indptr, columns[condensed].reshape(-1), normals.reshape(-1),
+                               ((condensed.size, PETSc.DETERMINE), sizes))
+        kept = self._inputs_kept
+        nonzero = {name: _nonzero_csr(*part[:3]) for name, part in parts.items()}
+        same = set(kept) == set(parts) and all(
+            np.array_equal(kept[name][1], nonzero[name][0])
+            and np.array_equal(kept[name][2], nonzero[name][1]) for name in parts)
+        if not self.comm.allreduce(same, op=MPI.LAND):
+            for matrix in (*self._products.values(), *(k[0] for k in kept.values())):
+                matrix.destroy()
+            self._products, kept = {}, {}
+            self._inputs_kept = kept
+            self._inner_layout = None
+            for name, (indptr, indices, values) in nonzero.items():
+                matrix = PETSc.Mat().createAIJ(size=parts[name][3], csr=(indptr, indices, values),
+                                               comm=self.comm)
+                matrix.assemble()
+                kept[name] = (matrix, indptr, indices)
+        else:
+            for name, (indptr, indices, values) in nonzero.items():
+                kept[name][0].setValuesCSR(indptr, indices, values)
+                kept[name][0].assemble()
+        return {name: kept[name][0] for name in parts}
+
+    def _condensed_rows(self) -> PETSc.Mat:
+        """K_c's rows near the contact (``self._rows``; the module docstring's products
+        restricted to them and to the multipliers of ``_choose_multipliers``, in order;
+        what ``apply`` needs stays in the products)."""
+        v = self._vectors
+        inputs = self._inputs()
+        store = _MatrixStore(self._products, self.keep_products)
+        A = inputs["A_rows"]
+        if "t_rows" not in v:
+            v["t_rows"] = A.createVecLeft()
+        num_condensed, num_eliminated = self._set_sizes
         # A' = A - G d^-1 C: the exact elimination of the rows with d != 0
-        scaled = store.scaled_copy("scaled_C", C, left=v["inverse_d"])
-        A_prime = store.combination("A_prime", [(1.0, A), (-1.0, store.product("G_C", G, scaled))])
-        store.release("A", "scaled_C", "G_C")
+        if num_eliminated:
+            A_prime = store.combination(
+                "A_prime", [(1.0, A), (-1.0, store.product("G_C", inputs["G_e"], inputs["C_e"]))])
+            store.release("G_C")
+        else:
+            A_prime = A
+        if not num_condensed:
+            return A_prime
+        T_rows, C_a = inputs["T_rows"], inputs["C_a"]
         # B1 = (I - G P^-1 T) A'
         if self.rotate:
-            G_p = store.product("G_p", G, m["P_inv"])
+            G_p = store.product("G_p", inputs["G_a"], inputs["P_inv_a"])
         else:
-            G_p = store.scaled_copy("G_p", G, right=v["inverse_p"])
-        T_A = store.product("T_A", T, A_prime)
+            G_p = inputs["G_a"]
+            _scale(G_p, right=v["inverse_p"].getArray(readonly=True)[self._condensed])
+        T_A = store.product("T_A", T_rows, A_prime)
         correction = store.product("G_p_T_A", G_p, T_A)
         B1 = store.combination("B1", [(1.0, A_prime), (-1.0, correction)])
-        store.release("G_p_T_A")
+        store.release("A_prime", "G_p", "G_p_T_A")
         # K_r = B1 - T^T (T B1 + C_a [- S P^-1 T A']): the normal rows at active nodes
         # become the constraints, negated so that their diagonal (c_n D_jj) is positive
         # as the stiffness is (the constraints row C_a is -c_n D n on the slave node)
-        C_a = store.scaled_copy("C_a", C, left=v["active"])
-        terms = [(1.0, store.product("T_B1", T, B1)), (1.0, C_a)]
+        terms = [(1.0, store.product("T_B1", T_rows, B1)), (1.0, C_a)]
         if self.rotate:
-            terms.append((-1.0, store.product("S_P_inv_T_A", m["S_P_inv"], T_A)))
+            terms.append((-1.0, store.product("S_P_inv_T_A", inputs["S_P_inv_a"], T_A)))
         normal_rows = store.combination("normal_rows", terms)
-        store.release("T_B1", "T_A", *(("S_P_inv_T_A",) if self.rotate else ()))
-        replaced = store.product("replaced", T, normal_rows, transpose=True)
+        store.release("T_B1", "T_A", "S_P_inv_T_A")
+        replaced = store.product("replaced", T_rows, normal_rows, transpose=True)
         store.release("normal_rows")
         K_r = store.combination("K_r", [(1.0, B1), (-1.0, replaced)])
         store.release("B1", "replaced")
         # K_c = (I - E Q^-1 T) K_r = K_r + E Q^-1 C_a, E = (I - T^T T) K_r T^T,
         # Q = diag(T K_r T^T): the slave normal displacements taken out of every other
         # row with the constraint rows (T K_r = -C_a)
-        T_t = m["T_t"] = T.transpose(m["T_t"] if "T_t" in m else PETSc.Mat())
+        p = self._products
+        T_t = p["T_t"] = inputs["T_cols"].transpose(p["T_t"] if "T_t" in p else PETSc.Mat())
         K_T = store.product("K_T", K_r, T_t)
-        normal_block = store.product("T_K_T", T, K_T)
+        normal_block = store.product("T_K_T", T_rows, K_T)
         q = normal_block.getDiagonal()
         q_values = q.getArray(readonly=True)
-        usable = active & (q_values != 0.0)
-        v["inverse_q"].getArray()[:] = np.where(usable, 1.0 / np.where(usable, q_values, 1.0),
-                                                0.0)
-        q.destroy()
+        q.setArray(np.where(q_values != 0.0, 1.0 / np.where(q_values != 0.0, q_values, 1.0),
+                            0.0))
         E = store.combination("E", [(1.0, K_T),
-                                    (-1.0, store.product("T_t_T_K_T", T_t, normal_block))])
-        store.release("K_T", "T_K_T", "T_t_T_K_T")
-        E_q = store.scaled_copy("E_q", E, right=v["inverse_q"])
+                                    (-1.0, store.product("T_t_T_K_T", T_rows, normal_block,
+                                                         transpose=True))])
+        store.release("K_T", "T_K_T", "T_t_T_K_T", "T_t")
+        E_q = store.scaled_copy("E_q", E, right=q)
+        q.destroy()
         store.release("E")
-        K_c = store.combination("K_c", [(1.0, K_r), (1.0, store.product("E_q_C_a", E_q, C_a))])
-        store.release("K_r", "E_q_C_a", "C_a", "T_t")
-        return K_c
+        K_rows = store.combination("K_rows", [(1.0, K_r),
+                                              (1.0, store.product("E_q_C_a", E_q, C_a))])
+        store.release("K_r", "E_q_C_a")
+        return K_rows
 
     def _normals(self, G: PETSc.Mat, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Unit normals (n_z, gdim) and |G[node j dofs, j]| of the active multipliers (0
@@ -457,49 +618,82 @@ class CondensedPreconditioner:
         matrix.assemble()
         return matrix
 
-    def _normal_matrix(self, normals: np.ndarray, A: PETSc.Mat,
+    def _normal_matrix(self, normals: np.ndarray, column_sizes: tuple,
                        existing: PETSc.Mat | None = None) -> PETSc.Mat:
         """T: row j holds n_j^T on the dofs of slave node j (zeros when j is not active);
         its pattern is fixed, so an ``existing`` T only gets the new values."""
-        bs = self.block_size
-        indptr = np.arange(0, bs * self.num_z + 1, bs, dtype=PETSc.IntType)
-        columns = self.z_node_dofs.reshape(-1).astype(PETSc.IntType)
-        if existing is not None:  # rows of the CSR data count from the first owned row
-            existing.setValuesCSR(indptr, columns, normals.reshape(-1))
-            existing.assemble()
-            return existing
-        T = PETSc.Mat().createAIJ(
-            size=((self.num_z, PETSc.DETERMINE), A.getSizes()[1]),
-            csr=(indptr, columns, normals.reshape(-1)),
-            comm=self.comm,
-        )
-        T.assemble()
-        return T
+        store = _MatrixStore({} if existing is None else {"T": existing}, True)
+        return store.sparse_rows("T", normals, self.z_node_dofs, column_sizes, self.comm)
 
-    def _nonzero_part(self, K_c: PETSc.Mat, existing: PETSc.Mat | None) -> PETSc.Mat:
-        """K_c without its stored zeros (the diagonal kept), as a new matrix or, where
-        every rank's pattern is ``existing``'s, as new values of ``existing``. Collective."""
-        indptr, indices, values = K_c.getValuesCSR()
-        first = K_c.getOwnershipRange()[0]
-        num_rows = indptr.size - 1
-        rows = np.repeat(np.arange(num_rows), np.diff(indptr))
-        keep = (values != 0.0) | (indices == rows + first)
-        kept_indptr = np.zeros(num_rows + 1, dtype=PETSc.IntType)
-        np.cumsum(np.bincount(rows[keep], minlength=num_rows), out=kept_indptr[1:])
-        kept_indices = indices[keep].astype(PETSc.IntType)
-        same = existing is not None and self._inner_pattern is not None and (
-            np.array_equal(self._inner_pattern[0], kept_indptr)
-            and np.array_equal(self._inner_pattern[1], kept_indices))
-        if self.comm.allreduce(bool(same), op=MPI.LAND):
-            existing.setValuesCSR(kept_indptr, kept_indices, values[keep])
+    def _inner_matrix(self, K_rows: PETSc.Mat, existing: PETSc.Mat | None) -> PETSc.Mat:
+        """K_c without its stored zeros (the diagonal kept; A's hold J's pattern, e.g. the
+        Dirichlet columns dolfinx zeroes): A's rows, with ``K_rows`` in the rows near the
+        contact; as a new matrix or, while the layout holds (J's pattern, the products'
+        patterns and the zeros), as new values of ``existing``. Collective."""
+        A = self._matrices["A"]
+        a_values = A.getValuesCSR()[2]
+        k_values = K_rows.getValuesCSR()[2]
+        a_part = self._inner_a_part
+        a_moved = a_part is not None and bool(np.any(a_values[a_part["dropped"]] != 0.0))
+        layout = self._inner_layout
+        fresh = self.comm.allreduce(
+            existing is None or layout is None or a_moved
+            or bool(np.any(k_values[layout["k_dropped"]] != 0.0)), op=MPI.LOR)
+        if fresh:
+            if a_part is None or a_moved:
+                outside = np.ones(self.num_u, dtype=bool)
+                outside[self._rows] = False
+                a_part = self._inner_a_part = self._kept_entries(
+                    A, a_values, np.arange(self.num_u), outside)
+            layout = self._inner_layout = self._merged_layout(a_part, K_rows, k_values)
+        values = np.empty(layout["indices"].size)
+        values[layout["a_target"]] = a_values[a_part["source"]]
+        values[layout["k_target"]] = k_values[layout["k_source"]]
+        if not fresh:
+            existing.setValuesCSR(layout["indptr"], layout["indices"], values)
             existing.assemble()
             return existing
-        self._inner_pattern = (kept_indptr, kept_indices)
-        matrix = PETSc.Mat().createAIJ(size=K_c.getSizes(), bsize=K_c.getBlockSize(),
-                                       csr=(kept_indptr, kept_indices, values[keep]),
+        matrix = PETSc.Mat().createAIJ(size=A.getSizes(), bsize=self.block_size,
+                                       csr=(layout["indptr"], layout["indices"], values),
                                        comm=self.comm)
         matrix.assemble()
         return matrix
+
+    def _kept_entries(self, matrix: PETSc.Mat, values: np.ndarray, row_of_local: np.ndarray,
+                      taken: np.ndarray | None = None) -> dict:
+        """Of a matrix's local CSR entries (its local row i being displacement row
+        ``row_of_local[i]``) in the rows ``taken`` (a mask; all if None), the nonzero or
+        diagonal ones: their positions, rows, rank within their row and columns; the
+        dropped positions, and the kept entries per displacement row."""
+        indptr, indices, _ = matrix.getValuesCSR()
+        first = self._matrices["A"].getOwnershipRange()[0]
+        local_rows = np.repeat(np.arange(indptr.size - 1), np.diff(indptr))
+        rows = row_of_local[local_rows]
+        in_rows = np.ones(rows.size, dtype=bool) if taken is None else taken[local_rows]
+        kept = in_rows & ((values != 0.0) | (indices == rows + first))
+        source = np.flatnonzero(kept)
+        counts = np.bincount(rows[source], minlength=self.num_u)
+        starts = np.zeros(self.num_u + 1, dtype=np.int64)
+        np.cumsum(counts, out=starts[1:])
+        rank = np.arange(source.size) - starts[rows[source]]
+        return {"source": source, "rows": rows[source], "rank": rank,
+                "indices": indices[source], "counts": counts,
+                "dropped": np.flatnonzero(in_rows & ~kept)}
+
+    def _merged_layout(self, a_part: dict, K_rows: PETSc.Mat, k_values: np.ndarray) -> dict:
+        """The CSR pattern of A's kept entries with ``K_rows``' in the rows near the
+        contact, and where the values of each go."""
+        k_part = self._kept_entries(K_rows, k_values, self._rows)
+        indptr = np.zeros(self.num_u + 1, dtype=np.int64)
+        np.cumsum(a_part["counts"] + k_part["counts"], out=indptr[1:])
+        a_target = indptr[a_part["rows"]] + a_part["rank"]
+        k_target = indptr[k_part["rows"]] + k_part["rank"]
+        indices = np.empty(indptr[-1], dtype=PETSc.IntType)
+        indices[a_target] = a_part["indices"]
+        indices[k_target] = k_part["indices"]
+        return {"indptr": indptr.astype(PETSc.IntType), "indices": indices,
+                "a_target": a_target, "k_source": k_part["source"], "k_target": k_target,
+                "k_dropped": k_part["dropped"]}
 
     def _set_near_nullspace(self, matrix: PETSc.Mat) -> None:
         if not self.near_nullspace:
@@ -516,14 +710,19 @@ class CondensedPreconditioner:
             vector.destroy()
 
     def _release_matrices(self) -> None:
-        for matrix in self._matrices.values():
+        for matrix in (*self._matrices.values(), *self._products.values(),
+                       *self._scratch.values(), *(kept[0] for kept in self._inputs_kept.values())):
             matrix.destroy()
+        self._products, self._scratch, self._inputs_kept = {}, {}, {}
+        self._sets = self._inner_layout = self._inner_a_part = None
         for vector in self._vectors.values():
             vector.destroy()
         self._matrices, self._vectors = {}, {}
 
     def destroy(self, pc: PETSc.PC | None = None) -> None:
         self._release_matrices()
+        for index_set in self._index_sets.values():
+            index_set.destroy()
         self.ksp.destroy()
         self.is_u.destroy()
         self.is_z.destroy()
@@ -589,8 +788,50 @@ class _MatrixStore:
         self.matrices[name] = multiply(right, result=self.matrices.get(name))
         return self.matrices[name]
 
+    def sparse_rows(self, name, values, columns, column_sizes, comm) -> PETSc.Mat:
+        """The matrix with this rank's row i holding ``values[i]`` at ``columns[i]`` (the
+        same number per row, columns ascending); an existing one gets the new values."""
+        num_rows, width = values.shape
+        indptr = np.arange(0, width * num_rows + 1, width, dtype=PETSc.IntType)
+        columns = np.asarray(columns).reshape(-1).astype(PETSc.IntType)
+        if name in self.matrices:
+            self.matrices[name].setValuesCSR(indptr, columns, values.reshape(-1))
+        else:
+            self.matrices[name] = PETSc.Mat().createAIJ(
+                size=((num_rows, PETSc.DETERMINE), column_sizes),
+                csr=(indptr, columns, values.reshape(-1)), comm=comm)
+        self.matrices[name].assemble()
+        return self.matrices[name]
+
     def release(self, *names) -> None:
         """Without kept products: free what the rest of the set-up and apply do not need."""
         if not self.keep:
             for name in names:
-                self.matrices.pop(name).destroy()
+                if name in self.matrices:
+                    self.matrices.pop(name).destroy()
+
+
+def _nonzero_csr(indptr, indices, values) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The CSR rows without their zero entries."""
+    rows = np.repeat(np.arange(indptr.size - 1), np.diff(indptr))
+    keep = values != 0.0
+    kept_indptr = np.zeros(indptr.size, dtype=PETSc.IntType)
+    np.cumsum(np.bincount(rows[keep], minlength=indptr.size - 1), out=kept_indptr[1:])
+    return kept_indptr, np.asarray(indices)[keep].astype(PETSc.IntType), values[keep]
+
+
+def _scale(matrix: PETSc.Mat, left: np.ndarray | None = None,
+           right: np.ndarray | None = None) -> None:
+    """diag(left) matrix diag(right), from this rank's parts of the two diagonals."""
+    vectors = []
+    for values in (left, right):
+        if values is None:
+            vectors.append(None)
+            continue
+        vector = PETSc.Vec().createMPI((values.size, PETSc.DETERMINE), comm=matrix.getComm())
+        vector.getArray()[:] = values
+        vectors.append(vector)
+    matrix.diagonalScale(L=vectors[0], R=vectors[1])
+    for vector in vectors:
+        if vector is not None:
+            vector.destroy()

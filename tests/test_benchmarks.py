@@ -240,8 +240,9 @@ def test_contact_vs_bonded_measures_both_on_the_same_mesh(tmp_path):
 
 
 def test_contact_vs_bonded_reports_that_friction_takes_the_direct_solver():
-    """Friction is not supported by the iterative path: the record says the direct solver
-    ran, and there is no inner solve to report."""
+    """Below solvers.AUTO_ITERATIVE_MIN_DOFS a frictional problem takes the direct solver,
+    as a frictionless one does: the record says which solver ran, and there is no inner
+    solve to report."""
     result = contact_vs_bonded().main(["--refinement", "0", "--bonded-repeats", "1", "--",
                                        "--steps", "1", "--mu", "0.3"])
     contact = result["contact"]
