@@ -622,8 +622,7 @@ class CondensedPreconditioner:
                        existing: PETSc.Mat | None = None) -> PETSc.Mat:
         """T: row j holds n_j^T on the dofs of slave node j (zeros when j is not active);
         its pattern is fixed, so an ``existing`` T only gets the new values."""
-        store = _MatrixStore({} if existing is None else {"T": existing}, True)
-        return store.sparse_rows("T", normals, self.z_node_dofs, column_sizes, self.comm)
+        return _sparse_rows(normals, self.z_node_dofs, column_sizes, self.comm, existing)
 
     def _inner_matrix(self, K_rows: PETSc.Mat, existing: PETSc.Mat | None) -> PETSc.Mat:
         """K_c without its stored zeros (the diagonal kept; A's hold J's pattern, e.g. the
@@ -631,8 +630,8 @@ class CondensedPreconditioner:
         contact; as a new matrix or, while the layout holds (J's pattern, the products'
         patterns and the zeros), as new values of ``existing``. Collective."""
         A = self._matrices["A"]
-        a_values = A.getValuesCSR()[2]
-        k_values = K_rows.getValuesCSR()[2]
+        a_csr, k_csr = A.getValuesCSR(), K_rows.getValuesCSR()
+        a_values, k_values = a_csr[2], k_csr[2]
         a_part = self._inner_a_part
         a_moved = a_part is not None and bool(np.any(a_values[a_part["dropped"]] != 0.0))
         layout = self._inner_layout
@@ -644,8 +643,8 @@ class CondensedPreconditioner:
                 outside = np.ones(self.num_u, dtype=bool)
                 outside[self._rows] = False
                 a_part = self._inner_a_part = self._kept_entries(
-                    A, a_values, np.arange(self.num_u), outside)
-            layout = self._inner_layout = self._merged_layout(a_part, K_rows, k_values)
+                    a_csr, np.arange(self.num_u), outside)
+            layout = self._inner_layout = self._merged_layout(a_part, k_csr)
         values = np.empty(layout["indices"].size)
         values[layout["a_target"]] = a_values[a_part["source"]]
         values[layout["k_target"]] = k_values[layout["k_source"]]
@@ -659,13 +658,13 @@ class CondensedPreconditioner:
         matrix.assemble()
         return matrix
 
-    def _kept_entries(self, matrix: PETSc.Mat, values: np.ndarray, row_of_local: np.ndarray,
+    def _kept_entries(self, csr: tuple, row_of_local: np.ndarray,
                       taken: np.ndarray | None = None) -> dict:
         """Of a matrix's local CSR entries (its local row i being displacement row
         ``row_of_local[i]``) in the rows ``taken`` (a mask; all if None), the nonzero or
         diagonal ones: their positions, rows, rank within their row and columns; the
         dropped positions, and the kept entries per displacement row."""
-        indptr, indices, _ = matrix.getValuesCSR()
+        indptr, indices, values = csr
         first = self._matrices["A"].getOwnershipRange()[0]
         local_rows = np.repeat(np.arange(indptr.size - 1), np.diff(indptr))
         rows = row_of_local[local_rows]
@@ -680,10 +679,10 @@ class CondensedPreconditioner:
                 "indices": indices[source], "counts": counts,
                 "dropped": np.flatnonzero(in_rows & ~kept)}
 
-    def _merged_layout(self, a_part: dict, K_rows: PETSc.Mat, k_values: np.ndarray) -> dict:
-        """The CSR pattern of A's kept entries with ``K_rows``' in the rows near the
-        contact, and where the values of each go."""
-        k_part = self._kept_entries(K_rows, k_values, self._rows)
+    def _merged_layout(self, a_part: dict, k_csr: tuple) -> dict:
+        """The CSR pattern of A's kept entries with those of K_rows (``k_csr``) in the rows
+        near the contact, and where the values of each go."""
+        k_part = self._kept_entries(k_csr, self._rows)
         indptr = np.zeros(self.num_u + 1, dtype=np.int64)
         np.cumsum(a_part["counts"] + k_part["counts"], out=indptr[1:])
         a_target = indptr[a_part["rows"]] + a_part["rank"]
@@ -788,27 +787,28 @@ class _MatrixStore:
         self.matrices[name] = multiply(right, result=self.matrices.get(name))
         return self.matrices[name]
 
-    def sparse_rows(self, name, values, columns, column_sizes, comm) -> PETSc.Mat:
-        """The matrix with this rank's row i holding ``values[i]`` at ``columns[i]`` (the
-        same number per row, columns ascending); an existing one gets the new values."""
-        num_rows, width = values.shape
-        indptr = np.arange(0, width * num_rows + 1, width, dtype=PETSc.IntType)
-        columns = np.asarray(columns).reshape(-1).astype(PETSc.IntType)
-        if name in self.matrices:
-            self.matrices[name].setValuesCSR(indptr, columns, values.reshape(-1))
-        else:
-            self.matrices[name] = PETSc.Mat().createAIJ(
-                size=((num_rows, PETSc.DETERMINE), column_sizes),
-                csr=(indptr, columns, values.reshape(-1)), comm=comm)
-        self.matrices[name].assemble()
-        return self.matrices[name]
-
     def release(self, *names) -> None:
         """Without kept products: free what the rest of the set-up and apply do not need."""
         if not self.keep:
             for name in names:
                 if name in self.matrices:
                     self.matrices.pop(name).destroy()
+
+
+def _sparse_rows(values: np.ndarray, columns: np.ndarray, column_sizes, comm: MPI.Intracomm,
+                 existing: PETSc.Mat | None = None) -> PETSc.Mat:
+    """The matrix with this rank's row i holding ``values[i]`` at ``columns[i]`` (the same
+    number per row, columns ascending); an ``existing`` one only gets the new values."""
+    num_rows, width = values.shape
+    indptr = np.arange(0, width * num_rows + 1, width, dtype=PETSc.IntType)
+    columns = np.asarray(columns).reshape(-1).astype(PETSc.IntType)
+    if existing is None:
+        existing = PETSc.Mat().createAIJ(size=((num_rows, PETSc.DETERMINE), column_sizes),
+                                         csr=(indptr, columns, values.reshape(-1)), comm=comm)
+    else:
+        existing.setValuesCSR(indptr, columns, values.reshape(-1))
+    existing.assemble()
+    return existing
 
 
 def _nonzero_csr(indptr, indices, values) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
