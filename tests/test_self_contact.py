@@ -164,10 +164,11 @@ def test_self_contact_patch_test_is_exact(dim, cell, ratio, basis):
 def test_self_contact_patch_test_neo_hookean_is_uniform(dim, cell):
     """Uniform to Newton's tolerance (the default relative 1e-10 leaves a spread of 3.5e-10
     in 3D): solved to 1e-13 relative and 1e-11 absolute here, through the options database
-    as a user would. The default absolute tolerance, 1e-11 k h, stopped 3 ranks at a
-    residual of 7.2e-11 with the pressure uniform to 1.9e-10 only (their Newton path is one
-    of two from run to run, the second residual 0.097 or 0.133: parallel MUMPS sums in no
-    fixed order); 1e-12 is about the residual's floor."""
+    as a user would, in 3 Newton iterations on any number of ranks. The lips' edges
+    coincide on the roller planes; while the 3D clip made vertices at the intersection of
+    such edges, the Jacobian carried entries of 2e17 decided by rounding, and 3 ranks took
+    4 to 12 iterations from run to run (tests/test_compiled_surface3.py,
+    test_edges_that_coincide_under_rotation)."""
     options = PETSc.Options()
     options["dolfinx_mortar_snes_rtol"] = 1e-13
     options["dolfinx_mortar_snes_atol"] = 1e-11
@@ -177,7 +178,7 @@ def test_self_contact_patch_test_neo_hookean_is_uniform(dim, cell):
     finally:
         options.delValue("dolfinx_mortar_snes_rtol")
         options.delValue("dolfinx_mortar_snes_atol")
-    assert summary["converged"] and summary["newton_iterations"] <= 6
+    assert summary["converged"] and summary["newton_iterations"] <= 3
     assert summary["max_pressure_deviation_rel"] < 1e-10  # (max - min) / mean
     assert summary["force_balance"] < 1e-10
 

@@ -42,6 +42,7 @@
 
 static const double FACING_TOLERANCE = 1e-8;
 static const double AREA_TOLERANCE = 1e-14;
+static const double ON_LINE = 1e-10;
 
 /* ---- dual numbers over the 27 pair variables (the auxiliary plane) ---- */
 typedef struct { double v, d[NV]; } d27;
@@ -164,33 +165,38 @@ static void emit(polygon_t *p, const double *position, const int *label, const i
     p->count++;
 }
 
-/* Sutherland-Hodgman: the slave triangle clipped by the reversed (counter-clockwise)
- * master triangle; labels (kind, i, j): 0 slave node i, 1 master node j, 2 slave edge i x
- * master edge j (reversed numbering). Returns -1 if a polygon outgrew its slots. */
-static int clip(const double S[3][2], const double Mp[3][2], polygon_t *out) {
-    const int nm = 3;
-    double Mr[3][2];
-    for (int j = 0; j < 3; ++j) { Mr[j][0] = Mp[2 - j][0]; Mr[j][1] = Mp[2 - j][1]; }
+/* Sutherland-Hodgman: the slave polygon (ns nodes) clipped by the reversed (counter-
+ * clockwise) master polygon (nm); labels (kind, i, j): 0 slave node i, 1 master node j,
+ * 2 slave edge i x master edge j (reversed numbering). A vertex within ON_LINE of a clip
+ * line (in lengths of that edge) lies on it: kept as itself, no crossing on an edge from
+ * it (numpy's _clip). Returns -1 if a polygon outgrew its slots. */
+static int clip_k(const double (*S)[2], int ns, const double (*Mp)[2], int nm, polygon_t *out) {
+    double Mr[4][2];
+    for (int j = 0; j < nm; ++j) { Mr[j][0] = Mp[nm - 1 - j][0]; Mr[j][1] = Mp[nm - 1 - j][1]; }
     polygon_t a, b;
     polygon_t *cur = &a, *next = &b;
     memset(cur, 0, sizeof(polygon_t));
-    for (int i = 0; i < 3; ++i) {
+    for (int i = 0; i < ns; ++i) {
         cur->pos[i][0] = S[i][0]; cur->pos[i][1] = S[i][1];
         cur->label[i][1] = i; cur->edge[i][1] = i;
     }
-    cur->count = 3;
+    cur->count = ns;
     for (int j = 0; j < nm; ++j) {
         const double *start = Mr[j], *end = Mr[(j + 1) % nm];
         double dir0 = end[0] - start[0], dir1 = end[1] - start[1];
+        double tolerance = ON_LINE * (dir0 * dir0 + dir1 * dir1);
         memset(next, 0, sizeof(polygon_t));
         int count = cur->count < SLOTS ? cur->count : SLOTS;
+        double side[SLOTS];
+        for (int k = 0; k < count; ++k)
+            side[k] = dir0 * (cur->pos[k][1] - start[1]) - dir1 * (cur->pos[k][0] - start[0]);
         for (int k = 0; k < count; ++k) {
-            int following = (k + 1) % cur->count;
-            if (following >= SLOTS) return -1;
+            int following = (k + 1) % cur->count, after = (k + 2) % cur->count;
+            if (following >= SLOTS || after >= SLOTS) return -1;
             const double *p = cur->pos[k], *q = cur->pos[following];
-            double s_cur = dir0 * (p[1] - start[1]) - dir1 * (p[0] - start[0]);
-            double s_next = dir0 * (q[1] - start[1]) - dir1 * (q[0] - start[0]);
-            int in_cur = s_cur >= 0.0, in_next = s_next >= 0.0;
+            double s_cur = side[k], s_next = side[following];
+            int out_cur = s_cur < -tolerance, out_next = s_next < -tolerance;
+            int in_cur = s_cur > tolerance, in_next = s_next > tolerance;
             double denominator = (s_cur - s_next == 0.0) ? 1.0 : s_cur - s_next;
             double t = s_cur / denominator;
             double crossing[2] = {p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])};
@@ -203,9 +209,11 @@ static int clip(const double S[3][2], const double Mp[3][2], polygon_t *out) {
                 crossing_label[2] = ((edge[1] + 1) % nm == j) ? j : (j + 1) % nm;
             }
             int along_clip[2] = {1, j};
-            if (!in_cur && in_next) emit(next, crossing, crossing_label, edge);
-            if (in_next) emit(next, q, cur->label[following], cur->edge[following]);
-            if (in_cur && !in_next) emit(next, crossing, crossing_label, along_clip);
+            /* a kept vertex on the line before one outside: its new edge runs along the line */
+            int leaves = !out_next && !in_next && side[after] < -tolerance;
+            if (out_cur && in_next) emit(next, crossing, crossing_label, edge);
+            if (!out_next) emit(next, q, cur->label[following], leaves ? along_clip : cur->edge[following]);
+            if (in_cur && out_next) emit(next, crossing, crossing_label, along_clip);
         }
         polygon_t *swap = cur; cur = next; next = swap;
     }
@@ -438,7 +446,7 @@ static int pair(long p, const double *xs, const double *xm, const double *nn, in
     if (!(((n0[0] * mn[0] + n0[1] * mn[1]) + n0[2] * mn[2]) < -FACING_TOLERANCE)) return 0;
     if (separated(S, Mp)) return 0;
     polygon_t poly;
-    if (clip(S, Mp, &poly) != 0) return -1;
+    if (clip_k(S, 3, Mp, 3, &poly) != 0) return -1;
     double slave_area = fabs(polygon_area3(S));
     double clip_area = padded_area(&poly);
     if (!(poly.count >= 3 && clip_area > AREA_TOLERANCE * slave_area)) return 0;
@@ -948,53 +956,6 @@ static int separated_k(const double (*S)[2], int ns, const double (*Mp)[2], int 
             if (largest < -gap) return 1;
         }
     }
-    return 0;
-}
-
-/* Sutherland-Hodgman as clip(): the slave polygon (ns) by the reversed master polygon (nm) */
-static int clip_k(const double (*S)[2], int ns, const double (*Mp)[2], int nm, polygon_t *out) {
-    double Mr[4][2];
-    for (int j = 0; j < nm; ++j) { Mr[j][0] = Mp[nm - 1 - j][0]; Mr[j][1] = Mp[nm - 1 - j][1]; }
-    polygon_t a, b;
-    polygon_t *cur = &a, *next = &b;
-    memset(cur, 0, sizeof(polygon_t));
-    for (int i = 0; i < ns; ++i) {
-        cur->pos[i][0] = S[i][0]; cur->pos[i][1] = S[i][1];
-        cur->label[i][1] = i; cur->edge[i][1] = i;
-    }
-    cur->count = ns;
-    for (int j = 0; j < nm; ++j) {
-        const double *start = Mr[j], *end = Mr[(j + 1) % nm];
-        double dir0 = end[0] - start[0], dir1 = end[1] - start[1];
-        memset(next, 0, sizeof(polygon_t));
-        int count = cur->count < SLOTS ? cur->count : SLOTS;
-        for (int k = 0; k < count; ++k) {
-            int following = (k + 1) % cur->count;
-            if (following >= SLOTS) return -1;
-            const double *p = cur->pos[k], *q = cur->pos[following];
-            double s_cur = dir0 * (p[1] - start[1]) - dir1 * (p[0] - start[0]);
-            double s_next = dir0 * (q[1] - start[1]) - dir1 * (q[0] - start[0]);
-            int in_cur = s_cur >= 0.0, in_next = s_next >= 0.0;
-            double denominator = (s_cur - s_next == 0.0) ? 1.0 : s_cur - s_next;
-            double t = s_cur / denominator;
-            double crossing[2] = {p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])};
-            const int *edge = cur->edge[k];
-            int crossing_label[3];
-            if (edge[0] == 0) {
-                crossing_label[0] = 2; crossing_label[1] = edge[1]; crossing_label[2] = j;
-            } else {
-                crossing_label[0] = 1; crossing_label[1] = 0;
-                crossing_label[2] = ((edge[1] + 1) % nm == j) ? j : (j + 1) % nm;
-            }
-            int along_clip[2] = {1, j};
-            if (!in_cur && in_next) emit(next, crossing, crossing_label, edge);
-            if (in_next) emit(next, q, cur->label[following], cur->edge[following]);
-            if (in_cur && !in_next) emit(next, crossing, crossing_label, along_clip);
-        }
-        polygon_t *swap = cur; cur = next; next = swap;
-    }
-    *out = *cur;
-    if (out->count > MAXV) out->count = MAXV;
     return 0;
 }
 

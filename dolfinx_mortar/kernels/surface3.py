@@ -58,6 +58,8 @@ from .factors import AffineFactors
 
 _FACING_TOLERANCE = 1e-8
 _AREA_TOLERANCE = 1e-14
+_ON_LINE = 1e-10
+"""A clip vertex this close to a master edge's line, in lengths of that edge, lies on it."""
 _MAX_VERTICES = 8
 _CHUNK = 2048
 _SCREEN_CHUNK = 16384  # candidates screened at once (values only)
@@ -224,6 +226,12 @@ def _clip(slave2d: np.ndarray, master2d: np.ndarray):
 
     Returns the clip vertex labels (n, V, 3): (kind, i, j) with kind 0 = slave
     node i, 1 = master node j, 2 = slave edge i x master edge j; and counts (n,).
+
+    A vertex within :data:`_ON_LINE` of a clip line (relative to that master edge's
+    length) lies on it: it is kept as itself, and no crossing is made on an edge
+    from it. Edges that meet exactly, as where both bodies end on one plane, then
+    give no intersection of two parallel lines, whose position rounding decides and
+    whose derivative is of the order of 1 / rounding.
     """
     n, ns, _ = slave2d.shape
     nm = master2d.shape[1]
@@ -239,10 +247,16 @@ def _clip(slave2d: np.ndarray, master2d: np.ndarray):
     for j in range(nm):
         start, end = master2d[:, j], master2d[:, (j + 1) % nm]
         direction = end - start
+        tolerance = _ON_LINE * (direction[:, 0] * direction[:, 0]
+                                + direction[:, 1] * direction[:, 1])
         new_positions = np.zeros_like(positions)
         new_labels = np.zeros_like(labels)
         new_edges = np.zeros_like(edges)
         new_count = np.zeros(n, dtype=np.int64)
+        side = (direction[:, None, 0] * (positions[..., 1] - start[:, None, 1])
+                - direction[:, None, 1] * (positions[..., 0] - start[:, None, 0]))
+        outside = side < -tolerance[:, None]
+        inside = side > tolerance[:, None]  # strictly: neither is on the line
 
         target = (new_positions, new_labels, new_edges, new_count)
 
@@ -250,11 +264,14 @@ def _clip(slave2d: np.ndarray, master2d: np.ndarray):
             active = k < count
             if not active.any():
                 break
-            following = np.where(count > 0, (k + 1) % np.maximum(count, 1), 0)
+            period = np.maximum(count, 1)
+            following = np.where(count > 0, (k + 1) % period, 0)
+            after = np.where(count > 0, (k + 2) % period, 0)
             current = positions[:, k]
             nxt = positions[rows, following]
-            s_cur, s_next = _side(start, direction, current), _side(start, direction, nxt)
-            inside_cur, inside_next = s_cur >= 0.0, s_next >= 0.0
+            s_cur, s_next = side[:, k], side[rows, following]
+            out_cur, out_next = outside[:, k], outside[rows, following]
+            in_cur, in_next = inside[:, k], inside[rows, following]
             denominator = np.where(s_cur - s_next == 0.0, 1.0, s_cur - s_next)
             t = (s_cur / denominator)[:, None]
             crossing = current + t * (nxt - current)
@@ -270,12 +287,12 @@ def _clip(slave2d: np.ndarray, master2d: np.ndarray):
                                  shared]))
             along_clip = np.column_stack([np.ones(n, dtype=np.int64), np.full(n, j)])
             next_label = labels[rows, following]
-            next_edge = edges[rows, following]
-            out_to_in = active & ~inside_cur & inside_next
-            in_to_out = active & inside_cur & ~inside_next
-            _emit(target, out_to_in, crossing, crossing_label, edge)
-            _emit(target, active & inside_next, nxt, next_label, next_edge)
-            _emit(target, in_to_out, crossing, crossing_label, along_clip)
+            # a kept vertex on the line before one outside: the new edge runs along the line
+            leaves = ~out_next & ~in_next & outside[rows, after]
+            next_edge = np.where(leaves[:, None], along_clip, edges[rows, following])
+            _emit(target, active & out_cur & in_next, crossing, crossing_label, edge)
+            _emit(target, active & ~out_next, nxt, next_label, next_edge)
+            _emit(target, active & in_cur & out_next, crossing, crossing_label, along_clip)
         positions, labels, edges, count = new_positions, new_labels, new_edges, new_count
     return labels[:, :_MAX_VERTICES], np.minimum(count, _MAX_VERTICES), positions[:, :_MAX_VERTICES]
 
@@ -298,11 +315,6 @@ def _separated(slave2d: np.ndarray, master2d: np.ndarray) -> np.ndarray:
             gap = 1e-8 * size * np.hypot(direction[:, 0], direction[:, 1])
             separated |= side.max(axis=1) < -gap
     return separated
-
-def _side(start: np.ndarray, direction: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """> 0 left of the directed line (inside a counter-clockwise polygon)."""
-    return direction[:, 0] * (p[:, 1] - start[:, 1]) - direction[:, 1] * (p[:, 0] - start[:, 0])
-
 
 def _emit(target, mask, position, label, edge) -> None:
     """Append a vertex to the polygons of the pairs in ``mask``."""
