@@ -399,7 +399,7 @@ class CooMatrix:
         groups = np.asarray(groups, dtype=np.int64).reshape(-1)
         nr, br, nc, bc = self._block_shape
         count = self._blocks["count"]
-        position = self._positions(groups)  # (groups, nr, nc)
+        position = self._positions(groups)  # (nr, nc, groups)
         sums = np.zeros((br, bc, count + 1))
         if not callable(values):
             # all at once, entry (i, a, j, b) of every group after the other (np.bincount)
@@ -408,7 +408,7 @@ class CooMatrix:
             if values.size != expected:
                 raise ValueError(f"expected {expected} values, got {values.size}")
             values = values.reshape(nr, br, nc, bc, groups.size)
-            where = position.transpose(1, 2, 0).astype(np.intp).reshape(-1)
+            where = position.reshape(-1)
             for a in range(br):
                 for b in range(bc):
                     weights = np.ascontiguousarray(values[:, a, :, b, :]).reshape(-1)
@@ -423,7 +423,7 @@ class CooMatrix:
             if part.size != expected:
                 raise ValueError(f"expected {expected} values, got {part.size}")
             part = part.reshape(nr, br, nc, bc, stop - start)
-            where = position[start:stop].reshape(-1).astype(np.intp)  # (once, not per call)
+            where = position[..., start:stop].transpose(2, 0, 1).reshape(-1).astype(np.intp)
             for a in range(br):
                 for b in range(bc):
                     np.add.at(sums[a, b], where, part[:, a, :, b, :].transpose(2, 0, 1).reshape(-1))
@@ -439,16 +439,17 @@ class CooMatrix:
         return summed
 
     def _positions(self, groups: np.ndarray) -> np.ndarray:
-        """(len(groups), nr, nc) 1 + positions of the groups' blocks; 0 for dropped ones.
+        """(nr, nc, len(groups)) 1 + positions of the groups' blocks; 0 for dropped ones.
 
-        The answer for the last ``groups`` is kept: a Newton iteration assembles the same
-        pairs again, or almost the same (only the groups that were not in the last call
-        are looked up).
+        The answer for the last ``groups`` is kept, in the order of the values'
+        entries (contiguous: no copy of an index of every entry at each assembly): a
+        Newton iteration assembles the same pairs again, or almost the same (only the
+        groups that were not in the last call are looked up).
         """
         blocks = self._blocks
         last = blocks["last"]
         if last is None:
-            result = self._lookup(groups)
+            result = np.ascontiguousarray(self._lookup(groups).transpose(1, 2, 0))
         elif np.array_equal(last[0], groups):
             return last[1]
         else:
@@ -456,10 +457,10 @@ class CooMatrix:
             where[last[0]] = np.arange(last[0].size)
             index = where[groups]
             known = index >= 0
-            result = np.empty((groups.size,) + last[1].shape[1:], dtype=last[1].dtype)
-            result[known] = last[1][index[known]]
+            result = np.empty(last[1].shape[:2] + (groups.size,), dtype=last[1].dtype)
+            result[..., known] = last[1][..., index[known]]
             if not known.all():
-                result[~known] = self._lookup(groups[~known])
+                result[..., ~known] = self._lookup(groups[~known]).transpose(1, 2, 0)
         blocks["last"] = (groups.copy(), result)
         return result
 
