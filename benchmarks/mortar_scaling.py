@@ -362,7 +362,7 @@ def main(argv=None) -> int:
                         help="3D: the slabs' cells (triangle or quadrilateral interface)")
     parser.add_argument("--kernels", nargs="+", choices=kernels.contract.KERNELS_OPTIONS,
                         help="kernel implementations to measure in turn, each size with each "
-                             "(default: $DOLFINX_MORTAR_KERNELS, else numpy)")
+                             "(default: $DOLFINX_MORTAR_KERNELS, else compiled)")
     args = parser.parse_args(argv)
     if MPI.COMM_WORLD.size != 1:
         parser.error("the benchmark is serial; run it without mpirun")

@@ -550,3 +550,16 @@ def test_lock_timeout(tmp_path, monkeypatch):
                                 timeout=120)
     assert result.returncode != 0
     assert "lock" in result.stderr and name in result.stderr
+
+
+def test_a_failed_compile_says_how_to_run_without(tmp_path, monkeypatch):
+    """Without a working compiler the error names the cache, the cause and the numpy
+    kernels; no module and no build directory are left behind."""
+    def broken(*args):
+        raise OSError("cc: not found")
+
+    monkeypatch.setattr(compiled, "_compile", broken)
+    with pytest.raises(RuntimeError, match="cc: not found.*DOLFINX_MORTAR_KERNELS=numpy"):
+        compiled.build(directory=tmp_path, kernel="line2")
+    assert not list(tmp_path.glob("*.so"))
+    assert not [p for p in tmp_path.iterdir() if p.is_dir()]

@@ -34,10 +34,10 @@ def assert_close(got: np.ndarray, expected: np.ndarray, tolerance: float = TOLER
 
 def test_switch(monkeypatch):
     monkeypatch.delenv(KERNELS_VARIABLE, raising=False)
-    assert KernelOptions().kernels == "numpy"
-    monkeypatch.setenv(KERNELS_VARIABLE, "compiled")
     assert KernelOptions().kernels == "compiled"
-    assert KernelOptions(kernels="numpy").kernels == "numpy"
+    monkeypatch.setenv(KERNELS_VARIABLE, "numpy")
+    assert KernelOptions().kernels == "numpy"
+    assert KernelOptions(kernels="compiled").kernels == "compiled"
     monkeypatch.setenv(KERNELS_VARIABLE, "fortran")
     with pytest.raises(ValueError, match="kernels"):
         KernelOptions()

@@ -144,9 +144,12 @@ def test_empty_and_not_overlapping():
         assert got.segment_gradients.combine([[(0, 1.0)]]).shape == (1, 12, 0)
 
 
-def test_default_stays_numpy(monkeypatch):
+def test_default_is_compiled(monkeypatch):
     monkeypatch.delenv(KERNELS_VARIABLE, raising=False)
     x, has_neighbour, _ = random_pairs(20, seed=49)
+    q = Line2Kernel().evaluate(geometry_of(x, has_neighbour), KernelOptions())
+    assert isinstance(q.segment_gradients, line2_compiled.FullGradients)
+    monkeypatch.setenv(KERNELS_VARIABLE, "numpy")
     q = Line2Kernel().evaluate(geometry_of(x, has_neighbour), KernelOptions())
     assert not isinstance(q.segment_gradients, line2_compiled.FullGradients)
 

@@ -44,7 +44,7 @@ import time
 import numpy as np
 
 from . import line2_rules
-from .contract import KernelOptions
+from .contract import KERNELS_VARIABLE, KernelOptions
 
 _LOG = logging.getLogger(__name__)
 # -O3: 1.5x faster than -O2 on the 3D kernel (benchmarks/compiled_kernel.py), portable (no
@@ -187,7 +187,14 @@ def build(compile_args=COMPILE_ARGS, directory: pathlib.Path | None = None,
                 if not target.exists():  # nobody built it while we waited
                     work = pathlib.Path(tempfile.mkdtemp(prefix=name + "-", dir=directory))
                     try:
-                        built = _compile(kernel, name, work, compile_args)
+                        try:
+                            built = _compile(kernel, name, work, compile_args)
+                        except Exception as error:  # cffi's, distutils' or the compiler's
+                            raise RuntimeError(
+                                f"could not compile the mortar kernels ({kernel}.c) into "
+                                f"{directory}: {error}. They need cffi and a C compiler, as "
+                                f"dolfinx's form compilation does; {KERNELS_VARIABLE}=numpy "
+                                "runs the numpy kernels instead") from error
                         os.replace(built, target)  # atomic within one file system
                     finally:
                         shutil.rmtree(work, ignore_errors=True)

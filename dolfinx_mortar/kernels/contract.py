@@ -35,9 +35,10 @@ KERNELS_VARIABLE = "DOLFINX_MORTAR_KERNELS"
 
 def default_kernels() -> str:
     """The kernels' implementation when none is given: ``$DOLFINX_MORTAR_KERNELS``
-    (``numpy`` or ``compiled``), else ``numpy``; read when the options are made, so that
-    one process can measure both."""
-    return os.environ.get(KERNELS_VARIABLE, "") or "numpy"
+    (``numpy`` or ``compiled``), else ``compiled``; read when the options are made, so that
+    one process can measure both. The C kernels need what dolfinx's own form compilation
+    needs (cffi and a C compiler); ``numpy`` is the vectorized reference."""
+    return os.environ.get(KERNELS_VARIABLE, "") or "compiled"
 
 
 @dataclasses.dataclass(frozen=True)

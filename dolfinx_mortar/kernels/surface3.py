@@ -8,7 +8,9 @@ Per candidate pair (Puso and Laursen 2004; Popp, Gee and Wall 2009):
    (e1, e2) with e1 x e2 = n0 (slave polygon counter-clockwise);
 3. the two convex polygons clipped (Sutherland-Hodgman; quadrilaterals as
    quadrilaterals); each clip vertex is labelled as a slave node, a master
-   node or the intersection of a slave edge with a master edge;
+   node or the intersection of a slave edge with a master edge (never of two
+   edges that coincide: a vertex on a clip line, to :data:`_ON_LINE`, stays
+   itself);
 4. the clip polygon split into triangles around its vertex mean (the fan
    keeps every cell inside a convex polygon however its vertices are
    spaced); Gauss points of each triangle mapped back onto the slave and
