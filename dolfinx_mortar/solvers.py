@@ -57,11 +57,6 @@ DEFAULT_OPTIONS = {
     # 5e-10 off uniform after its one Newton step (now 2e-12)
     "mat_mumps_cntl_1": 0.1,
     "mat_mumps_cntl_3": 1e-8,
-    # one step of iterative refinement (an extra solve and product: +11 % of the 3D
-    # ironing's factorizations and solves): on OpenBLAS the 3D finite-strain patch
-    # test's LU solves were otherwise accurate to 3e-4 of the Newton correction, its
-    # last residual 5e-10 (with the step: 3e-13, pressure uniform to 1.5e-14)
-    "mat_mumps_icntl_10": -1,
 }
 
 LINEAR_SOLVERS = typing.get_args(LinearSolver)
