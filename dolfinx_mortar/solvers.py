@@ -41,7 +41,10 @@ DEFAULT_OPTIONS = {
     "snes_rtol": 1e-10,
     "snes_stol": 0.0,
     "snes_max_it": 30,
-    "snes_divergence_tolerance": -1.0,
+    # no divergence test: a contact iterate's residual may jump by far more than its
+    # default 1e4 (an active set or a stiff penalty switching on). PETSc >= 3.22 reads
+    # -1 as "the default", 1e4: only "unlimited" (PETSC_UNLIMITED) turns the test off
+    "snes_divergence_tolerance": "unlimited",
     # at least one Newton step per solve: an increment whose residual is below
     # the absolute tolerance (a 1e-12 push) must still be applied
     "snes_force_iteration": True,

@@ -87,6 +87,38 @@ def test_a_users_atol_in_the_database_wins():
     snes.destroy()
 
 
+def test_no_divergence_test():
+    """f(x) = x + 1 for x >= 0 and 1e6 x + 1 below, from x = 1e-8: the first Newton step
+    lands at -1, where the residual is 1e6 times the first one, and the second on the
+    root -1e-6. PETSc's divergence test (default: stop at 1e4 times) would end the solve
+    at the first step, as it cut back a 3D Cattaneo-Mindlin load step; with PETSc >= 3.22
+    the option value -1, which the defaults held before, kept it on."""
+    snes = PETSc.SNES().create(PETSc.COMM_SELF)
+    configure(snes)
+    assert snes.getDivergenceTolerance() == PETSc.UNLIMITED
+
+    def residual(snes, x, f):
+        value = x.getArray(readonly=True)[0]
+        f.getArray()[0] = value + 1.0 if value >= 0.0 else 1e6 * value + 1.0
+
+    def jacobian(snes, x, J, P):
+        J.setValue(0, 0, 1.0 if x.getArray(readonly=True)[0] >= 0.0 else 1e6)
+        J.assemble()
+
+    J = PETSc.Mat().createAIJ((1, 1), nnz=1, comm=PETSc.COMM_SELF)
+    f, x = J.createVecs()
+    snes.setFunction(residual, f)
+    snes.setJacobian(jacobian, J)
+    x.set(1e-8)
+    with solvers.inserted_options(PREFIX, {}):
+        snes.solve(None, x)
+    assert snes.getConvergedReason() > 0
+    assert snes.getIterationNumber() == 2
+    assert x.getArray()[0] == pytest.approx(-1e-6, rel=1e-12)
+    for obj in (snes, J, f, x):
+        obj.destroy()
+
+
 NETLIB = "/usr/lib/x86_64-linux-gnu/blas/libblas.so.3.12.0"
 OPENBLAS = "/usr/lib/x86_64-linux-gnu/openblas-serial/libblas.so.3"
 
