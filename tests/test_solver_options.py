@@ -87,36 +87,44 @@ def test_a_users_atol_in_the_database_wins():
     snes.destroy()
 
 
-def test_no_divergence_test():
+def test_a_residual_that_grows_1e4_fold_stops_newton():
     """f(x) = x + 1 for x >= 0 and 1e6 x + 1 below, from x = 1e-8: the first Newton step
-    lands at -1, where the residual is 1e6 times the first one, and the second on the
-    root -1e-6. PETSc's divergence test (default: stop at 1e4 times) would end the solve
-    at the first step, as it cut back a 3D Cattaneo-Mindlin load step; with PETSc >= 3.22
-    the option value -1, which the defaults held before, kept it on."""
-    snes = PETSc.SNES().create(PETSc.COMM_SELF)
-    configure(snes)
-    assert snes.getDivergenceTolerance() == PETSc.UNLIMITED
+    lands at -1, where the residual is 1e6 times the first one. The divergence test
+    (1e4, stated in the defaults: PETSc >= 3.22 reads the -1 they held before as its
+    default, older PETSc as "no test") stops the solve there, DIVERGED_DTOL, and the
+    load stepper cuts back; with the test off Newton would go on to the root -1e-6."""
+    residual_jump = []
 
     def residual(snes, x, f):
         value = x.getArray(readonly=True)[0]
         f.getArray()[0] = value + 1.0 if value >= 0.0 else 1e6 * value + 1.0
+        residual_jump.append(abs(f.getArray()[0]))
 
     def jacobian(snes, x, J, P):
         J.setValue(0, 0, 1.0 if x.getArray(readonly=True)[0] >= 0.0 else 1e6)
         J.assemble()
 
-    J = PETSc.Mat().createAIJ((1, 1), nnz=1, comm=PETSc.COMM_SELF)
-    f, x = J.createVecs()
-    snes.setFunction(residual, f)
-    snes.setJacobian(jacobian, J)
-    x.set(1e-8)
-    with solvers.inserted_options(PREFIX, {}):
-        snes.solve(None, x)
-    assert snes.getConvergedReason() > 0
-    assert snes.getIterationNumber() == 2
-    assert x.getArray()[0] == pytest.approx(-1e-6, rel=1e-12)
-    for obj in (snes, J, f, x):
-        obj.destroy()
+    for options, reason, root in (({}, PETSc.SNES.ConvergedReason.DIVERGED_DTOL, None),
+                                  ({"snes_divergence_tolerance": "unlimited"}, None, -1e-6)):
+        snes = PETSc.SNES().create(PETSc.COMM_SELF)
+        values = configure(snes, options)
+        J = PETSc.Mat().createAIJ((1, 1), nnz=1, comm=PETSc.COMM_SELF)
+        f, x = J.createVecs()
+        snes.setFunction(residual, f)
+        snes.setJacobian(jacobian, J)
+        x.set(1e-8)
+        with solvers.inserted_options(PREFIX, values):
+            snes.solve(None, x)
+        if reason is not None:
+            assert snes.getDivergenceTolerance() == 1e4
+            assert snes.getConvergedReason() == reason
+            assert snes.getIterationNumber() == 1
+        else:
+            assert snes.getConvergedReason() > 0 and snes.getIterationNumber() == 2
+            assert x.getArray()[0] == pytest.approx(root, rel=1e-12)
+        for obj in (snes, J, f, x):
+            obj.destroy()
+    assert max(residual_jump) > 1e5 * residual_jump[0]
 
 
 NETLIB = "/usr/lib/x86_64-linux-gnu/blas/libblas.so.3.12.0"
