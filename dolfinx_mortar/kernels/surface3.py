@@ -318,6 +318,7 @@ def _separated(slave2d: np.ndarray, master2d: np.ndarray) -> np.ndarray:
             separated |= side.max(axis=1) < -gap
     return separated
 
+
 def _emit(target, mask, position, label, edge) -> None:
     """Append a vertex to the polygons of the pairs in ``mask``."""
     positions, labels, edges, count = target
