@@ -41,12 +41,8 @@ DEFAULT_OPTIONS = {
     "snes_rtol": 1e-10,
     "snes_stol": 0.0,
     "snes_max_it": 30,
-    # PETSc's divergence test at its default, stated: a Newton iterate whose residual
-    # grows 1e4-fold stops the solve and the load stepper cuts back. (The value -1 held
-    # here before meant "no test" to older PETSc and "the default" to 3.22 on, so every
-    # measurement was made with the test on; turned off, the 3D Cattaneo-Mindlin normal
-    # phase at refinement 2 went another way: docs/benchmarks.md, "3D Cattaneo-Mindlin
-    # at refinement 2".)
+    # PETSc's default, stated (PETSc >= 3.22 reads -1 as it): an iterate whose residual
+    # grows 1e4-fold is cut back (docs/benchmarks.md, "3D Cattaneo-Mindlin at refinement 2")
     "snes_divergence_tolerance": 1e4,
     # at least one Newton step per solve: an increment whose residual is below
     # the absolute tolerance (a 1e-12 push) must still be applied
