@@ -158,6 +158,7 @@ class CondensedPreconditioner:
         self._inner_layout: dict | None = None
         self._inner_a_part: dict | None = None
         self._fingerprint = None
+        self._null_space: PETSc.NullSpace | None = None
         self.num_active = 0
         self.rebuilds = 0
         """set-ups that built every matrix (J's pattern was new)"""
@@ -173,6 +174,7 @@ class CondensedPreconditioner:
         # rows near the contact are reused; while the sets stay too, the products (their
         # symbolic part) and the inner matrix's layout, and only values are computed.
         J = pc.getOperators()[0]
+        self._take_null_space(J)
         fingerprint = _pattern_fingerprint(J, self.comm)
         reuse = (self.keep_products and fingerprint == self._fingerprint
                  and bool(self._matrices))
@@ -202,6 +204,7 @@ class CondensedPreconditioner:
             m["K_inner"] = inner
             self._set_near_nullspace(inner)
             self.ksp.setOperators(inner)
+        self._set_inner_null_space(inner)
         _MatrixStore(self._products, self.keep_products).release("K_rows")
         self.ksp.setUp()
 
@@ -272,6 +275,36 @@ class CondensedPreconditioner:
         target = y.getArray()
         target[: self.num_u] = v["du"].getArray(readonly=True)
         target[self.num_u:] = result.getArray(readonly=True)
+        del target
+        if self._null_space is not None:
+            # fgmres preconditions from the right: its steps are the outputs
+            self._null_space.remove(y)
+
+    def _take_null_space(self, J: PETSc.Mat) -> None:
+        """J's null space (:meth:`~dolfinx_mortar.equations.ContactEquations.set_null_space`),
+        if it has one with vectors: removed from every output (so from fgmres' step) and,
+        by its displacement parts, given to the inner matrix."""
+        if self._null_space is not None:
+            self._null_space.destroy()
+            self._null_space = None
+        space = J.getNullSpace()
+        if space and space.getVecs():
+            self._null_space = space  # (getNullSpace took a reference for it)
+
+    def _set_inner_null_space(self, inner: PETSc.Mat) -> None:
+        """The displacement parts of J's null vectors as K_c's null space (none: an empty
+        one), which the inner Krylov method removes from its preconditioner's output."""
+        vectors = []
+        for vector in self._null_space.getVecs() if self._null_space is not None else []:
+            part = inner.createVecRight()
+            part.getArray()[:] = vector.getArray(readonly=True)[: self.num_u]
+            part.normalize()
+            vectors.append(part)
+        space = PETSc.NullSpace().create(vectors=vectors, comm=self.comm)
+        inner.setNullSpace(space)
+        space.destroy()
+        for part in vectors:
+            part.destroy()
 
     def view(self, pc: PETSc.PC, viewer: PETSc.Viewer) -> None:
         viewer.printfASCII(f"static condensation of the multipliers ({self.num_active} active)\n")
@@ -720,6 +753,9 @@ class CondensedPreconditioner:
 
     def destroy(self, pc: PETSc.PC | None = None) -> None:
         self._release_matrices()
+        if self._null_space is not None:
+            self._null_space.destroy()
+            self._null_space = None
         for index_set in self._index_sets.values():
             index_set.destroy()
         self.ksp.destroy()

@@ -16,7 +16,7 @@ module holds the checks behind the messages of :class:`ContactProblem` and
   when a problem is built, for bodies that start overlapping, and after each
   accepted load step);
 * :func:`free_translations`: bodies whose rigid-body translation nothing in the
-  bulk form holds;
+  bulk form holds, and :func:`translation_vectors`, those translations as vectors;
 * :func:`describe_ksp_failure`, :func:`describe_iterative_failure`: why a linear
   solve failed (and, for the iterative solver, what to try);
 * :func:`warn`: a :class:`ContactWarning` that the user sees, once, on rank 0.
@@ -481,6 +481,15 @@ class FreeBody:
     """The corners of its bounding box (reference coordinates)."""
 
 
+def _block_labels(V, labels: np.ndarray) -> np.ndarray:
+    """The body label of each (owned and ghost) dof block of V, from the cells' ``labels``."""
+    index_map = V.dofmap.index_map
+    dofmap = np.asarray(V.dofmap.list, dtype=np.int64)[: labels.size]
+    block_label = np.full(index_map.size_local + index_map.num_ghosts, -1, dtype=np.int64)
+    block_label[dofmap.reshape(-1)] = np.repeat(labels, dofmap.shape[1])
+    return block_label
+
+
 def free_translations(V, K, labels: np.ndarray, bcs, tolerance: float = 1e-8) -> list[FreeBody]:
     """Collective: bodies that a translation along a coordinate axis moves freely.
 
@@ -496,10 +505,7 @@ def free_translations(V, K, labels: np.ndarray, bcs, tolerance: float = 1e-8) ->
     comm = V.mesh.comm
     bs = V.dofmap.index_map_bs
     index_map = V.dofmap.index_map
-    num_blocks = index_map.size_local + index_map.num_ghosts
-    dofmap = np.asarray(V.dofmap.list, dtype=np.int64)[: labels.size]
-    block_label = np.full(num_blocks, -1, dtype=np.int64)
-    block_label[dofmap.reshape(-1)] = np.repeat(labels, dofmap.shape[1])
+    block_label = _block_labels(V, labels)
     owned_label = block_label[: index_map.size_local]
     fixed = np.zeros((0, 2), dtype=np.int64)
     for bc in bcs:
@@ -539,3 +545,19 @@ def free_translations(V, K, labels: np.ndarray, bcs, tolerance: float = 1e-8) ->
     translation.destroy()
     image.destroy()
     return found
+
+
+def translation_vectors(V, labels: np.ndarray, free: list[FreeBody]) -> list[np.ndarray]:
+    """This rank's owned displacement dofs of each free translation of ``free`` (one unit
+    vector per body and axis, as :func:`free_translations` found them), in the order of
+    the bodies and their axes. ``labels`` as for :func:`free_translations`."""
+    bs = V.dofmap.index_map_bs
+    index_map = V.dofmap.index_map
+    owned_label = _block_labels(V, labels)[: index_map.size_local]
+    vectors = []
+    for body in free:
+        for axis in body.axes:
+            values = np.zeros((index_map.size_local, bs))
+            values[owned_label == body.label, axis] = 1.0
+            vectors.append(values.reshape(-1))
+    return vectors

@@ -13,7 +13,8 @@ the system is regular whenever the bulk problem is; a body held only by contact 
 loses every active node has a singular rigid mode, which MUMPS' null-pivot detection
 (ICNTL(24) with CNTL(3) = 1e-8, on by default) sets to a zero step instead of an
 arbitrary huge one; the residual test stays exact, so this can only slow Newton down,
-never change a solution.
+never change a solution. The iterative solver is given the translations that are exactly
+null (:meth:`ContactEquations.set_null_space`).
 
 Every row is a force (unit E x length in plane strain), whatever the enforcement
 (:mod:`dolfinx_mortar.enforcement`); the Dirichlet rows are k (u - u_D) with k ~ E the
@@ -42,6 +43,10 @@ from petsc4py import PETSc
 from . import compat, diagnostics, enforcement
 from . import friction as friction_rules
 from .system import Tangential
+
+NULL_SPACE_TOLERANCE = 1e-10
+"""A candidate null vector v of the Newton matrix J is one if |J v| is at most this times
+k |v| (k the bulk stiffness scale of the Dirichlet rows)."""
 
 
 class ContactEquations:
@@ -97,6 +102,9 @@ class ContactEquations:
         """Per pair, whether its multiplier fields are unknowns of the layout (an interface
         without pairs on any rank may be left out: :meth:`~dolfinx_mortar.newton.
         ContactNewton.fit_layout`); the multipliers of a pair left out are zero."""
+        self.null_space_candidates: list[np.ndarray] = []
+        """Owned displacement dofs of the translations that may be a null space of the Newton
+        matrix (:meth:`set_null_space`); empty: none is looked for."""
         self.stale_state: dict | None = None
         """The state of the iterate at which a pair left out of the layout found pairs (its
         residual needs the pair's rows: the SNES is stopped there, and the solve goes on
@@ -313,7 +321,40 @@ class ContactEquations:
             snes.setJacobian(self.callbacks.jacobian, self.system.mat)
         self.timings["bulk assembly"] += bulk
         self.timings["mortar integration"] += contact
+        if self.null_space_candidates:
+            self.set_null_space(self.system.mat)
         return self.system.mat
+
+    def set_null_space(self, matrix: PETSc.Mat) -> None:
+        """Give ``matrix`` the candidates (with zero multipliers) that it maps to nothing, to
+        rounding, as its null space. Collective.
+
+        Why: a body that nothing but frictionless contact holds is free to slide along the
+        contact when the constraints' normals do not see the slide (a flat master and the
+        reference configuration): the Newton matrix is singular, with that translation as
+        its null vector, and the residual has no component along it (no force does). MUMPS
+        sets the null pivot's step to zero; the condensed preconditioner of the Krylov
+        method removes the null space from its output instead. A translation that
+        contact holds, however weakly, is not exactly null and is not given."""
+        vectors = []
+        image = matrix.createVecLeft()
+        for values in self.null_space_candidates:
+            vector = matrix.createVecRight()
+            vector.zeroEntries()
+            vector.getArray()[self.layout.owned_u] = values
+            size = vector.norm()
+            matrix.mult(vector, image)
+            if size > 0.0 and image.norm() <= NULL_SPACE_TOLERANCE * self.dirichlet_scale * size:
+                vector.scale(1.0 / size)
+                vectors.append(vector)
+            else:
+                vector.destroy()
+        image.destroy()
+        space = PETSc.NullSpace().create(vectors=vectors, comm=self.layout.comm)
+        matrix.setNullSpace(space)
+        space.destroy()
+        for vector in vectors:
+            vector.destroy()
 
     def destroy(self) -> None:
         """Free the PETSc objects this holds (the multiplier vectors too). Collective."""

@@ -102,6 +102,8 @@ class ContactNewton:
             "linear_solver='iterative' to keep it (the load stepping then cuts the step "
             "back).",
         )
+        self.equations.null_space_candidates = []
+        self.equations.set_null_space(self.equations.system.mat)
         self.destroy()
         self.linear_solver = "direct"
         self.condensation = condensation

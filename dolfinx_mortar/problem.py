@@ -244,6 +244,9 @@ class ContactProblem(ContactResults):
         self.c_n, self.penalty, self.c_t = enforcement.default_parameters(
             options.method, scales, master_scale, options.c_n, options.penalty, options.c_t)
         self.equations = self._create_equations(options, scales, components, layout)
+        if self._linear_solver == "iterative":
+            self.equations.null_space_candidates = diagnostics.translation_vectors(
+                self.V, body_labels, free_bodies)
         self.equations.read_state(x)
         self.timings = self.equations.timings
         self._slip_origin: np.ndarray | None = None
