@@ -1,5 +1,10 @@
 """Geometry and integration kernels of 2D mortar contact, batched over all pairs.
 
+The test oracle of the compiled 2D kernel (``dolfinx_mortar/kernels/line2.c``): the same
+mortar integrals written once more in vectorized numpy, with their derivatives, kept under
+``tests/oracle`` so that the tests (and the benchmarks' comparisons) check the package's one
+implementation against a second one. Nothing in ``dolfinx_mortar`` imports it.
+
 Everything here is a plain numpy function of coordinate arrays: no MPI, no
 PETSc, no dolfinx. One call handles every candidate (slave facet, master facet)
 pair at once and returns the pair's contributions to the mortar quantities of
@@ -28,9 +33,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..dual import RowSubsetDual
-from . import line2_compiled
-from .contract import (
+from dolfinx_mortar.dual import RowSubsetDual
+from dolfinx_mortar.kernels.contract import (
     NORMAL_OPTIONS,
     BasisOption,
     IntegrationOption,
@@ -39,10 +43,12 @@ from .contract import (
     PairGeometry,
     PairQuantities,
 )
-from .factors import PairGradients
-from .line2_rules import DEFAULT_GAUSS_POINTS, gauss_legendre
-from .line2_rules import DUAL_COEFFICIENTS as _DUAL_COEFFICIENTS
-from .line2_rules import one_master_facet_per_point as _one_master_facet_per_point
+from dolfinx_mortar.kernels.factors import PairGradients
+from dolfinx_mortar.kernels.line2_rules import DEFAULT_GAUSS_POINTS, gauss_legendre
+from dolfinx_mortar.kernels.line2_rules import DUAL_COEFFICIENTS as _DUAL_COEFFICIENTS
+from dolfinx_mortar.kernels.line2_rules import (
+    one_master_facet_per_point as _one_master_facet_per_point,
+)
 
 NUM_PAIR_VARIABLES = 12
 
@@ -498,12 +504,10 @@ def pair_quantities(
 
 
 class Line2Kernel:
-    """The 2D kernel behind the contract (:class:`~.contract.MortarKernel`): the
-    neighbours p, q of :class:`~.contract.PairGeometry` (``neighbour_x``,
-    ``has_neighbour``) enter the averaged normals; no ``slave_normals``. With
-    ``options.kernels == "compiled"`` every option runs the compiled kernel
-    (:mod:`.line2_compiled`: values and gradients kept, in :class:`~.line2_compiled.
-    FullGradients`)."""
+    """The numpy 2D kernel behind the contract (:class:`~dolfinx_mortar.kernels.contract.
+    MortarKernel`), as the package's :class:`~dolfinx_mortar.kernels.Line2Kernel` takes it:
+    the neighbours p, q of the geometry enter the averaged normals; no ``slave_normals``.
+    ``options.scalar_gradients`` is ignored (the factorized gradients always hold D's)."""
 
     gdim = 2
     default_gauss_points = DEFAULT_GAUSS_POINTS
@@ -515,9 +519,6 @@ class Line2Kernel:
             raise ValueError("the 2D kernel takes the slave facets' neighbours "
                              "(PairGeometry.neighbour_x, has_neighbour)")
         points = options.num_gauss_points or self.default_gauss_points[options.integration]
-        if options.kernels == "compiled":
-            return line2_compiled.evaluate(geometry, options, points, crosspoint=crosspoint,
-                                           slave_facet=slave_facet)
         slave, master, neighbour = geometry.slave_x, geometry.master_x, geometry.neighbour_x
         X = np.empty((NUM_PAIR_VARIABLES, geometry.num_pairs))
         for node, (x, i) in enumerate([(neighbour, 0), (slave, 0), (slave, 1), (neighbour, 1),

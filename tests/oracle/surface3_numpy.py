@@ -1,5 +1,10 @@
 """3D mortar kernel: triangle and quadrilateral facets, segment- and element-based integration.
 
+The test oracle of the compiled 3D kernel (``dolfinx_mortar/kernels/surface3.c``): the same
+mortar integrals written once more in vectorized numpy, with their derivatives, kept under
+``tests/oracle`` so that the tests (and the benchmarks' comparisons) check the package's one
+implementation against a second one. Nothing in ``dolfinx_mortar`` imports it.
+
 Per candidate pair (Puso and Laursen 2004; Popp, Gee and Wall 2009):
 
 1. an auxiliary plane through the slave facet centre x0 with the unit normal
@@ -48,15 +53,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import dual
-from ..dual import Dual, RowSubsetDual
-from . import compiled, surface3_compiled
-from .contract import (
-    KernelOptions,
-    PairGeometry,
-    PairQuantities,
-)
-from .factors import AffineFactors
+from dolfinx_mortar import dual
+from dolfinx_mortar.dual import Dual, RowSubsetDual
+from dolfinx_mortar.kernels import compiled
+from dolfinx_mortar.kernels.contract import KernelOptions, PairGeometry, PairQuantities
+from dolfinx_mortar.kernels.factors import AffineFactors
 
 _FACING_TOLERANCE = 1e-8
 _AREA_TOLERANCE = 1e-14
@@ -433,12 +434,10 @@ def pair_quantities(
 
 
 class Surface3Kernel:
-    """The 3D kernel behind the contract (:class:`~.contract.MortarKernel`): takes the
-    slave nodal normals of :class:`~.contract.PairGeometry` as variables (zeros will do
-    for the ``slave`` and ``master`` normal options); no neighbours. With
-    ``options.kernels == "compiled"`` the pairs go to the compiled kernel
-    (:mod:`.surface3_compiled`: values now, gradients on demand), which covers every
-    configuration this one takes (a Gauss rule neither takes stays here, which raises)."""
+    """The numpy 3D kernel behind the contract (:class:`~dolfinx_mortar.kernels.contract.
+    MortarKernel`), as the package's :class:`~dolfinx_mortar.kernels.Surface3Kernel` takes
+    it: the slave nodal normals of the geometry are variables (zeros will do for the
+    ``slave`` and ``master`` normal options); no neighbours."""
 
     gdim = 3
     default_gauss_points = {"segment": DEFAULT_GAUSS_POINTS, "element": DEFAULT_GAUSS_POINTS}
@@ -446,8 +445,6 @@ class Surface3Kernel:
     def evaluate(self, geometry: PairGeometry, options: KernelOptions, *,
                  crosspoint: np.ndarray | None = None,
                  slave_facet: np.ndarray | None = None) -> PairQuantities:
-        if options.kernels == "compiled" and surface3_compiled.covers(geometry, options):
-            return surface3_compiled.evaluate(geometry, options, crosspoint, slave_facet)
         slave_normals = geometry.slave_normals
         if slave_normals is None:
             slave_normals = np.zeros_like(geometry.slave_x)
