@@ -1,4 +1,5 @@
-"""The compiled 3D kernel (kernels/compiled.py) against the numpy kernel: time per pair on random
+"""The compiled 3D kernel (kernels/compiled.py) against the numpy oracle (tests/oracle, the
+package's former numpy kernels, imported from there): time per pair on random
 overlapping triangle pairs, peak memory, first-use compile time and a second process's load
 time, -O2 against -O3; then per facet combination (triangles, quadrilaterals) and normal field.
 With ``--dim 2`` the same for the 2D kernel (random candidate pairs, some overlapping, and
@@ -10,11 +11,12 @@ strips at N slave facets, as its interface hands them to the kernel).
     tools/run python3 benchmarks/compiled_kernel.py --dim 2 [--interface 100000]
 
 Times are the median of ``--repeats`` calls in one process (the compiled module loaded
-before). numpy is timed twice: as the contact code calls it today (``factorized=True``, the
-gradients of Dn, Mn and the areas kept factorized, expanded later by their consumers) and
-with the full gradients the compiled kernel returns (``factorized=False``, expanded with
-``.grad``). Peak memory is tracemalloc's peak over one call (numpy's allocations are traced;
-the compiled kernel's work arrays are on the C stack, so its peak is its output arrays).
+before). numpy is timed twice: as the contact code called it while it was the package's
+kernel (``factorized=True``, the gradients of Dn, Mn and the areas kept factorized, expanded
+later by their consumers) and with the full gradients the compiled kernel returns
+(``factorized=False``, expanded with ``.grad``). Peak memory is tracemalloc's peak over one
+call (numpy's allocations are traced; the compiled kernel's work arrays are on the C stack, so
+its peak is its output arrays).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import pathlib
 import statistics
 import subprocess
 import sys
@@ -31,7 +34,11 @@ import tracemalloc
 
 import numpy as np
 
-from dolfinx_mortar.kernels import compiled, line2, surface3
+from dolfinx_mortar.kernels import compiled
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
+
+from oracle import line2_numpy, surface3_numpy, use_oracle  # noqa: E402
 
 
 def overlapping_pairs(n: int, seed: int = 0):
@@ -71,7 +78,7 @@ def overlapping_facets(n: int, ns: int, nm: int, seed: int = 0):
 
 
 def numpy_run(slave, master, nodal, options):
-    q = surface3.pair_quantities(slave, master, nodal, factorized=False, **options)
+    q = surface3_numpy.pair_quantities(slave, master, nodal, factorized=False, **options)
     for item in (q.Dn, q.Mn, q.gap, q.area, q.D_dual, q.M_dual):
         item.grad  # noqa: B018 (the full gradients, as the compiled kernel returns)
 
@@ -113,7 +120,7 @@ def facet_comparison(n: int, repeats: int) -> list:
 
 def numpy_kernel(factorized: bool):
     def run(slave, master, nodal, crosspoint):
-        q = surface3.pair_quantities(slave, master, nodal, crosspoint=crosspoint,
+        q = surface3_numpy.pair_quantities(slave, master, nodal, crosspoint=crosspoint,
                                      factorized=factorized)
         if not factorized:
             for item in (q.Dn, q.Mn, q.gap, q.area):
@@ -261,7 +268,8 @@ def interface_pairs(num_slave: int, repeats: int):
     """The pairs (x (n, 6, 2), has_neighbour) that mortar_scaling's interface hands the 2D kernel
     after a search at ``num_slave`` slave facets, and the times (medians) of that evaluation as
     mortar_scaling measures it (update with a new search, then the assembly) and of the numpy
-    kernel's calls within it."""
+    kernel's calls within it (the interface runs the numpy oracle here, :func:`oracle.use_oracle`,
+    as it ran the numpy kernels when they were the package's)."""
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import dolfinx
     import mortar_scaling
@@ -269,7 +277,7 @@ def interface_pairs(num_slave: int, repeats: int):
     from dolfinx_mortar import MortarInterface
 
     calls, kernel_seconds = [], []
-    original = line2.Line2Kernel.evaluate
+    original = line2_numpy.Line2Kernel.evaluate
 
     def recording(self, geometry, options, **keywords):
         calls.append(geometry)
@@ -282,24 +290,26 @@ def interface_pairs(num_slave: int, repeats: int):
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
     u = mortar_scaling.displacement(V, upper, lower, width)
     times = {"evaluation": [], "numpy_kernel": []}
-    line2.Line2Kernel.evaluate = recording
+    line2_numpy.Line2Kernel.evaluate = recording
     try:
-        interface = MortarInterface(V, tags, mortar_scaling.SLAVE_TAG, mortar_scaling.MASTER_TAG)
-        interface.update(u)
-        z = interface.create_multiplier_vector()
-        z.set(1.0)
-        mortar_scaling._assemble(interface, z)
-        for _ in range(repeats):
-            kernel_seconds.clear()
-            interface.reuse.invalidate()
-            start = time.perf_counter()
+        with use_oracle():
+            interface = MortarInterface(V, tags, mortar_scaling.SLAVE_TAG,
+                                        mortar_scaling.MASTER_TAG)
             interface.update(u)
+            z = interface.create_multiplier_vector()
+            z.set(1.0)
             mortar_scaling._assemble(interface, z)
-            times["evaluation"].append(time.perf_counter() - start)
-            times["numpy_kernel"].append(sum(kernel_seconds))
-        z.destroy()
+            for _ in range(repeats):
+                kernel_seconds.clear()
+                interface.reuse.invalidate()
+                start = time.perf_counter()
+                interface.update(u)
+                mortar_scaling._assemble(interface, z)
+                times["evaluation"].append(time.perf_counter() - start)
+                times["numpy_kernel"].append(sum(kernel_seconds))
+            z.destroy()
     finally:
-        line2.Line2Kernel.evaluate = original
+        line2_numpy.Line2Kernel.evaluate = original
     geometry = calls[-1]
     x = np.stack([geometry.neighbour_x[:, 0], geometry.slave_x[:, 0], geometry.slave_x[:, 1],
                   geometry.neighbour_x[:, 1], geometry.master_x[:, 0], geometry.master_x[:, 1]], 1)
@@ -310,7 +320,7 @@ def interface_pairs(num_slave: int, repeats: int):
 
 def numpy_line2(full: bool):
     def run(x, has_neighbour):
-        q = line2.pair_quantities(x, has_neighbour)
+        q = line2_numpy.pair_quantities(x, has_neighbour)
         if full:
             for item in (q.Dn, q.Mn, q.gap, q.area):
                 item.grad_rows  # noqa: B018 (the full gradients, as the compiled kernel returns)

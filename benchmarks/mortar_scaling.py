@@ -34,10 +34,11 @@ With ``--dim 3`` the bodies are two slabs of tetrahedra one cell thick,
 in x and y alike, the upper one pushed 0.1 w down and slid 0.3 w. With
 ``--cell hexahedron`` the slabs are of hexahedra (N = n^2 quadrilateral facets).
 
-``--kernels numpy compiled`` measures each size with each kernel implementation in turn
-(``$DOLFINX_MORTAR_KERNELS``, :class:`dolfinx_mortar.kernels.KernelOptions`; default: the
-environment's). Per size and implementation the peak resident memory of the process while
-it is measured (:class:`PeakMemory`: mesh, interface and the repeats) is reported too.
+``--kernels numpy compiled`` measures each size with the numpy oracle's kernels
+(``tests/oracle``, the package's former numpy kernels, run by the interface through
+``oracle.use_oracle``) and with the package's compiled ones in turn (default: compiled only).
+Per size and implementation the peak resident memory of the process while it is measured
+(:class:`PeakMemory`: mesh, interface and the repeats) is reported too.
 
 Prints a markdown table, the log-log slope of the total against N (least
 squares over all N) and the total at the largest N. The goal is linear
@@ -56,9 +57,11 @@ growth (slope <= 1.1) and under a second for 1e5 slave facets.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gc
 import json
 import os
+import pathlib
 import platform
 import statistics
 import sys
@@ -76,6 +79,8 @@ from dolfinx_mortar import MortarInterface, kernels
 DEFAULT_SIZES = (1000, 2000, 5000, 10000, 20000, 50000, 100000)
 SLAVE_TAG, MASTER_TAG = 1, 2
 RATIO = 1.37
+KERNELS = ("numpy", "compiled")
+"""``--kernels``: the numpy oracle of tests/oracle, the package's compiled kernels."""
 PHASES = ("update_search", "search", "integration", "assembly", "update_reuse", "assembly_reuse",
           "total")
 LABELS = {
@@ -296,7 +301,6 @@ def measure(num_slave: int, repeats: int, normals: str, integration: str, dim: i
         master_facets=interface.master.num_facets,
         pairs=stats.pairs,
         segments=stats.segments,
-        kernels=kernels.contract.default_kernels(),
         weighted_gap_sum=float(interface.weighted_gap().sum()),
     )
     z.destroy()
@@ -346,6 +350,17 @@ def plot(results: list[dict], path: str) -> None:
     fig.savefig(path, dpi=120)
 
 
+def kernels_of(implementation: str):
+    """A context in which the interfaces run ``implementation``'s kernels: the package's own
+    (compiled), or the numpy oracle of tests/oracle (imported from there: developer tool)."""
+    if implementation == "compiled":
+        return contextlib.nullcontext()
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
+    from oracle import use_oracle
+
+    return use_oracle()
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--sizes", type=float, nargs="+", default=DEFAULT_SIZES,
@@ -360,23 +375,24 @@ def main(argv=None) -> int:
                         help="2: strips of quadrilaterals; 3: slabs of --cell (default 2)")
     parser.add_argument("--cell", default="tetrahedron", choices=("tetrahedron", "hexahedron"),
                         help="3D: the slabs' cells (triangle or quadrilateral interface)")
-    parser.add_argument("--kernels", nargs="+", choices=kernels.contract.KERNELS_OPTIONS,
-                        help="kernel implementations to measure in turn, each size with each "
-                             "(default: $DOLFINX_MORTAR_KERNELS, else compiled)")
+    parser.add_argument("--kernels", nargs="+", choices=KERNELS, default=["compiled"],
+                        help="kernel implementations to measure in turn, each size with each: "
+                             "numpy (the tests' oracle, tests/oracle), compiled (the package's; "
+                             "default)")
     args = parser.parse_args(argv)
     if MPI.COMM_WORLD.size != 1:
         parser.error("the benchmark is serial; run it without mpirun")
     sizes = [int(round(n)) for n in args.sizes]
-    implementations = args.kernels or [kernels.contract.default_kernels()]
+    implementations = args.kernels
     print(f"dimension {args.dim}" + (f", {args.cell}" if args.dim == 3 else ""),
           file=sys.stderr)
     by_kernels = {}
     for n in sizes:
         for implementation in implementations:
-            os.environ[kernels.contract.KERNELS_VARIABLE] = implementation
-            with PeakMemory() as memory:
+            with kernels_of(implementation), PeakMemory() as memory:
                 result = measure(n, args.repeats, args.normals, args.integration, args.dim,
                                  args.cell)
+            result["kernels"] = implementation
             result["peak_memory"] = memory.peak
             by_kernels.setdefault(implementation, []).append(result)
             print(f"N={n} {implementation}: total {1e3 * result['total']:.1f} ms "

@@ -20,7 +20,7 @@ Entry points, all importable from here (``from dolfinx_mortar import ContactProb
   benchmark geometries.
 
 Everything but :class:`ContactOptions`, :class:`Coulomb` and :class:`Tresca` loads on
-first use: the pure-numpy kernels (:mod:`dolfinx_mortar.kernels`,
+first use: the kernels (:mod:`dolfinx_mortar.kernels`, compiled C through cffi, and
 :mod:`dolfinx_mortar.dual`) import without dolfinx.
 """
 
@@ -32,7 +32,7 @@ from .options import ContactOptions, Coulomb, Tresca
 
 __version__ = "0.1.0"
 
-# dolfinx-dependent names load on first use, so that the pure-numpy kernels
+# dolfinx-dependent names load on first use, so that the kernels
 # (dolfinx_mortar.kernels, dolfinx_mortar.dual) import without dolfinx
 _LAZY = {
     "ContactProblem": "problem",

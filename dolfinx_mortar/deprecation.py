@@ -109,3 +109,40 @@ def renamed_keywords(**renames: str):
         return wrapper
 
     return decorate
+
+
+def removed_keyword(name: str, message: str, refuse=None):
+    """A decorator: a keyword argument that no longer means anything is dropped with a
+    DeprecationWarning (``message``) for one release; ``refuse(value)``, if given, raises
+    first for the values that asked for something no longer there."""
+
+    def decorate(function):
+        @functools.wraps(function)
+        def wrapper(*args, **kwargs):
+            if name in kwargs:
+                value = kwargs.pop(name)
+                if refuse is not None:
+                    refuse(value)
+                warn_deprecated(message)
+            return function(*args, **kwargs)
+
+        return wrapper
+
+    return decorate
+
+
+_warned_variables: set[tuple[str, str]] = set()
+
+
+def warn_removed_variable(variable: str, message: str) -> None:
+    """Once per process and value: a UserWarning that the environment variable ``variable``,
+    set, is no longer read (``message`` says what happens instead). Shown as :func:`show`
+    shows warnings."""
+    value = os.environ.get(variable)
+    if not value or (variable, value) in _warned_variables:
+        return
+    _warned_variables.add((variable, value))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.warn(f"{variable}={value} is no longer read: {message}", UserWarning,
+                      stacklevel=stacklevel_outside())
+    show(caught)

@@ -1,11 +1,12 @@
 """Forward-mode dual numbers over numpy arrays: values and exact first derivatives.
 
-The mortar kernels are written once, in terms of :class:`Dual` arrays, and
-return every mortar quantity together with its derivative with respect to the
-nodal coordinates it depends on (at most 12 in 2D: two slave nodes, their two
-neighbours that enter averaged normals, and two master nodes). Derivatives are
-exact to rounding: every operation applies its own chain rule, nothing is
-approximated by differences.
+The mortar kernels return every mortar quantity together with its derivative with
+respect to the nodal coordinates it depends on (at most 12 in 2D: two slave nodes,
+their two neighbours that enter averaged normals, and two master nodes), as
+:class:`RowSubsetDual` arrays. The compiled kernels compute them in C; the numpy
+oracle of the tests (``tests/oracle``) is written in terms of :class:`Dual` arrays and
+the functions here. Derivatives are exact to rounding: every operation applies its own
+chain rule, nothing is approximated by differences.
 
 A Dual holds ``value`` of shape ``S`` and ``grad`` of shape ``S + (n,)``; the
 derivative axis is always last, so the usual numpy broadcasting of the leading

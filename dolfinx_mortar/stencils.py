@@ -17,7 +17,9 @@ Every stencil calls its kernel through the one contract of
 lives in one class each, chosen once by :data:`STENCILS`:
 
 - :class:`Line2Stencil`: 2D, the stencil ``p, a, b, q, c, d`` of
-  :mod:`~dolfinx_mortar.kernels.line2`, whose gradients are already on it.
+  :mod:`~dolfinx_mortar.kernels.line2`, whose gradients are already on it (the compiled
+  kernel's :class:`~dolfinx_mortar.kernels.line2_compiled.FullGradients`, or the factorized
+  :class:`~dolfinx_mortar.kernels.PairGradients` of the tests' numpy oracle).
 - :class:`Surface3Stencil`: 3D, slave facet nodes, master facet nodes and, per
   slave node, the nodes of its averaged normal's star; the kernel
   :mod:`~dolfinx_mortar.kernels.surface3` differentiates with respect to the
@@ -26,7 +28,7 @@ lives in one class each, chosen once by :data:`STENCILS`:
 
 Outputs of a pair are numbered alike in both dimensions: ``Dn`` (j, k, c) first,
 then ``Mn`` (j, l, c), ``area`` (j), ``gap`` (j); ``D`` (j, k) and ``M`` (j, l) when
-the kernel kept their gradients (in 2D the factorized gradients always hold D's),
+the kernel kept their gradients (in 2D the gradients always hold D's),
 then the slave nodal normals (j, c), kernel variables in 3D
 (:meth:`PairStencil.dn` and its siblings).
 """

@@ -1,9 +1,9 @@
-"""The compiled 2D kernel (kernels/line2.c through kernels/compiled.py) against the numpy kernel
-(kernels/line2.pair_quantities): values and every gradient to 1e-13 of each output's largest
-entry, for every normal, integration and basis option, on random and degenerate configurations
-(disjoint, touching at a point, parallel facets, facets not facing, slaves without
-neighbours, crosspoints); a Taylor test of its gradients; and the compile cache of the 2D
-module (compiled once per cache, loaded by a second process)."""
+"""The compiled 2D kernel (kernels/line2.c through kernels/compiled.py) against the numpy oracle
+(tests/oracle/line2_numpy.py, pair_quantities): values and every gradient to 1e-13 of each
+output's largest entry, for every normal, integration and basis option, on random and degenerate
+configurations (disjoint, touching at a point, parallel facets, facets not facing, slaves
+without neighbours, crosspoints); a Taylor test of its gradients; and the compile cache of the
+2D module (compiled once per cache, loaded by a second process)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,9 @@ import textwrap
 import numpy as np
 import pytest
 
-from dolfinx_mortar.kernels import compiled, line2
+from dolfinx_mortar.kernels import compiled
+
+from oracle import line2_numpy
 
 TOLERANCE = 1e-13
 VALUES = ("D", "M", "Dn", "Mn", "gap", "area")
@@ -54,7 +56,7 @@ def random_pairs(n: int, seed: int, bend: float = 0.3):
 
 
 def reference(x, has_neighbour, **options):
-    q = line2.pair_quantities(x, has_neighbour, **options)
+    q = line2_numpy.pair_quantities(x, has_neighbour, **options)
     values = {"D": q.D, "M": q.M, "Dn": q.Dn.value, "Mn": q.Mn.value, "gap": q.gap.value,
               "area": q.area.value, "valid": q.valid, "overlap": q.overlap, "rows": q.rows}
     r = q.rows.size
@@ -66,7 +68,7 @@ def reference(x, has_neighbour, **options):
 
 def assert_agree(x, has_neighbour, **options) -> int:
     """The compiled kernel equals the numpy kernel; returns the number of valid pairs."""
-    options.setdefault("num_gauss_points", line2.DEFAULT_GAUSS_POINTS[
+    options.setdefault("num_gauss_points", line2_numpy.DEFAULT_GAUSS_POINTS[
         options.get("integration", "segment")])
     values, grads = reference(x, has_neighbour, **options)
     got = compiled.line2_pair_quantities_compiled(x, has_neighbour, **options)
@@ -208,8 +210,9 @@ def master_along_the_normal(n: int, seed: int):
     x = np.zeros((n, 6, 2))
     x[:, 0], x[:, 1], x[:, 2], x[:, 3] = p, a, b, q
     X = np.ascontiguousarray(x.reshape(n, 12).T)
-    normal_a, normal_b, _, _ = line2._normal_field(X, np.ones((n, 2), bool), "averaged", False)
-    xi = rng.choice(line2.gauss_legendre(3)[0], n)
+    normal_a, normal_b, _, _ = line2_numpy._normal_field(X, np.ones((n, 2), bool), "averaged",
+                                                         False)
+    xi = rng.choice(line2_numpy.gauss_legendre(3)[0], n)
     N0, N1 = (1.0 - xi) * 0.5, (xi + 1.0) * 0.5
     normal = np.stack([N0 * normal_a[0] + N1 * normal_b[0],
                        N0 * normal_a[1] + N1 * normal_b[1]], -1)

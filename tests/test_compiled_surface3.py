@@ -1,12 +1,13 @@
-"""The compiled 3D kernel (kernels/surface3.c through kernels/compiled.py) against the numpy
-kernel (kernels/surface3.pair_quantities, factorized=False): values and every gradient to 1e-13
-of each output's largest entry, on random and mesh configurations, triangle and quadrilateral
-facets, every normal field; Taylor tests of its gradients; and the compile cache (one compile
-per cache, none in a second process, three processes on an empty cache)."""
+"""The compiled 3D kernel (kernels/surface3.c through kernels/compiled.py) against the numpy oracle
+(tests/oracle/surface3_numpy.py, pair_quantities, factorized=False): values and every gradient
+to 1e-13 of each output's largest entry, on random and mesh configurations, triangle and
+quadrilateral facets, every normal field; Taylor tests of its gradients; and the compile cache
+(one compile per cache, none in a second process, three processes on an empty cache)."""
 
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -15,8 +16,9 @@ import numpy as np
 import pytest
 from test_kernel_surface3_speedpath import random_pairs
 
-from dolfinx_mortar.kernels import compiled, surface3
-from dolfinx_mortar.kernels.contract import KERNELS_VARIABLE
+from dolfinx_mortar.kernels import compiled
+
+from oracle import surface3_numpy, use_oracle
 
 TOLERANCE = 1e-13
 VALUES = ("D", "M", "Dn", "Mn", "gap", "area")
@@ -24,8 +26,8 @@ GRADIENTS = ("Dn", "Mn", "gap", "area", "D", "M")
 
 
 def reference(slave, master, nodal, **options):
-    q = surface3.pair_quantities(slave, master, nodal, factorized=False, scalar_gradients=True,
-                                 **options)
+    q = surface3_numpy.pair_quantities(slave, master, nodal, factorized=False,
+                                       scalar_gradients=True, **options)
     values = {"D": q.D, "M": q.M, "Dn": q.Dn.value, "Mn": q.Mn.value, "gap": q.gap.value,
               "area": q.area.value, "valid": q.valid, "overlap": q.overlap}
     grads = {"Dn": q.Dn.grad, "Mn": q.Mn.grad, "gap": q.gap.grad, "area": q.area.grad,
@@ -204,20 +206,20 @@ def test_mesh_interface_pairs(cell, sizes, monkeypatch):
     from test_mortar3d import bent_displacement, interface, two_blocks
 
     calls = []
-    original = surface3.pair_quantities
+    original = surface3_numpy.pair_quantities
 
     def recording(slave_x, master_x, slave_normals, **options):
         calls.append((slave_x, master_x, slave_normals, options))
         return original(slave_x, master_x, slave_normals, **options)
 
-    monkeypatch.setenv(KERNELS_VARIABLE, "numpy")  # (the pairs the numpy kernel is handed)
-    monkeypatch.setattr(surface3, "pair_quantities", recording)
+    monkeypatch.setattr(surface3_numpy, "pair_quantities", recording)
     tagged = two_blocks(cell, *sizes)
-    for u in (None, bent_displacement(tagged)):
-        mortar = interface(tagged, u, basis="dual")
-        mortar.destroy()
+    with use_oracle():  # (the pairs the numpy kernel is handed)
+        for u in (None, bent_displacement(tagged)):
+            mortar = interface(tagged, u, basis="dual")
+            mortar.destroy()
     monkeypatch.undo()  # the comparison calls the numpy kernel itself
-    assert calls, "the interface did not call surface3.pair_quantities"
+    assert calls, "the interface did not call surface3_numpy.pair_quantities"
     checked = False
     for slave, master, nodal, options in calls:
         if options.get("integration", "segment") != "segment":
@@ -425,17 +427,17 @@ def test_element_based_mesh_pairs(cell, sizes, monkeypatch):
     from test_mortar3d import bent_displacement, interface, two_blocks
 
     calls = []
-    original = surface3.pair_quantities
+    original = surface3_numpy.pair_quantities
 
     def recording(slave_x, master_x, slave_normals, **options):
         calls.append((slave_x, master_x, slave_normals, options))
         return original(slave_x, master_x, slave_normals, **options)
 
-    monkeypatch.setenv(KERNELS_VARIABLE, "numpy")  # (the pairs the numpy kernel is handed)
-    monkeypatch.setattr(surface3, "pair_quantities", recording)
+    monkeypatch.setattr(surface3_numpy, "pair_quantities", recording)
     tagged = two_blocks(cell, *sizes)
-    for u in (None, bent_displacement(tagged)):
-        interface(tagged, u, basis="dual").destroy()
+    with use_oracle():  # (the pairs the numpy kernel is handed)
+        for u in (None, bent_displacement(tagged)):
+            interface(tagged, u, basis="dual").destroy()
     monkeypatch.undo()
     assert calls
     for slave, master, nodal, options in calls:
@@ -552,14 +554,18 @@ def test_lock_timeout(tmp_path, monkeypatch):
     assert "lock" in result.stderr and name in result.stderr
 
 
-def test_a_failed_compile_says_how_to_run_without(tmp_path, monkeypatch):
-    """Without a working compiler the error names the cache, the cause and the numpy
-    kernels; no module and no build directory are left behind."""
+def test_a_failed_compile_says_what_it_needs(tmp_path, monkeypatch):
+    """Without a working compiler the error names the cache, the cause and what the kernels
+    need (a C compiler and cffi, as dolfinx's form compilation); it no longer points at the
+    numpy kernels, which are not in the package. No module and no build directory are left
+    behind."""
     def broken(*args):
         raise OSError("cc: not found")
 
     monkeypatch.setattr(compiled, "_compile", broken)
-    with pytest.raises(RuntimeError, match="cc: not found.*DOLFINX_MORTAR_KERNELS=numpy"):
+    with pytest.raises(RuntimeError, match=re.escape(str(tmp_path)) + r".*cc: not found"
+                       r".*dolfinx's form compilation.*cffi.*C compiler") as raised:
         compiled.build(directory=tmp_path, kernel="line2")
+    assert "numpy" not in str(raised.value) and "DOLFINX_MORTAR_KERNELS" not in str(raised.value)
     assert not list(tmp_path.glob("*.so"))
     assert not [p for p in tmp_path.iterdir() if p.is_dir()]

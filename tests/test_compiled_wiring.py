@@ -1,14 +1,17 @@
-"""The compiled 3D kernel wired behind the contract (kernels/surface3_compiled.py): the
+"""The compiled 3D kernel wired behind the contract (kernels/surface3_compiled.py): the removed
 switch (KernelOptions.kernels, $DOLFINX_MORTAR_KERNELS), the values at evaluation and the
-gradients on demand equal to the numpy kernel's for every configuration (triangles and
-quadrilaterals, mixed, segment- and element-based, every normal field, basis and rule,
-crosspoints), through the stencils and the interface (matrices of the standard, dual,
-covered dual basis and the reference configuration on tetrahedra and hexahedra; friction's
-D and M gradients), in chunks of any size, and an evaluation that keeps no gradients."""
+gradients on demand equal to the numpy oracle's (tests/oracle) for every configuration
+(triangles and quadrilaterals, mixed, segment- and element-based, every normal field, basis and
+rule, crosspoints), through the stencils and the interface (matrices of the standard, dual,
+covered dual basis and the reference configuration on tetrahedra and hexahedra; friction's D and
+M gradients), in chunks of any size, and an evaluation that keeps no gradients."""
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import tracemalloc
+import warnings
 
 import dolfinx
 import numpy as np
@@ -19,9 +22,11 @@ from test_compiled_surface3 import random_facets
 from test_kernel_surface3_speedpath import random_pairs
 from test_mortar3d import bent_displacement, two_blocks
 
-from dolfinx_mortar import MortarInterface
+from dolfinx_mortar import MortarInterface, deprecation
 from dolfinx_mortar.kernels import KernelOptions, PairGeometry, Surface3Kernel, surface3_compiled
 from dolfinx_mortar.kernels.contract import KERNELS_VARIABLE
+
+from oracle import surface3_numpy, use_oracle
 
 TOLERANCE = 1e-13
 
@@ -32,14 +37,37 @@ def assert_close(got: np.ndarray, expected: np.ndarray, tolerance: float = TOLER
     assert error <= tolerance * scale or error == 0.0, (what, error, scale)
 
 
-def test_switch(monkeypatch):
+ORACLE = surface3_numpy.Surface3Kernel()
+
+
+def test_the_switch_is_gone(monkeypatch):
+    """One implementation: ``kernels="numpy"`` is refused, saying why and where the numpy
+    kernels went; ``kernels="compiled"`` is dropped with a DeprecationWarning; the variable
+    warns once per process and value, and the compiled kernel runs."""
     monkeypatch.delenv(KERNELS_VARIABLE, raising=False)
-    assert KernelOptions().kernels == "compiled"
+    monkeypatch.setattr(deprecation, "_warned_variables", set())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        options = KernelOptions(normals="slave")
+    assert "kernels" not in {field.name for field in dataclasses.fields(KernelOptions)}
+    with pytest.raises(ValueError, match="one implementation, compiled C.*tests/oracle"):
+        KernelOptions(kernels="numpy")
+    with pytest.raises(ValueError, match="one implementation"):
+        KernelOptions(kernels="fortran")
+    with pytest.warns(DeprecationWarning, match="kernels=.*deprecated.*drop the argument"):
+        assert KernelOptions(kernels="compiled", normals="slave") == options
     monkeypatch.setenv(KERNELS_VARIABLE, "numpy")
-    assert KernelOptions().kernels == "numpy"
-    assert KernelOptions(kernels="compiled").kernels == "compiled"
+    with pytest.warns(UserWarning, match="DOLFINX_MORTAR_KERNELS=numpy is no longer read: "
+                      "the compiled kernels run.*tests/oracle"):
+        options = KernelOptions()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # once per process and value
+        KernelOptions()
+    slave, master, nodal, _ = random_pairs(20, seed=1)
+    q = Surface3Kernel().evaluate(PairGeometry(slave, master, nodal), options)
+    assert q.gradients_on_demand is not None and q.rows.size > 5
     monkeypatch.setenv(KERNELS_VARIABLE, "fortran")
-    with pytest.raises(ValueError, match="kernels"):
+    with pytest.warns(UserWarning, match="DOLFINX_MORTAR_KERNELS=fortran is no longer read"):
         KernelOptions()
 
 
@@ -54,9 +82,9 @@ def test_kernel_equals_numpy(rule, basis, scalar_gradients):
     kernel = Surface3Kernel()
     for cross in (None, crosspoint):
         options = dict(basis=basis, num_gauss_points=rule, scalar_gradients=scalar_gradients)
-        expected = kernel.evaluate(geometry, KernelOptions(kernels="numpy", **options),
+        expected = ORACLE.evaluate(geometry, KernelOptions(**options),
                                    crosspoint=cross)
-        got = kernel.evaluate(geometry, KernelOptions(kernels="compiled", **options),
+        got = kernel.evaluate(geometry, KernelOptions(**options),
                               crosspoint=cross)
         assert got.gradients_on_demand is not None and expected.gradients_on_demand is None
         np.testing.assert_array_equal(got.valid, expected.valid)
@@ -85,9 +113,9 @@ def test_screened_candidates_are_far():
     near = surface3_compiled._near(slave, master, nodal)
     assert 100 < near.size < 1900
     geometry = PairGeometry(slave, master, nodal)
-    expected = Surface3Kernel().evaluate(geometry, KernelOptions(kernels="numpy"))
+    expected = ORACLE.evaluate(geometry, KernelOptions())
     assert np.isin(expected.rows, near).all() and expected.rows.size > 50
-    got = Surface3Kernel().evaluate(geometry, KernelOptions(kernels="compiled"))
+    got = Surface3Kernel().evaluate(geometry, KernelOptions())
     np.testing.assert_array_equal(got.rows, expected.rows)
 
 
@@ -99,7 +127,7 @@ def test_kept_gradients_are_those_made_again(monkeypatch, ns, nm, scalar_gradien
     kept."""
     slave, master, nodal, cross = random_facets(200, ns, nm, seed=9)
     geometry = PairGeometry(slave, master, nodal)
-    options = KernelOptions(kernels="compiled", scalar_gradients=scalar_gradients)
+    options = KernelOptions(scalar_gradients=scalar_gradients)
     kept = Surface3Kernel().evaluate(geometry, options, crosspoint=cross)
     monkeypatch.setattr(surface3_compiled, "KEPT_GRADIENTS_BYTES", 0)
     made = Surface3Kernel().evaluate(geometry, options, crosspoint=cross)
@@ -116,7 +144,7 @@ def test_gradients_survive_later_requests():
     """``grad`` of an output stays what it was when other rows were asked for since."""
     slave, master, nodal, _ = random_pairs(100, seed=8)
     first, second = (Surface3Kernel().evaluate(PairGeometry(slave, master, nodal),
-                                               KernelOptions(kernels="compiled"))
+                                               KernelOptions())
                      for _ in range(2))
     assert first.Dn.grad.any()  # every output's gradients made here
     first.gradients_on_demand.gradients(first.rows[::-1])
@@ -128,8 +156,8 @@ def _assert_kernels_agree(geometry: PairGeometry, options: dict, tolerance=TOLER
     """The compiled evaluation equals the numpy one: valid pairs, values and every output's
     gradient (whole, and on demand for rows in any order); returns the contributing pairs."""
     kernel = Surface3Kernel()
-    expected = kernel.evaluate(geometry, KernelOptions(kernels="numpy", **options), **arguments)
-    got = kernel.evaluate(geometry, KernelOptions(kernels="compiled", **options), **arguments)
+    expected = ORACLE.evaluate(geometry, KernelOptions(**options), **arguments)
+    got = kernel.evaluate(geometry, KernelOptions(**options), **arguments)
     assert got.gradients_on_demand is not None
     assert got.num_variables == expected.num_variables
     np.testing.assert_array_equal(got.valid, expected.valid)
@@ -192,15 +220,15 @@ def test_element_assignment_is_kept():
     slave[1::2] = slave[::2]
     nodal[1::2] = nodal[::2]
     geometry = PairGeometry(slave, master, nodal)
-    options = KernelOptions(kernels="compiled", integration="element", scalar_gradients=True)
+    options = KernelOptions(integration="element", scalar_gradients=True)
     kernel = Surface3Kernel()
     alone = kernel.evaluate(geometry, options)
     competing = kernel.evaluate(geometry, options, slave_facet=shared)
     rows = np.intersect1d(alone.rows, competing.rows)
     assert rows.size > 20
     assert not np.allclose(alone.D[rows], competing.D[rows])
-    expected = Surface3Kernel().evaluate(
-        geometry, KernelOptions(kernels="numpy", integration="element", scalar_gradients=True),
+    expected = ORACLE.evaluate(
+        geometry, KernelOptions(integration="element", scalar_gradients=True),
         slave_facet=shared)
     for a, b in zip(competing.gradients_on_demand.gradients(rows[::-1]), expected.outputs(),
                     strict=True):
@@ -208,28 +236,31 @@ def test_element_assignment_is_kept():
 
 
 def test_covers_every_3d_configuration():
-    """Every configuration the numpy kernel takes goes to the compiled one; a Gauss rule
-    neither takes stays with numpy, which refuses it."""
+    """Every configuration the numpy oracle takes goes to the compiled kernel; a Gauss rule
+    neither takes is refused by both, naming the rules taken."""
     kernel = Surface3Kernel()
     for ns, nm in ((3, 3), (3, 4), (4, 3), (4, 4)):
         geometry = PairGeometry(np.zeros((2, ns, 3)), np.zeros((2, nm, 3)), np.zeros((2, ns, 3)))
         for normals in ("averaged", "slave", "master"):
             for integration in ("segment", "element"):
-                options = KernelOptions(kernels="compiled", normals=normals,
-                                        integration=integration)
+                options = KernelOptions(normals=normals, integration=integration)
                 assert surface3_compiled.covers(geometry, options)
         no_normals = PairGeometry(geometry.slave_x, geometry.master_x)
         assert surface3_compiled.covers(no_normals, KernelOptions(normals="slave"))
     slave, master, nodal, _ = random_pairs(20, seed=1)
-    q = kernel.evaluate(PairGeometry(slave, master), KernelOptions(kernels="compiled",
-                                                                   normals="master"))
+    q = kernel.evaluate(PairGeometry(slave, master), KernelOptions(normals="master"))
     assert q.gradients_on_demand is not None and q.rows.size > 5
-    for options in (dict(num_gauss_points=4), dict(integration="element", num_gauss_points=4)):
+    for options, taken in ((dict(num_gauss_points=4), "1, 3 or 7 Gauss points per cell"),
+                           (dict(integration="element", num_gauss_points=4),
+                            "triangles take 1, 3 or 7 Gauss points")):
         assert not surface3_compiled.covers(PairGeometry(slave, master, nodal),
                                             KernelOptions(**options))
-        with pytest.raises(ValueError, match="Gauss points"):
-            kernel.evaluate(PairGeometry(slave, master, nodal),
-                            KernelOptions(kernels="compiled", **options))
+        for implementation in (kernel, ORACLE):
+            with pytest.raises(ValueError, match=taken):
+                implementation.evaluate(PairGeometry(slave, master, nodal),
+                                        KernelOptions(**options))
+    with pytest.raises(ValueError, match="triangles or quadrilaterals"):
+        kernel.evaluate(PairGeometry(slave[:, :2], master, nodal[:, :2]), KernelOptions())
 
 
 def test_evaluation_keeps_no_gradients(monkeypatch):
@@ -239,9 +270,9 @@ def test_evaluation_keeps_no_gradients(monkeypatch):
     slave, master, nodal, _ = random_pairs(20000, seed=2)
     geometry = PairGeometry(slave, master, nodal)
     kernel = Surface3Kernel()
-    kernel.evaluate(geometry, KernelOptions(kernels="compiled"))  # compiled and loaded
+    kernel.evaluate(geometry, KernelOptions())  # compiled and loaded
     tracemalloc.start()
-    q = kernel.evaluate(geometry, KernelOptions(kernels="compiled"))
+    q = kernel.evaluate(geometry, KernelOptions())
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     assert q.rows.size > 5000
@@ -257,7 +288,7 @@ def test_quadrilateral_evaluation_keeps_no_gradients(monkeypatch, integration):
     monkeypatch.setattr(surface3_compiled, "KEPT_GRADIENTS_BYTES", 2**20)
     slave, master, nodal, _ = random_facets(12000, 4, 4, seed=9, noise=0.04)
     geometry = PairGeometry(slave, master, nodal)
-    options = KernelOptions(kernels="compiled", integration=integration, scalar_gradients=True)
+    options = KernelOptions(integration=integration, scalar_gradients=True)
     kernel = Surface3Kernel()
     tracemalloc.start()
     q = kernel.evaluate(geometry, options)
@@ -295,17 +326,18 @@ INTERFACE_OPTIONS = [
     dict(integration="element", basis="dual", num_gauss_points=3)]
 
 
-def _interfaces(monkeypatch, tagged, u, options: dict, scalar_gradients: bool = False):
-    """The interface of ``tagged`` at ``u`` with the numpy, then the compiled kernels."""
+def _interfaces(tagged, u, options: dict, scalar_gradients: bool = False):
+    """The interface of ``tagged`` at ``u`` with the numpy oracle's kernels
+    (:func:`oracle.use_oracle`), then the package's compiled ones."""
     for kernels in ("numpy", "compiled"):
-        monkeypatch.setenv(KERNELS_VARIABLE, kernels)
-        mortar = MortarInterface(u.function_space, tagged.facet_tags,
-                                 tagged.markers["upper_bottom"], tagged.markers["lower_top"],
-                                 **options)
-        mortar.scalar_gradients = scalar_gradients
-        mortar.update(u)
-        yield kernels, mortar
-        mortar.destroy()
+        with use_oracle() if kernels == "numpy" else contextlib.nullcontext():
+            mortar = MortarInterface(u.function_space, tagged.facet_tags,
+                                     tagged.markers["upper_bottom"], tagged.markers["lower_top"],
+                                     **options)
+            mortar.scalar_gradients = scalar_gradients
+            mortar.update(u)
+            yield kernels, mortar
+            mortar.destroy()
 
 
 @pytest.mark.parametrize("cell", ["tetrahedron", "hexahedron"])
@@ -322,7 +354,7 @@ def test_interface_equals_numpy(monkeypatch, cell, options):
     u = bent_displacement(tagged)
     configuration = options.get("configuration", "current")
     results = {}
-    for kernels, mortar in _interfaces(monkeypatch, tagged, u, options):
+    for kernels, mortar in _interfaces(tagged, u, options):
         z = mortar.create_multiplier_vector()
         z.getArray()[:] = np.random.default_rng(5).uniform(0.5, 1.5, z.getLocalSize())
         z.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
@@ -350,11 +382,11 @@ ELEMENT_TIES_IN_THE_FORCE_JACOBIAN = (
     "entry with 7 points, 1.0 with 1 point and slave normals)")
 
 
-def _flat_tie_results(monkeypatch, options: dict) -> dict:
+def _flat_tie_results(options: dict) -> dict:
     tagged = two_blocks("tetrahedron", 3, 4, comm=MPI.COMM_SELF)
     u = dolfinx.fem.Function(dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (3,))))
     results = {}
-    for kernels, mortar in _interfaces(monkeypatch, tagged, u, options):
+    for kernels, mortar in _interfaces(tagged, u, options):
         z = mortar.create_multiplier_vector()
         z.set(1.0)
         results[kernels] = _matrices(mortar, z)
@@ -368,7 +400,7 @@ def _flat_tie_results(monkeypatch, options: dict) -> dict:
 def test_flat_element_ties(monkeypatch, options):
     """Where the two kernels give tied Gauss points to different pairs, the assembled D, M,
     G and B still agree."""
-    results = _flat_tie_results(monkeypatch, options)
+    results = _flat_tie_results(options)
     for name in ("D", "M", "G", "B"):
         assert_close(results["compiled"][name], results["numpy"][name], what=name)
 
@@ -378,7 +410,7 @@ def test_flat_element_ties(monkeypatch, options):
                                      dict(integration="element", num_gauss_points=1,
                                           normals="slave")], ids=["7", "1-slave"])
 def test_flat_element_ties_force_jacobian(monkeypatch, options):
-    results = _flat_tie_results(monkeypatch, options)
+    results = _flat_tie_results(options)
     assert_close(results["compiled"]["K"], results["numpy"]["K"], what="K")
 
 
@@ -394,7 +426,7 @@ def test_friction_gradients_equal_numpy(monkeypatch, cell, options):
     tagged = two_blocks(cell, 3, 4, comm=MPI.COMM_SELF)
     u = bent_displacement(tagged)
     results = {}
-    for kernels, mortar in _interfaces(monkeypatch, tagged, u, options, scalar_gradients=True):
+    for kernels, mortar in _interfaces(tagged, u, options, scalar_gradients=True):
         stencil = mortar.stencil
         rows = mortar.contributing_pairs()
         assert rows.size > 16 and stencil.max_star > 0
@@ -412,5 +444,5 @@ def test_friction_gradients_equal_numpy(monkeypatch, cell, options):
 def test_frozen_quantities_drop_the_gradients():
     slave, master, nodal, _ = random_pairs(10, seed=4)
     q = Surface3Kernel().evaluate(PairGeometry(slave, master, nodal),
-                                  KernelOptions(kernels="compiled"))
+                                  KernelOptions())
     assert q.replaced(normals_vary=False).gradients_on_demand is None

@@ -1,13 +1,15 @@
-"""The compiled 2D kernel wired behind the contract (kernels/line2_compiled.py): with
-``kernels="compiled"`` every 2D option runs it, and what it hands the stencils equals the
-numpy kernel's: the values, valid pairs, overlaps and every output's gradient of the kernel
-(every normal, integration and basis option, Gauss rules, crosspoints, scalar gradients), and
-through the interface the assembled D, M, weighted gaps, gap Jacobian, constraint matrix and
-force Jacobian (standard basis, covered dual basis, reference configuration, crosspoints;
-triangles and quadrilaterals), and a frictional contact system's residual and Jacobian, to
-1e-13 of each result's largest entry."""
+"""The compiled 2D kernel wired behind the contract (kernels/line2_compiled.py): every 2D option
+runs it (whatever $DOLFINX_MORTAR_KERNELS says), and what it hands the stencils equals the numpy
+oracle's (tests/oracle/line2_numpy.py): the values, valid pairs, overlaps and every output's
+gradient of the kernel (every normal, integration and basis option, Gauss rules, crosspoints,
+scalar gradients), and through the interface the assembled D, M, weighted gaps, gap Jacobian,
+constraint matrix and force Jacobian (standard basis, covered dual basis, reference
+configuration, crosspoints; triangles and quadrilaterals), and a frictional contact system's
+residual and Jacobian, to 1e-13 of each result's largest entry."""
 
 from __future__ import annotations
+
+import contextlib
 
 import numpy as np
 import pytest
@@ -16,12 +18,15 @@ from petsc4py import PETSc
 from test_compiled_line2 import random_pairs
 from test_mortar import interface, perturbed_displacement
 
-from dolfinx_mortar import meshes
+from dolfinx_mortar import deprecation, meshes
 from dolfinx_mortar.kernels import KernelOptions, Line2Kernel, PairGeometry, line2_compiled
 from dolfinx_mortar.kernels.contract import KERNELS_VARIABLE
 
+from oracle import line2_numpy, use_oracle
+
 TOLERANCE = 1e-13
 NORMALS = ("averaged", "slave", "master")
+ORACLE = line2_numpy.Line2Kernel()
 
 
 def assert_close(got: np.ndarray, expected: np.ndarray, tolerance: float = TOLERANCE, what=""):
@@ -37,10 +42,10 @@ def geometry_of(x: np.ndarray, has_neighbour: np.ndarray) -> PairGeometry:
 
 
 def evaluate_both(geometry, crosspoint=None, slave_facet=None, **options):
-    kernel = Line2Kernel()
-    return [kernel.evaluate(geometry, KernelOptions(kernels=kernels, **options),
-                            crosspoint=crosspoint, slave_facet=slave_facet)
-            for kernels in ("numpy", "compiled")]
+    """The numpy oracle's, then the package's quantities."""
+    return [kernel.evaluate(geometry, KernelOptions(**options), crosspoint=crosspoint,
+                            slave_facet=slave_facet)
+            for kernel in (ORACLE, Line2Kernel())]
 
 
 def assert_kernels_agree(expected, got) -> None:
@@ -110,8 +115,8 @@ def test_scalar_gradients_keep_D_and_M():
     rows = got.rows[got.overlap[got.rows] > 0.3]
     direction = np.random.default_rng(45).uniform(-1.0, 1.0, x.shape)
     h = 1e-6
-    moved = [Line2Kernel().evaluate(geometry_of(x + s * h * direction, has_neighbour),
-                                    KernelOptions(kernels="numpy"), crosspoint=crosspoint)
+    moved = [ORACLE.evaluate(geometry_of(x + s * h * direction, has_neighbour),
+                             KernelOptions(), crosspoint=crosspoint)
              for s in (1.0, -1.0)]
     difference = (moved[0].M - moved[1].M)[rows] / (2.0 * h)
     position = np.searchsorted(got.rows, rows)
@@ -144,13 +149,15 @@ def test_empty_and_not_overlapping():
         assert got.segment_gradients.combine([[(0, 1.0)]]).shape == (1, 12, 0)
 
 
-def test_default_is_compiled(monkeypatch):
-    monkeypatch.delenv(KERNELS_VARIABLE, raising=False)
-    x, has_neighbour, _ = random_pairs(20, seed=49)
-    q = Line2Kernel().evaluate(geometry_of(x, has_neighbour), KernelOptions())
-    assert isinstance(q.segment_gradients, line2_compiled.FullGradients)
+def test_the_variable_no_longer_switches(monkeypatch):
+    """$DOLFINX_MORTAR_KERNELS=numpy warns that it is not read, and the compiled kernel runs."""
+    monkeypatch.setattr(deprecation, "_warned_variables", set())
     monkeypatch.setenv(KERNELS_VARIABLE, "numpy")
-    q = Line2Kernel().evaluate(geometry_of(x, has_neighbour), KernelOptions())
+    x, has_neighbour, _ = random_pairs(20, seed=49)
+    with pytest.warns(UserWarning, match="DOLFINX_MORTAR_KERNELS=numpy is no longer read"):
+        q = Line2Kernel().evaluate(geometry_of(x, has_neighbour), KernelOptions())
+    assert isinstance(q.segment_gradients, line2_compiled.FullGradients)
+    q = ORACLE.evaluate(geometry_of(x, has_neighbour), KernelOptions())
     assert not isinstance(q.segment_gradients, line2_compiled.FullGradients)
 
 
@@ -197,7 +204,7 @@ CONFIGURATIONS = [
 @pytest.mark.parametrize("cell_type", ["triangle", "quadrilateral"])
 @pytest.mark.parametrize("configuration", CONFIGURATIONS, ids=lambda c: "-".join(
     f"{k}={v}" for k, v in c.items()) or "default")
-def test_interface_equals_numpy(monkeypatch, cell_type, configuration):
+def test_interface_equals_numpy(cell_type, configuration):
     """D, M, gaps, gap Jacobian, B and the force Jacobian of a bent, non-matching interface."""
     options = dict(configuration)
     crosspoints = options.pop("crosspoints", False)
@@ -207,25 +214,25 @@ def test_interface_equals_numpy(monkeypatch, cell_type, configuration):
     u = perturbed_displacement(tagged)
     results = {}
     for kernels in ("numpy", "compiled"):
-        monkeypatch.setenv(KERNELS_VARIABLE, kernels)
-        mortar = interface(tagged, None, **options)
-        mortar.scalar_gradients = scalar_gradients
-        if crosspoints:
-            ends = _slave_end_blocks(mortar, u.function_space)
-            assert ends.size == 2
-            mortar.set_crosspoints(ends)
-        mortar.update(u)
-        z = mortar.create_multiplier_vector()
-        z.getArray()[:] = np.random.default_rng(5).uniform(0.5, 1.5, z.getLocalSize())
-        z.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
-        results[kernels] = _matrices(mortar, z)
-        q = mortar.quantities
-        standard = getattr(q, "standard", q)
-        is_compiled = isinstance(standard.segment_gradients, line2_compiled.FullGradients)
-        if options.get("configuration") != "reference":
-            assert is_compiled == (kernels == "compiled")
-        z.destroy()
-        mortar.destroy()
+        with use_oracle() if kernels == "numpy" else contextlib.nullcontext():
+            mortar = interface(tagged, None, **options)
+            mortar.scalar_gradients = scalar_gradients
+            if crosspoints:
+                ends = _slave_end_blocks(mortar, u.function_space)
+                assert ends.size == 2
+                mortar.set_crosspoints(ends)
+            mortar.update(u)
+            z = mortar.create_multiplier_vector()
+            z.getArray()[:] = np.random.default_rng(5).uniform(0.5, 1.5, z.getLocalSize())
+            z.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+            results[kernels] = _matrices(mortar, z)
+            q = mortar.quantities
+            standard = getattr(q, "standard", q)
+            is_compiled = isinstance(standard.segment_gradients, line2_compiled.FullGradients)
+            if options.get("configuration") != "reference":
+                assert is_compiled == (kernels == "compiled")
+            z.destroy()
+            mortar.destroy()
     for name, expected in results["numpy"].items():
         # (frozen reference integrals: the force does not change with u)
         frozen = (name, options.get("configuration")) == ("K", "reference")
@@ -234,24 +241,24 @@ def test_interface_equals_numpy(monkeypatch, cell_type, configuration):
 
 
 @pytest.mark.parametrize("method", ["lagrange", "penalty"])
-def test_frictional_system_equals_numpy(monkeypatch, method):
+def test_frictional_system_equals_numpy(method):
     """The residual and Jacobian of a 2D frictional contact system (the tangential terms read
     Dn, Mn, the gaps and the areas) at a state with random multipliers."""
     from test_friction import frictional_blocks
 
     results = {}
     for kernels in ("numpy", "compiled"):
-        monkeypatch.setenv(KERNELS_VARIABLE, kernels)
-        problem = frictional_blocks(0.5, method)
-        residual = problem.b.duplicate()
-        problem.equations.residual(problem.snes, problem.x, residual)
-        assert problem.num_active() > 0
-        J = problem.equations.assemble_system()
-        results[kernels] = (residual.getArray().copy(),
-                            J.convert("dense").getDenseArray().copy())
-        q = problem.interfaces[0].quantities
-        q = getattr(q, "standard", q)  # (the covered dual basis, the problem's default)
-        assert isinstance(q.segment_gradients, line2_compiled.FullGradients) == (
-            kernels == "compiled")
+        with use_oracle() if kernels == "numpy" else contextlib.nullcontext():
+            problem = frictional_blocks(0.5, method)
+            residual = problem.b.duplicate()
+            problem.equations.residual(problem.snes, problem.x, residual)
+            assert problem.num_active() > 0
+            J = problem.equations.assemble_system()
+            results[kernels] = (residual.getArray().copy(),
+                                J.convert("dense").getDenseArray().copy())
+            q = problem.interfaces[0].quantities
+            q = getattr(q, "standard", q)  # (the covered dual basis, the problem's default)
+            assert isinstance(q.segment_gradients, line2_compiled.FullGradients) == (
+                kernels == "compiled")
     assert_close(results["compiled"][0], results["numpy"][0], what="residual")
     assert_close(results["compiled"][1], results["numpy"][1], what="jacobian")

@@ -1,17 +1,43 @@
 """The 3D mortar kernel on hand-made pairs: known areas and gaps, the dual basis, Taylor
-tests, objectivity, scaling and degenerate geometry (pure numpy)."""
+tests, objectivity, scaling and degenerate geometry, on the package's compiled kernel and on
+the numpy oracle (tests/oracle/surface3_numpy.py) alike (the dual basis's coefficients are the
+oracle's own)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from dolfinx_mortar.kernels import surface3
+from dolfinx_mortar.kernels import KernelOptions, PairGeometry, Surface3Kernel
+
+from oracle import surface3_numpy
 
 # the slave facet faces -z (a lower surface of the upper body), the master faces +z
 SLAVE_QUAD = np.array([[0, 0, 0], [0, 1, 0], [1, 1, 0], [1, 0, 0]], float)
 SLAVE_TRIANGLE = np.array([[0, 0, 0], [0, 1, 0], [1, 0, 0]], float)
 DOWN = np.array([0.0, 0.0, -1.0])
+
+
+def compiled_pair_quantities(slave_x, master_x, slave_normals, *, crosspoint=None,
+                             slave_facet=None, **options):
+    """The package's kernel with the oracle's ``pair_quantities`` arguments."""
+    geometry = PairGeometry(*(np.asarray(x, dtype=float)
+                              for x in (slave_x, master_x, slave_normals)))
+    return Surface3Kernel().evaluate(geometry, KernelOptions(**options), crosspoint=crosspoint,
+                                     slave_facet=slave_facet)
+
+
+IMPLEMENTATIONS = {"compiled": compiled_pair_quantities,
+                   "oracle": surface3_numpy.pair_quantities}
+pair_quantities = compiled_pair_quantities
+"""The implementation the tests call (:func:`implementation` sets it per test)."""
+
+
+@pytest.fixture(params=list(IMPLEMENTATIONS))
+def implementation(request, monkeypatch):
+    """The package's compiled kernel, then the numpy oracle."""
+    monkeypatch.setitem(globals(), "pair_quantities", IMPLEMENTATIONS[request.param])
+    return request.param
 
 
 def master_square(x0, x1, y0, y1, z=-0.1):
@@ -21,10 +47,10 @@ def master_square(x0, x1, y0, y1, z=-0.1):
 def evaluate(slave, master, normals=None, **options):
     if normals is None:
         normals = np.tile(DOWN, (slave.shape[0], 1))
-    return surface3.pair_quantities(slave[None], master[None], normals[None], **options)
+    return pair_quantities(slave[None], master[None], normals[None], **options)
 
 
-def test_master_square_offset_by_half_a_facet():
+def test_master_square_offset_by_half_a_facet(implementation):
     for basis in ("standard", "dual"):
         q = evaluate(SLAVE_QUAD, master_square(0.5, 1.5, 0.0, 1.0), basis=basis)
         assert q.valid[0]
@@ -38,7 +64,7 @@ def test_master_square_offset_by_half_a_facet():
                                atol=1e-15)
 
 
-def test_tilted_master_plane():
+def test_tilted_master_plane(implementation):
     """Master plane z = -0.1 - 0.2 x below the unit slave square: gap 0.1 + 0.2 x."""
     master = np.array([[-1, -1, 0.1], [2, -1, -0.5], [2, 2, -0.5], [-1, 2, 0.1]], float)
     q = evaluate(SLAVE_QUAD, master)
@@ -49,14 +75,14 @@ def test_tilted_master_plane():
     np.testing.assert_allclose(q.area.value[0], 0.25, atol=1e-14)
 
 
-def test_penetrating_master_gives_negative_gaps():
+def test_penetrating_master_gives_negative_gaps(implementation):
     q = evaluate(SLAVE_TRIANGLE, master_square(-1, 2, -1, 2, z=0.2))
     np.testing.assert_allclose(q.area.value[0], 0.5 / 3, atol=1e-15)
     np.testing.assert_allclose(q.gap.value[0], -0.2 * 0.5 / 3, atol=1e-15)
 
 
 @pytest.mark.parametrize("slave", ["triangle", "parallelogram"])
-def test_dual_mortar_matrix_is_diagonal(slave):
+def test_dual_mortar_matrix_is_diagonal(slave, implementation):
     """A master covering the whole flat slave facet: dual D is diagonal with
     D_jj = int N_j, and sum_j Phi_j = 1 keeps the row sums of M. (Exact where the
     integrands are polynomials in the plane: triangles and parallelograms.)"""
@@ -84,12 +110,12 @@ def test_dual_basis_is_biorthogonal_on_distorted_quadrilaterals(warped):
     facet = np.array([[0, 0, 0], [0.2, 1.0, 0], [1.6, 1.3, 0], [1.1, -0.2, 0]], float)
     if warped:
         facet[:, 2] = [0.0, 0.1, -0.2, 0.05]
-    A = surface3._dual_coefficients(Dual(facet[None], np.zeros((1, 4, 3, 1))), 4).value[0]
+    A = surface3_numpy._dual_coefficients(Dual(facet[None], np.zeros((1, 4, 3, 1))), 4).value[0]
     g, w = np.polynomial.legendre.leggauss(3 if warped else 6)
     points = np.array([[a, b] for a in g for b in g])
     weights = np.array([wa * wb for wa in w for wb in w])
-    N = np.stack(surface3.shape_functions(points, 4), axis=-1)
-    dN = surface3._shape_derivatives(points, 4)
+    N = np.stack(surface3_numpy.shape_functions(points, 4), axis=-1)
+    dN = surface3_numpy._shape_derivatives(points, 4)
     t1, t2 = np.einsum("qk,kc->qc", dN[..., 0], facet), np.einsum("qk,kc->qc", dN[..., 1], facet)
     area_element = np.linalg.norm(np.cross(t1, t2), axis=1) * weights
     Phi = N @ A.T
@@ -115,7 +141,7 @@ def outputs(q):
 @pytest.mark.parametrize("normals", ["averaged", "slave", "master"])
 @pytest.mark.parametrize("basis", ["standard", "dual"])
 @pytest.mark.parametrize("integration", ["segment", "element"])
-def test_taylor(shapes, normals, basis, integration):
+def test_taylor(shapes, normals, basis, integration, implementation):
     """Element-based pairs on a master that covers the slave facet whole: no Gauss point
     leaves it within the steps."""
     ns, nm = shapes
@@ -129,7 +155,7 @@ def test_taylor(shapes, normals, basis, integration):
     direction = rng.uniform(-1, 1, x.size)
 
     def quantities(values):
-        return surface3.pair_quantities(
+        return pair_quantities(
             values[:3 * ns].reshape(1, ns, 3), values[3 * ns:3 * (ns + nm)].reshape(1, nm, 3),
             values[3 * (ns + nm):].reshape(1, ns, 3), normals=normals, basis=basis,
             integration=integration)
@@ -158,7 +184,7 @@ def covering_pair(rng, ns, nm):
 
 
 @pytest.mark.parametrize("shapes", [(3, 3), (4, 4), (3, 4)])
-def test_objectivity_and_scaling(shapes):
+def test_objectivity_and_scaling(shapes, implementation):
     ns, nm = shapes
     rng = np.random.default_rng(3)
     slave, master, nodal = random_pair(rng, ns, nm)
@@ -180,7 +206,7 @@ def test_objectivity_and_scaling(shapes):
 
 @pytest.mark.parametrize("case", ["coincident", "edges_on_edges", "tiny_corner", "inside",
                                   "around", "nearly_tangent"])
-def test_degenerate_geometry_is_finite_and_continuous(case):
+def test_degenerate_geometry_is_finite_and_continuous(case, implementation):
     slave = SLAVE_QUAD
     masters = {
         "coincident": master_square(0, 1, 0, 1, z=0.0)[[0, 1, 2, 3]],
@@ -206,7 +232,7 @@ def test_degenerate_geometry_is_finite_and_continuous(case):
 
 @pytest.mark.parametrize("shapes", [(3, 3), (4, 4), (3, 4), (4, 3)])
 @pytest.mark.parametrize("basis", ["standard", "dual"])
-def test_element_based_equals_segment_based_under_one_master_facet(shapes, basis):
+def test_element_based_equals_segment_based_under_one_master_facet(shapes, basis, implementation):
     """A flat slave facet wholly inside one parallel master facet: the integrands are
     polynomials the slave rule integrates exactly, so both integrations agree."""
     ns, nm = shapes
@@ -223,7 +249,7 @@ def test_element_based_equals_segment_based_under_one_master_facet(shapes, basis
 
 
 @pytest.mark.parametrize("basis", ["standard", "dual"])
-def test_element_based_gives_each_gauss_point_to_one_master_facet(basis):
+def test_element_based_gives_each_gauss_point_to_one_master_facet(basis, implementation):
     """Two master squares meeting at x = 1/2, where the middle row of the slave's 3 x 3
     Gauss points lies: summed over both pairs, D is the whole facet's (each point counted
     once) and the weighted gap is 0.1 times the area; the overlaps add up to 1."""
@@ -231,12 +257,12 @@ def test_element_based_gives_each_gauss_point_to_one_master_facet(basis):
     slave = np.stack([SLAVE_QUAD, SLAVE_QUAD])
     normals = np.tile(DOWN, (2, 4, 1))
     options = {"basis": basis, "integration": "element", "num_gauss_points": 9}
-    both = surface3.pair_quantities(slave, np.stack([left, right]), normals,
+    both = pair_quantities(slave, np.stack([left, right]), normals,
                                     slave_facet=np.array([0, 0]), **options)
     whole = evaluate(SLAVE_QUAD, master_square(-0.5, 1.5, -0.5, 1.5), **options)
     np.testing.assert_allclose(both.D.sum(axis=0), whole.D[0], atol=1e-15)
     assert both.overlap.sum() == pytest.approx(1.0, abs=1e-15)
     np.testing.assert_allclose(both.gap.value.sum(axis=0), 0.1 * whole.area.value[0],
                                atol=1e-15)
-    alone = surface3.pair_quantities(slave, np.stack([left, right]), normals, **options)
+    alone = pair_quantities(slave, np.stack([left, right]), normals, **options)
     assert alone.overlap.sum() > 1.0  # without the facet numbers the middle row counts twice

@@ -1,8 +1,8 @@
-"""The 3D kernel keeps the gradients of Dn, Mn and the areas of triangle pairs factorized
-(kernels.AffineFactors, the result's ``affine_factors``: over the plane coordinates, a
-chain, the normals' weights).
-Expanded they must be the unfactorized kernel's gradients bit for bit, and the stencil's
-combined gradients (contracted before the chain) those of the expanded gradients."""
+"""The 3D numpy oracle (tests/oracle/surface3_numpy.py) keeps the gradients of Dn, Mn and the areas
+of triangle pairs factorized (kernels.AffineFactors, the result's ``affine_factors``: over the
+plane coordinates, a chain, the normals' weights). Expanded they must be the unfactorized
+kernel's gradients bit for bit, and the stencil's combined gradients (contracted before the
+chain) those of the expanded gradients."""
 
 from __future__ import annotations
 
@@ -12,15 +12,17 @@ from test_kernel_surface3_speedpath import random_pairs
 from test_mortar3d import bent_displacement, interface, two_blocks
 
 from dolfinx_mortar.dual import RowSubsetDual
-from dolfinx_mortar.kernels import AffineFactors, surface3
+from dolfinx_mortar.kernels import AffineFactors
+
+from oracle import surface3_numpy, use_oracle
 
 
 @pytest.mark.parametrize("crosspoints", [False, True])
 def test_expanded_factors_are_the_kernel_gradients(crosspoints):
     slave, master, nodal, crosspoint = random_pairs(1500, seed=7)
     args = dict(crosspoint=crosspoint if crosspoints else None)
-    factorized = surface3.pair_quantities(slave, master, nodal, factorized=True, **args)
-    full = surface3.pair_quantities(slave, master, nodal, factorized=False, **args)
+    factorized = surface3_numpy.pair_quantities(slave, master, nodal, factorized=True, **args)
+    full = surface3_numpy.pair_quantities(slave, master, nodal, factorized=False, **args)
     assert factorized.valid.sum() > 100
     assert isinstance(factorized.affine_factors, AffineFactors)
     assert full.affine_factors is None
@@ -40,13 +42,13 @@ def _unfactorized(q):
     return q.replaced(Dn=plain(q.Dn), Mn=plain(q.Mn), area=plain(q.area))
 
 
-def test_combined_gradients_of_the_factors(monkeypatch):
+def test_combined_gradients_of_the_factors():
     """K's and the friction rows' terms (per-pair weights on Dn, Mn, area, gap) over a
-    subset of pairs that includes pairs without overlap (the numpy kernel's factors: the
+    subset of pairs that includes pairs without overlap (the numpy oracle's factors: the
     compiled kernel keeps none)."""
-    monkeypatch.setenv("DOLFINX_MORTAR_KERNELS", "numpy")
     tagged = two_blocks("tetrahedron", 3, 4)
-    mortar = interface(tagged, bent_displacement(tagged))
+    with use_oracle():
+        mortar = interface(tagged, bent_displacement(tagged))
     q, stencil = mortar.quantities, mortar.stencil
     assert q.affine_factors is not None
     rng = np.random.default_rng(2)

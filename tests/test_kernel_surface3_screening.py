@@ -1,6 +1,6 @@
-"""The 3D kernel's separation test (kernels/surface3._separated) drops candidates before the
-clip: it must drop only pairs the clip finds no overlap for, so that the kernel's output is
-the same with and without it, bit for bit."""
+"""The 3D numpy oracle's separation test (tests/oracle/surface3_numpy.py, _separated) drops
+candidates before the clip: it must drop only pairs the clip finds no overlap for, so that the
+kernel's output is the same with and without it, bit for bit."""
 
 from __future__ import annotations
 
@@ -8,18 +8,18 @@ import numpy as np
 import pytest
 from test_kernel_surface3_speedpath import random_pairs
 
-from dolfinx_mortar.kernels import surface3
+from oracle import surface3_numpy
 
 
 def clip_overlaps(slave, master, nodal, normals):
     """(separated, overlapping) of every pair, on the projected polygons."""
-    xs, xm, n = surface3._pair_variables(slave, master, nodal, False)
-    *_, S, Mp = surface3._auxiliary_plane(xs, xm, n, normals)
-    separated = surface3._separated(S.value, Mp.value)
-    _, count, positions = surface3._clip(S.value, Mp.value[:, ::-1])
-    area = surface3._padded_area(positions, count)
-    slave_area = np.abs(surface3._polygon_area(S.value))
-    return separated, (count >= 3) & (area > surface3._AREA_TOLERANCE * slave_area)
+    xs, xm, n = surface3_numpy._pair_variables(slave, master, nodal, False)
+    *_, S, Mp = surface3_numpy._auxiliary_plane(xs, xm, n, normals)
+    separated = surface3_numpy._separated(S.value, Mp.value)
+    _, count, positions = surface3_numpy._clip(S.value, Mp.value[:, ::-1])
+    area = surface3_numpy._padded_area(positions, count)
+    slave_area = np.abs(surface3_numpy._polygon_area(S.value))
+    return separated, (count >= 3) & (area > surface3_numpy._AREA_TOLERANCE * slave_area)
 
 
 @pytest.mark.parametrize("normals", ["averaged", "slave", "master"])
@@ -47,10 +47,10 @@ def test_touching_triangles_are_not_separated():
 def test_kernel_output_unchanged_by_the_separation_test(normals, monkeypatch):
     slave, master, nodal, crosspoint = random_pairs(1500, seed=5)
     args = dict(normals=normals, basis="dual", crosspoint=crosspoint, scalar_gradients=True)
-    screened = surface3.pair_quantities(slave, master, nodal, **args)
-    monkeypatch.setattr(surface3, "_separated",
+    screened = surface3_numpy.pair_quantities(slave, master, nodal, **args)
+    monkeypatch.setattr(surface3_numpy, "_separated",
                         lambda S, M: np.zeros(S.shape[0], dtype=bool))
-    clipped = surface3.pair_quantities(slave, master, nodal, **args)
+    clipped = surface3_numpy.pair_quantities(slave, master, nodal, **args)
     assert screened.valid.sum() > 100
     np.testing.assert_array_equal(screened.valid, clipped.valid)
     np.testing.assert_array_equal(screened.overlap, clipped.overlap)

@@ -1,5 +1,5 @@
 """The 3D kernel's triangle-on-triangle path (integrands from the fan cells' corners,
-kernels/surface3._affine_integrals) against the Gauss point path it replaces: the same
+tests/oracle/surface3_numpy._affine_integrals) against the Gauss point path it replaces: the same
 quadrature sums and derivatives to rounding, for every rule, basis and normal field."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dolfinx_mortar.kernels import surface3
+from oracle import surface3_numpy
 
 
 def random_pairs(n: int, seed: int):
@@ -30,14 +30,14 @@ def random_pairs(n: int, seed: int):
 @pytest.mark.parametrize("normals", ["averaged", "slave", "master"])
 def test_corner_path_matches_gauss_points(rule, basis, normals):
     slave, master, nodal, crosspoint = random_pairs(120, seed=0)
-    rows, _, batches = surface3._screen_segments(slave, master, nodal, normals)
+    rows, _, batches = surface3_numpy._screen_segments(slave, master, nodal, normals)
     assert {b[1].shape[1] for b in batches} >= {3, 4, 5, 6}  # clip polygons of every size
     for cross in (np.zeros_like(crosspoint), crosspoint):
         for batch, *topology in batches:
             args = (slave[batch], master[batch], nodal[batch], cross[batch], normals, basis,
                     rule, *topology)
-            fast = surface3._polygon_integrals(*args)
-            slow = surface3._polygon_integrals(*args, pointwise=True)
+            fast = surface3_numpy._polygon_integrals(*args)
+            slow = surface3_numpy._polygon_integrals(*args, pointwise=True)
             for name in ("D", "M", "Dn", "Mn", "gap", "area"):
                 for part in ("value", "grad"):
                     a, b = getattr(fast[name], part), getattr(slow[name], part)

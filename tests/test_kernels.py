@@ -1,5 +1,9 @@
 """Known-answer tests of the batched 2D mortar kernels (:mod:`dolfinx_mortar.kernels`).
 
+Every test runs twice: on the package's kernel (compiled, ``kernels.pair_quantities``) and on
+the numpy oracle (``tests/oracle/line2_numpy.py``), so that both keep the properties checked
+here and not only each other's values.
+
 Geometry conventions (see the kernels' module docstring): a pair is the six nodes
 ``p, a, b, q, c, d``; ``a -> b`` is the slave facet, ``c -> d`` the master facet,
 and a facet ``start -> end`` has the outward normal ``(t_y, -t_x) / |t|``. A
@@ -21,9 +25,21 @@ import pytest
 from dolfinx_mortar import kernels
 from dolfinx_mortar.kernels import BASIS_OPTIONS, INTEGRATION_OPTIONS, NORMAL_OPTIONS
 
+from oracle import line2_numpy
+
 INTERFACE_LENGTH = 2.5
 DUAL_COEFFICIENTS = np.array([[2.0, -1.0], [-1.0, 2.0]])
 ALL_OPTIONS = list(itertools.product(NORMAL_OPTIONS, INTEGRATION_OPTIONS, BASIS_OPTIONS))
+IMPLEMENTATIONS = {"compiled": kernels.pair_quantities, "oracle": line2_numpy.pair_quantities}
+pair_quantities = kernels.pair_quantities
+"""The implementation the tests call (:func:`implementation` sets it per test)."""
+
+
+@pytest.fixture(autouse=True, params=list(IMPLEMENTATIONS))
+def implementation(request, monkeypatch):
+    """Every test on the package's compiled kernel, then on the numpy oracle."""
+    monkeypatch.setitem(globals(), "pair_quantities", IMPLEMENTATIONS[request.param])
+    return request.param
 
 
 # --------------------------------------------------------------------------------------------
@@ -117,7 +133,7 @@ def assemble(pairs: SurfacePairs, quantities) -> tuple[np.ndarray, np.ndarray, n
 
 
 def assembled(pairs: SurfacePairs, **options):
-    quantities = kernels.pair_quantities(
+    quantities = pair_quantities(
         pairs.x, pairs.has_neighbour, slave_facet=pairs.slave_facet, **options
     )
     return assemble(pairs, quantities)
@@ -411,7 +427,7 @@ def test_element_based_keeps_exactly_the_gauss_points_on_the_master(master_start
     height = 0.2
     master_start = -1.0 / np.sqrt(3.0) + master_start_offset
     x = single_pair((1.0, 0.0), (-1.0, 0.0), (master_start, height), (3.0, height))
-    quantities = kernels.pair_quantities(
+    quantities = pair_quantities(
         x, NO_NEIGHBOURS, integration="element", basis=basis, num_gauss_points=2
     )
     points, weights = np.polynomial.legendre.leggauss(2)
@@ -463,7 +479,7 @@ NO_NEIGHBOURS = np.zeros((1, 2), dtype=bool)
 
 
 def pair_gap(x, **options) -> np.ndarray:
-    return kernels.pair_quantities(x, NO_NEIGHBOURS, **options).gap.value[0]
+    return pair_quantities(x, NO_NEIGHBOURS, **options).gap.value[0]
 
 
 @pytest.mark.parametrize("integration", INTEGRATION_OPTIONS)
@@ -473,7 +489,7 @@ def pair_gap(x, **options) -> np.ndarray:
 def test_gap_parallel_master_full_cover(gap, normals, basis, integration):
     """Slave facet from (1, 0) to (-1, 0) (normal +y), master at y = gap covering it."""
     x = single_pair((1.0, 0.0), (-1.0, 0.0), (-1.5, gap), (1.7, gap))
-    quantities = kernels.pair_quantities(
+    quantities = pair_quantities(
         x, NO_NEIGHBOURS, normals=normals, integration=integration, basis=basis
     )
     # int Phi_j = int N_j = L/2 = 1 for both bases
@@ -533,7 +549,7 @@ def test_curved_pairs_match_independent_reference(normals, basis):
     has_neighbour = np.ones((len(x), 2), dtype=bool)
     has_neighbour[0] = (False, True)
     has_neighbour[1] = (True, False)
-    quantities = kernels.pair_quantities(
+    quantities = pair_quantities(
         x, has_neighbour, normals=normals, basis=basis, integration="segment", num_gauss_points=12
     )
     assert quantities.valid.all()
@@ -553,8 +569,8 @@ def test_absent_neighbours_are_ignored():
     other = x.copy()
     other[~has_neighbour[:, 0], 0] += 10.0
     other[~has_neighbour[:, 1], 3] -= 7.0
-    first = kernels.pair_quantities(x, has_neighbour)
-    second = kernels.pair_quantities(other, has_neighbour)
+    first = pair_quantities(x, has_neighbour)
+    second = pair_quantities(other, has_neighbour)
     np.testing.assert_array_equal(first.gap.value, second.gap.value)
     np.testing.assert_array_equal(first.Dn.grad, second.Dn.grad)
     p_grad = first.gap.grad[..., 0:2]
@@ -573,7 +589,7 @@ def test_grazing_master(steepness, normals, basis):
     quadratic, so 2 Gauss points on [0.2, 0.2 + s] give the exact answer."""
     start, height = 0.2, 0.1
     x = single_pair((1.0, 0.0), (-1.0, 0.0), (start, height), (start + steepness, height + 1.0))
-    quantities = kernels.pair_quantities(x, NO_NEIGHBOURS, normals=normals, basis=basis)
+    quantities = pair_quantities(x, NO_NEIGHBOURS, normals=normals, basis=basis)
     assert quantities.valid[0]
     points, weights = np.polynomial.legendre.leggauss(2)
     positions = start + steepness * (points + 1.0) / 2.0
@@ -602,7 +618,7 @@ def test_master_not_facing_the_slave_contributes_nothing(
     name, master_start, master_end, normals, integration, basis
 ):
     x = single_pair((1.0, 0.0), (-1.0, 0.0), master_start, master_end)
-    quantities = kernels.pair_quantities(
+    quantities = pair_quantities(
         x, NO_NEIGHBOURS, normals=normals, integration=integration, basis=basis
     )
     assert not quantities.valid[0]
@@ -620,10 +636,10 @@ def test_units_do_not_matter(normals, integration, basis):
     x = np.array([random_curved_pair(rng) for _ in range(6)])
     has_neighbour = np.ones((len(x), 2), dtype=bool)
     options = dict(normals=normals, integration=integration, basis=basis)
-    reference = kernels.pair_quantities(x, has_neighbour, **options)
+    reference = pair_quantities(x, has_neighbour, **options)
     assert reference.valid.all()
     for scale in (1e-6, 1e-3, 1e3, 1e6):
-        scaled = kernels.pair_quantities(x * scale, has_neighbour, **options)
+        scaled = pair_quantities(x * scale, has_neighbour, **options)
         np.testing.assert_array_equal(scaled.valid, reference.valid)
         np.testing.assert_allclose(scaled.D / scale, reference.D, rtol=0, atol=1e-14)
         np.testing.assert_allclose(scaled.M / scale, reference.M, rtol=0, atol=1e-14)
@@ -644,7 +660,7 @@ def test_tiny_overlaps_are_integrated(overlap, normals, basis):
     """Segment-based: the master covers x in [1 - overlap, 3] of the slave (1, 0) -> (-1, 0),
     i.e. xi in [-1, -1 + overlap], next to a, where N_a = 1 - O(overlap)."""
     x = single_pair((1.0, 0.0), (-1.0, 0.0), (1.0 - overlap, 0.1), (3.0, 0.1))
-    quantities = kernels.pair_quantities(x, NO_NEIGHBOURS, normals=normals, basis=basis)
+    quantities = pair_quantities(x, NO_NEIGHBOURS, normals=normals, basis=basis)
     assert quantities.valid[0]
     relative_rounding = 1e-15 / overlap
     np.testing.assert_allclose(quantities.overlap[0], overlap, rtol=relative_rounding)
@@ -710,10 +726,10 @@ def test_dual_basis_biorthogonal_on_distorted_facets(normals, integration):
         x.append(nodes)
     x = np.array(x)
     has_neighbour = np.zeros((len(x), 2), dtype=bool)
-    dual = kernels.pair_quantities(
+    dual = pair_quantities(
         x, has_neighbour, normals=normals, integration=integration, basis="dual"
     )
-    standard = kernels.pair_quantities(x, has_neighbour, normals=normals, integration=integration)
+    standard = pair_quantities(x, has_neighbour, normals=normals, integration=integration)
     expected_dual = lengths[:, None, None] / 2.0 * np.eye(2)
     expected_standard = lengths[:, None, None] / 6.0 * np.array([[2.0, 1.0], [1.0, 2.0]])
     tolerance = 1e-14 * lengths[:, None, None]
@@ -800,7 +816,7 @@ def test_taylor_second_order(normals, integration, basis):
     perturbed = cases[:, None] + TAYLOR_STEPS[None, :, None, None] * directions[:, None]
     x = np.concatenate([cases[:, None], perturbed], axis=1).reshape(-1, 6, 2)
     has_neighbour = np.ones((len(x), 2), dtype=bool)
-    quantities = kernels.pair_quantities(
+    quantities = pair_quantities(
         x, has_neighbour, normals=normals, integration=integration, basis=basis
     )
     assert quantities.valid.all()
@@ -838,7 +854,7 @@ def test_gradients_match_central_differences(normals, integration, basis):
         [cases[:, None], cases[:, None] + offsets[None], cases[:, None] - offsets[None]], axis=1
     ).reshape(-1, 6, 2)
     has_neighbour = np.ones((len(x), 2), dtype=bool)
-    quantities = kernels.pair_quantities(
+    quantities = pair_quantities(
         x, has_neighbour, normals=normals, integration=integration, basis=basis
     )
     values, grads = flat_outputs(quantities)
@@ -914,7 +930,7 @@ def test_degenerate_geometry_finite_and_continuous(name, normals, integration, b
     perturbations *= 1e-12 / np.linalg.norm(perturbations, axis=-1, keepdims=True)
     batch = np.concatenate([x, x + perturbations])
     neighbours = np.repeat(has_neighbour, len(batch), axis=0)
-    quantities = kernels.pair_quantities(batch, neighbours, **options)
+    quantities = pair_quantities(batch, neighbours, **options)
     for item in (quantities.Dn, quantities.Mn, quantities.gap):
         assert np.all(np.isfinite(item.value)) and np.all(np.isfinite(item.grad))
     assert np.all(np.isfinite(quantities.D)) and np.all(np.isfinite(quantities.M))
@@ -926,5 +942,5 @@ def test_degenerate_geometry_finite_and_continuous(name, normals, integration, b
         change = np.abs(values[1:] - values[:1]).max()
         assert change <= 1e-10 * max(1.0, np.abs(values).max()), (label, change)
     # and the same pair alone gives the same result as inside a batch
-    alone = kernels.pair_quantities(x, has_neighbour, **options)
+    alone = pair_quantities(x, has_neighbour, **options)
     np.testing.assert_array_equal(alone.gap.value, quantities.gap.value[:1])

@@ -108,3 +108,21 @@ def test_layers_have_no_circles():
         if name not in done:
             visit(name, [name])
     assert circles == []
+
+
+def test_the_package_does_not_import_the_tests_oracle():
+    """The numpy kernels live under tests/oracle as the compiled kernels' oracle only: the
+    package runs one implementation and must not reach back into the tests for another."""
+    found = []
+    for path in _modules():
+        for node in ast.walk(_tree(path)):
+            if isinstance(node, ast.ImportFrom):
+                names = [node.module or ""] if not node.level else []
+            elif isinstance(node, ast.Import):
+                names = [alias.name for alias in node.names]
+            else:
+                continue
+            found += [f"{path.relative_to(PACKAGE)}:{node.lineno} {name}" for name in names
+                      if name.split(".")[0] in ("tests", "oracle")
+                      or name.endswith(("line2_numpy", "surface3_numpy"))]
+    assert found == []

@@ -44,12 +44,13 @@ import time
 import numpy as np
 
 from . import line2_rules
-from .contract import KERNELS_VARIABLE, KernelOptions
+from .contract import KernelOptions
 
 _LOG = logging.getLogger(__name__)
 # -O3: 1.5x faster than -O2 on the 3D kernel (benchmarks/compiled_kernel.py), portable (no
 # -march: the cache may be shared across machines); no FMA contraction, so that the values
-# (and the clip decisions made on them) follow the numpy kernels' operation order
+# (and the clip decisions made on them) follow the operation order of the tests' numpy oracle
+# (tests/oracle), so that the two agree to rounding
 COMPILE_ARGS = ("-O3", "-ffp-contract=off", "-std=c99")
 _CDEFS = {
     "surface3": """
@@ -192,9 +193,11 @@ def build(compile_args=COMPILE_ARGS, directory: pathlib.Path | None = None,
                         except Exception as error:  # cffi's, distutils' or the compiler's
                             raise RuntimeError(
                                 f"could not compile the mortar kernels ({kernel}.c) into "
-                                f"{directory}: {error}. They need cffi and a C compiler, as "
-                                f"dolfinx's form compilation does; {KERNELS_VARIABLE}=numpy "
-                                "runs the numpy kernels instead") from error
+                                f"{directory}: {error}. They are the package's only kernels "
+                                "and need what dolfinx's form compilation needs: cffi (with "
+                                "setuptools on Python >= 3.12), a C compiler (cc, or $CC) and "
+                                "the Python headers (python3-dev); install them, or point "
+                                "$CC at a working compiler") from error
                         os.replace(built, target)  # atomic within one file system
                     finally:
                         shutil.rmtree(work, ignore_errors=True)
@@ -246,8 +249,8 @@ _TRIANGLE_RULES = {  # barycentric points, weights summing to 1
 
 
 def _facet_rule(nodes: int, rule: int) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss points (q, 2) and weights on the slave reference facet, as the numpy kernel's
-    element-based integration: a triangle's symmetric rule (weights summing to 1/2); a
+    """Gauss points (q, 2) and weights on the slave reference facet of element-based
+    integration: a triangle's symmetric rule (weights summing to 1/2); a
     quadrilateral's 1, 2 x 2 or 3 x 3 Gauss-Legendre rule (3 and 7 read as 4 and 9)."""
     if nodes == 3:
         if rule not in _TRIANGLE_RULES:
@@ -301,10 +304,11 @@ def pair_quantities_compiled(slave_x, master_x, slave_normals, *, normals: str =
                              integration: str = "segment", slave_facet=None) -> dict:
     """Mortar integrals of triangle or quadrilateral pairs, compiled.
 
-    The same quantities as :func:`dolfinx_mortar.kernels.surface3.pair_quantities`
-    (``integration`` ``segment`` or ``element``; with ``element``, ``slave_facet`` (n,) says
-    which pairs share a slave facet: each of its Gauss points goes to one of them), for ns,
-    nm in {3, 4} slave and master nodes, as plain arrays
+    The quantities of :class:`~dolfinx_mortar.kernels.Surface3Kernel` (and of the tests'
+    numpy oracle, ``tests/oracle/surface3_numpy.py``) (``integration`` ``segment`` or
+    ``element``; with ``element``, ``slave_facet`` (n,) says which pairs share a slave facet:
+    each of its Gauss points goes to one of them), for ns, nm in {3, 4} slave and master
+    nodes, as plain arrays
     (leading axis: the pair): values ``D`` (n, ns, ns), ``M`` (n, ns, nm), ``Dn``
     (n, ns, ns, 3), ``Mn`` (n, ns, nm, 3), ``gap``, ``area`` (n, ns), ``valid`` (n,) bool,
     ``overlap`` (n,); full gradients over the pair's nv = 3 (2 ns + nm) variables (slave xyz,
@@ -312,8 +316,8 @@ def pair_quantities_compiled(slave_x, master_x, slave_normals, *, normals: str =
     (the value's shape + (nv,)), and with ``scalar_gradients`` ``D_grad``, ``M_grad``. Zero
     where not valid.
 
-    A triangle on a triangle takes the corner-value path (numpy's ``_affine_integrals``)
-    unless ``pointwise``; quadrilaterals are integrated at every Gauss point (numpy's
+    A triangle on a triangle takes the corner-value path (the oracle's ``_affine_integrals``)
+    unless ``pointwise``; quadrilaterals are integrated at every Gauss point (the oracle's
     pointwise path).
     """
     rule = _checked_surface3_options(normals, basis, integration, num_gauss_points)
@@ -475,12 +479,12 @@ def line2_pair_quantities_compiled(x, has_neighbour, *, normals: str = "averaged
                                    slave_facet=None, scalar_gradients: bool = False) -> dict:
     """The 2D mortar integrals of every pair, compiled.
 
-    The same quantities as :func:`dolfinx_mortar.kernels.line2.pair_quantities` (the same
+    The quantities of :func:`dolfinx_mortar.kernels.line2.pair_quantities` (the same
     arguments: ``x`` (n, 6, 2) the nodes ``p, a, b, q, c, d``, ``has_neighbour`` (n, 2); the
     default Gauss points those of :class:`~dolfinx_mortar.kernels.line2.Line2Kernel`), as plain
     arrays: values ``D``, ``M`` (n, 2, 2), ``Dn``, ``Mn`` (n, 2, 2, 2), ``gap``, ``area``
     (n, 2), ``valid`` (n,) bool, ``overlap`` (n,), zero where not valid; ``rows``, the pairs
-    that were integrated (the numpy kernel's ``rows``: outside them every output is zero), and
+    that were integrated (``PairQuantities.rows``: outside them every output is zero), and
     the gradients over the 12 pair variables of those rows only (the others' are zero, and most
     candidate pairs do not overlap): ``Dn_grad``, ``Mn_grad`` (r, 2, 2, 2, 12), ``gap_grad``,
     ``area_grad`` (r, 2, 12), ``D_grad`` (r, 2, 2, 12) (the covered dual basis needs it), and

@@ -1,44 +1,52 @@
 """The kernel contract: what every mortar kernel takes and returns, in both dimensions.
 
-A kernel (:class:`MortarKernel`) is a plain numpy computation over a batch of
-(slave facet, master facet) pairs. It takes the pairs' coordinates
-(:class:`PairGeometry`) and the options (:class:`KernelOptions`) and returns one
+A kernel (:class:`MortarKernel`) is a computation over a batch of (slave facet, master
+facet) pairs, numpy arrays in and out (no MPI, no PETSc, no dolfinx). It takes the pairs'
+coordinates (:class:`PairGeometry`) and the options (:class:`KernelOptions`) and returns one
 :class:`PairQuantities`: D, M, Dn, Mn, the weighted gaps and the nodal areas, with the
 derivatives of Dn, Mn, gap and area over the pair's *kernel variables* (2D: the six
 nodes p, a, b, q, c, d; 3D: the slave nodes, the master nodes and the slave nodal
 normals). The stencils (:mod:`dolfinx_mortar.stencils`) are the only callers; above
 them nothing knows the dimension.
+
+There is one implementation of each kernel, compiled C through cffi (:mod:`.compiled`), as
+dolfinx's own form kernels are: it needs a C compiler and cffi, as dolfinx's form compilation
+does. The vectorized numpy version that came first is kept as the tests' oracle
+(``tests/oracle``), not in the package: two implementations behind an option would both have
+to be kept right, and only one of them would be run. The ``kernels`` option and
+``$DOLFINX_MORTAR_KERNELS`` that chose between them are gone (:data:`KERNELS_VARIABLE`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import os
 import typing
 
 import numpy as np
 
+from ..deprecation import removed_keyword, warn_removed_variable
 from ..dual import RowSubsetDual
 from .factors import AffineFactors, PairGradients
 
 NormalOption = typing.Literal["averaged", "slave", "master"]
 IntegrationOption = typing.Literal["segment", "element"]
 BasisOption = typing.Literal["standard", "dual"]
-KernelsOption = typing.Literal["numpy", "compiled"]
 
 NORMAL_OPTIONS: tuple[str, ...] = typing.get_args(NormalOption)
 INTEGRATION_OPTIONS: tuple[str, ...] = typing.get_args(IntegrationOption)
 BASIS_OPTIONS: tuple[str, ...] = typing.get_args(BasisOption)
-KERNELS_OPTIONS: tuple[str, ...] = typing.get_args(KernelsOption)
 KERNELS_VARIABLE = "DOLFINX_MORTAR_KERNELS"
+"""The environment variable that once chose the kernels' implementation; set, it warns."""
+
+_ONE_IMPLEMENTATION = ("the mortar kernels have one implementation, compiled C through cffi "
+                       "(it needs a C compiler and cffi, as dolfinx's form compilation does); "
+                       "the numpy kernels were removed from the package and live on as the "
+                       "tests' oracle (tests/oracle)")
 
 
-def default_kernels() -> str:
-    """The kernels' implementation when none is given: ``$DOLFINX_MORTAR_KERNELS``
-    (``numpy`` or ``compiled``), else ``compiled``; read when the options are made, so that
-    one process can measure both. The C kernels need what dolfinx's own form compilation
-    needs (cffi and a C compiler); ``numpy`` is the vectorized reference."""
-    return os.environ.get(KERNELS_VARIABLE, "") or "compiled"
+def _refuse_numpy(kernels) -> None:
+    if kernels != "compiled":
+        raise ValueError(f"KernelOptions(kernels={kernels!r}): {_ONE_IMPLEMENTATION}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,12 +62,13 @@ class KernelOptions:
         num_gauss_points: per segment or integration cell; None: the kernel's default.
         scalar_gradients: also keep the gradients of D and M (``D_dual``, ``M_dual``;
             friction's 3D tangent frames and the covered dual basis need them). The 2D
-            kernels' gradients (``segment_gradients``) always hold those of D; the numpy
-            one ignores it, the compiled one then also keeps M's and fills ``D_dual``,
-            ``M_dual``.
-        kernels: ``numpy`` (vectorized) or ``compiled`` (C through cffi) for every 2D
-            option (:mod:`.line2_compiled`) and every 3D configuration
-            (:mod:`.surface3_compiled`). Default: :func:`default_kernels`.
+            kernel's gradients (``segment_gradients``) always hold those of D; with it they
+            also hold M's.
+
+    The ``kernels`` argument is gone with the numpy kernels (module docstring):
+    ``kernels="compiled"`` still works for one release, with a DeprecationWarning;
+    ``kernels="numpy"`` raises a ValueError. ``$DOLFINX_MORTAR_KERNELS``, set, is not read:
+    it warns once per process.
     """
 
     normals: NormalOption = "averaged"
@@ -67,15 +76,20 @@ class KernelOptions:
     basis: BasisOption = "standard"
     num_gauss_points: int | None = None
     scalar_gradients: bool = False
-    kernels: KernelsOption = dataclasses.field(default_factory=default_kernels)
 
     def __post_init__(self):
         for value, allowed, what in ((self.normals, NORMAL_OPTIONS, "normal option"),
                                      (self.integration, INTEGRATION_OPTIONS, "integration"),
-                                     (self.basis, BASIS_OPTIONS, "multiplier basis"),
-                                     (self.kernels, KERNELS_OPTIONS, "kernels")):
+                                     (self.basis, BASIS_OPTIONS, "multiplier basis")):
             if value not in allowed:
                 raise ValueError(f"unknown {what} {value!r}; expected one of {allowed}")
+        warn_removed_variable(KERNELS_VARIABLE, "the compiled kernels run: "
+                              + _ONE_IMPLEMENTATION)
+
+
+KernelOptions.__init__ = removed_keyword(
+    "kernels", "KernelOptions(kernels=...) is deprecated: " + _ONE_IMPLEMENTATION
+    + "; drop the argument", refuse=_refuse_numpy)(KernelOptions.__init__)
 
 
 @dataclasses.dataclass(frozen=True)

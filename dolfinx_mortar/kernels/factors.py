@@ -1,14 +1,19 @@
-"""The kernels' factorized gradients: derivatives kept in the form the kernels make them.
+"""Factorized gradients: derivatives kept in the form a kernel makes them.
 
 Most consumers need linear combinations of a pair's output gradients (sum_j z_j Dn_j,
-the gap rows, ...), not every output's gradient over every variable. Each kernel keeps
+the gap rows, ...), not every output's gradient over every variable. A kernel may keep
 its gradients in a cheaper form that combines outputs before expanding them:
 
-- :class:`PairGradients` (2D, :mod:`.line2`): coefficients on the gradients of a few
-  pair-level quantities (segment limits, facet Jacobian, nodal normals).
-- :class:`AffineFactors` (3D, :mod:`.surface3`, triangle on triangle with averaged
-  normals): gradients over the 12 plane coordinates and their chain to the pair's
-  variables.
+- :class:`PairGradients` (2D): the interface of a 2D kernel's gradients
+  (:meth:`~PairGradients.combine`, :meth:`~PairGradients.outputs`), which the compiled
+  kernel's :class:`~.line2_compiled.FullGradients` implements over full gradients; this
+  class itself holds the tests' numpy oracle's (``tests/oracle/line2_numpy.py``):
+  coefficients on the gradients of a few pair-level quantities (segment limits, facet
+  Jacobian, nodal normals).
+- :class:`AffineFactors` (3D, triangle on triangle with averaged normals, the numpy
+  oracle's ``tests/oracle/surface3_numpy.py``): gradients over the 12 plane coordinates
+  and their chain to the pair's variables. The compiled 3D kernel makes its gradients
+  again on demand instead (:mod:`.surface3_compiled`).
 
 They are the typed optional parts of :class:`~dolfinx_mortar.kernels.contract.
 PairQuantities`; the stencils (:mod:`dolfinx_mortar.stencils`) read them.
@@ -87,7 +92,7 @@ class PairGradients:
 
 class AffineFactors:
     """The gradients of Dn, the areas and Mn of triangle pairs with averaged normals, kept
-    as :func:`.surface3._affine_integrals` makes them: over the 12 plane coordinates of the
+    as the oracle's ``_affine_integrals`` makes them: over the 12 plane coordinates of the
     slave and master nodes (``local``, (57, r, 12), output-major so that a consumer reads one output
     of many pairs at once: Dn (j, k, c), area (j), Mn (j, l, c)), the chain
     of the plane coordinates to the pair's 27 variables (``chain``, (r, 12, 27)), and what
@@ -118,7 +123,7 @@ class AffineFactors:
 
     def expanded(self, name: str) -> np.ndarray:
         """The gradient of Dn, Mn or area over the pair's variables (the kernel's product and
-        the normals' scatter, as :func:`.surface3._affine_integrals` applies them)."""
+        the normals' scatter, as the oracle's ``_affine_integrals`` applies them)."""
         ns, nm, nvar = self.ns, self.nm, self.nvar
         r = self.local.shape[1]
         k = {"Dn": 3 * ns * ns, "area": ns, "Mn": 3 * ns * nm}[name]

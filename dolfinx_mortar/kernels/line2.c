@@ -1,7 +1,8 @@
 /* The 2D mortar kernel in C: a linear slave facet a -> b on a linear master facet c -> d,
  * averaged, slave or master normals, segment- or element-based integration, standard or dual
- * multiplier basis, crosspoints (dolfinx_mortar/kernels/line2.py is the reference; its module
- * docstring describes the method and the 12 pair variables p, a, b, q, c, d).
+ * multiplier basis, crosspoints (dolfinx_mortar/kernels/line2.py's module docstring describes
+ * the method and the 12 pair variables p, a, b, q, c, d). "The numpy kernel" below is the
+ * package's former vectorized kernel, now the tests' oracle, tests/oracle/line2_numpy.py.
  *
  * Two passes, as the numpy kernel:
  *  - line2_screen, values only, every pair: facing test, and segment-based the projections of

@@ -5,7 +5,7 @@ averaged, slave or master; segment- or element-based; standard or dual basis; an
 rule; crosspoints). Unlike the 3D glue (:mod:`.surface3_compiled`) it keeps the gradients of
 the contributing pairs from the evaluation rather than making them again on demand: a 2D
 pair's are 288 numbers (Dn, Mn, the areas, the gaps and D over 12 variables; 336 with M),
-fewer than the numpy kernel's factorized form keeps (:class:`~.factors.PairGradients`), and
+fewer than a factorized form would keep (:class:`~.factors.PairGradients`), and
 the one C pass that makes the values makes them for a few percent more time, where a second
 pass per Jacobian would cost the whole kernel again.
 

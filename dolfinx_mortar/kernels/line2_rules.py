@@ -1,7 +1,8 @@
-"""What the 2D kernels share, numpy (:mod:`.line2`) and compiled (:mod:`.line2_compiled`,
+"""The rules of the 2D kernel that are not C (:mod:`.line2`, :mod:`.line2_compiled`,
 :mod:`.compiled`): the Gauss rules, the whole-facet dual basis and the element-based
 assignment of slave Gauss points to master facets. A module of its own so that the compiled
-glue, which the numpy kernel dispatches to, need not import the numpy kernel back."""
+glue, which :mod:`.line2` dispatches to, need not import it back; the tests' numpy oracle
+(``tests/oracle/line2_numpy.py``) takes them from here too."""
 
 from __future__ import annotations
 

@@ -1,5 +1,7 @@
-/* The 3D mortar kernel in C (dolfinx_mortar/kernels/surface3.py is the reference; its module
- * docstring describes the method). Three entry points:
+/* The 3D mortar kernel in C (dolfinx_mortar/kernels/surface3.py's module docstring describes the
+ * method). "numpy" below is the package's former vectorized kernel, now the tests' oracle,
+ * tests/oracle/surface3_numpy.py, whose module docstring gives the method in detail. Three
+ * entry points:
  *
  * surface3_triangles: segment-based integration of a triangle slave facet on a triangle master
  * facet, any normal field (numpy's corner-value path, _affine_integrals):

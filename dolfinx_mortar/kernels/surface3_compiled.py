@@ -10,12 +10,13 @@ kernel again on the pairs a consumer asks for (the stencils, a chunk at a time),
 their gradients and forgets them. The values and gradients are the same bits as the first
 run's: the kernel is deterministic per pair.
 
-Covered (:func:`covers`): every 3D pair the numpy kernel (:mod:`.surface3`) takes: triangle
-and quadrilateral slave and master facets (a triangle on a triangle by the C corner-value
-path, as numpy's ``_affine_integrals``; the others at every Gauss point), segment- or
-element-based integration, the averaged, slave or master normal field, the standard or the
-dual basis, crosspoints, every Gauss rule the numpy kernel accepts (a rule it refuses goes to
-it, which raises). The covered dual basis runs it with the standard basis.
+Covered (:func:`covers`): triangle and quadrilateral slave and master facets (a triangle on
+a triangle by the C corner-value path, as the tests' numpy oracle's ``_affine_integrals``; the
+others at every Gauss point), segment- or element-based integration, the averaged, slave or
+master normal field, the standard or the dual basis, crosspoints, the Gauss rules of
+:func:`.compiled._facet_rule` (element) and 1, 3 or 7 points per cell (segment); for anything
+else :class:`~.surface3.Surface3Kernel` raises. The covered dual basis runs it with the
+standard basis.
 
 Element-based integration gives each Gauss point of a slave facet to one of its pairs (the
 master facet it lands on most centrally, :func:`.compiled.points_on_master`): decided once, at
@@ -49,7 +50,7 @@ _GRADIENTS = ("Dn_grad", "Mn_grad", "area_grad", "gap_grad", "D_grad", "M_grad")
 
 def covers(geometry: PairGeometry, options: KernelOptions) -> bool:
     """Whether the compiled kernel integrates these pairs with these options: every 3D pair
-    of triangles or quadrilaterals with a Gauss rule the numpy kernel takes."""
+    of triangles or quadrilaterals with a Gauss rule the kernel takes."""
     slave_x, master_x = geometry.slave_x, geometry.master_x
     if slave_x.ndim != 3 or master_x.ndim != 3 or slave_x.shape[2] != 3:
         return False

@@ -3,7 +3,8 @@
 Lengths x 1e3 with moduli x 1e-6, and back (lengths x 1e-3, moduli x 1e6), must give
 the same dimensionless result: pressure / E and displacement / length.
 
-* Kernel level: kernels.pair_quantities on coordinates scaled by s gives D, M, Dn,
+* Kernel level: kernels.pair_quantities (compiled) and the numpy oracle's
+  (tests/oracle/line2_numpy.py) on coordinates scaled by s give D, M, Dn,
   Mn, area scaled by s and the weighted gap by s^2 (their coordinate derivatives
   by 1, 1 and s), to 1e-10 relative.
 * ContactProblem: the patch test mesh (meshes.patch_test) with mesh.geometry.x
@@ -24,6 +25,7 @@ from dolfinx_mortar import kernels
 
 from . import common
 from .common import all_pairs, record, record_outcome, relative_difference
+from oracle import line2_numpy
 
 SCALINGS = [(1e3, 1e-6), (1e-3, 1e6)]  # (length factor, modulus factor)
 OPTIONS = list(
@@ -53,14 +55,17 @@ def curved_polylines(rng: np.random.Generator, num_slave: int, num_master: int):
     return x, has_neighbour, facets_s
 
 
+@pytest.mark.parametrize("implementation", ["compiled", "oracle"])
 @pytest.mark.parametrize("scale", [1e3, 1e-3, 1e6, 1e-6])
 @pytest.mark.parametrize("normals,integration,basis", OPTIONS)
-def test_kernel_quantities_scale_with_length(normals, integration, basis, scale):
+def test_kernel_quantities_scale_with_length(normals, integration, basis, scale, implementation):
+    pair_quantities = {"compiled": kernels.pair_quantities,
+                       "oracle": line2_numpy.pair_quantities}[implementation]
     rng = np.random.default_rng(2024)
     x, has_neighbour, slave_facet = curved_polylines(rng, 7, 11)
     options = dict(normals=normals, integration=integration, basis=basis, slave_facet=slave_facet)
-    reference = kernels.pair_quantities(x, has_neighbour, **options)
-    scaled = kernels.pair_quantities(x * scale, has_neighbour, **options)
+    reference = pair_quantities(x, has_neighbour, **options)
+    scaled = pair_quantities(x * scale, has_neighbour, **options)
     assert reference.valid.sum() >= 10
     errors = {
         "D": relative_difference(scaled.D / scale, reference.D),
