@@ -461,39 +461,8 @@ def pair_quantities(
     crosspoint: np.ndarray | None = None,
     slave_facet: np.ndarray | None = None,
 ) -> PairQuantities:
-    """Mortar contributions of every pair, with derivatives.
-
-    Args:
-        x: (n, 6, 2) current coordinates of the nodes ``p, a, b, q, c, d``.
-        has_neighbour: (n, 2) bool, whether ``p`` and ``q`` exist.
-        normals: which normal field (paper, section 3).
-        integration: ``segment`` integrates over the overlap found by
-            projecting the master nodes onto the slave facet ("integration by
-            clipping", exact for the polynomials of the mortar integrands);
-            ``element`` uses fixed Gauss points on the slave facet and keeps
-            those whose projection lands on the master facet ("concentrated").
-        basis: multiplier basis Phi; ``dual`` is biorthogonal to N on the
-            whole slave facet (see :func:`.line2_rules.dual_basis_coefficients`), pair by pair;
-            :class:`~dolfinx_mortar.mortar.MortarInterface` instead builds it over the
-            covered part of each slave facet from this kernel's standard outputs
-            (:mod:`dolfinx_mortar.covered`).
-        num_gauss_points: Gauss points per segment (or per slave facet).
-        crosspoint: (n, 2) bool, slave nodes a, b that carry no multiplier
-            (their displacement is prescribed). Their basis function is added
-            to the other node's on the facet, so sum_j Phi_j = 1 still holds
-            (constants stay representable: the patch test passes) and the
-            system stays regular (a dual Phi at a crosspoint is orthogonal to
-            every linear function vanishing there and would couple to nothing).
-        slave_facet: (n,) which slave facet each pair belongs to; element-based
-            integration gives each slave Gauss point to one master facet only
-            (a point on a shared master node would otherwise count twice, or
-            not at all after rounding). Default: every pair is a facet of its
-            own (no sharing decided).
-
-    The gradients of ``Dn``, ``Mn``, ``gap`` and ``area`` are
-    :class:`~dolfinx_mortar.dual.RowSubsetDual`: zero outside the pairs that
-    contribute, which are kept apart (``rows``, ``grad_rows``) for assembly.
-    """
+    """The numpy oracle of :func:`dolfinx_mortar.kernels.line2.pair_quantities`: the same
+    arguments and outputs (see there), computed by vectorized forward-mode derivatives."""
     KernelOptions(normals=normals, integration=integration, basis=basis)  # (checks them)
     x = np.asarray(x, dtype=np.float64)
     num_pairs = x.shape[0]
