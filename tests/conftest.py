@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import gc
 
+import hypothesis
 import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
@@ -55,6 +56,15 @@ def pytest_runtest_makereport(item, call):
 
 
 _CALL_FAILED = pytest.StashKey[bool]()
+
+
+@hypothesis.given(hypothesis.strategies.just(0))
+def _hypothesis_started(_):
+    """Run once at import: Hypothesis registers its global random generator at its first
+    test, and with ``gc.get_referrers``, which does not see frozen referrers."""
+
+
+_hypothesis_started()
 
 
 def _collect_everything() -> None:
