@@ -4,6 +4,8 @@ RUN := tools/run
 PYTEST := python3 -m pytest -p no:cacheprovider --color=no
 MPI_TIMEOUT := timeout --signal=INT --kill-after=60 3600
 RESULTS := results
+# pytest-xdist workers of the serial suite (the machines CI runs on have 2 cores)
+SERIAL_WORKERS ?= 2
 
 .PHONY: demo test test-tools test-serial test-parallel lint format stress benchmark benchmark-quick benchmark-3d benchmark-3d-quick clean
 
@@ -18,7 +20,7 @@ test-tools:
 	tests/tools/test_run.sh
 
 test-serial:
-	$(RUN) $(PYTEST) -q tests
+	$(RUN) $(PYTEST) -q -n $(SERIAL_WORKERS) tests
 
 test-parallel:
 	$(RUN) $(MPI_TIMEOUT) mpirun -n 2 tools/mpi-pytest -q -m parallel tests
