@@ -133,11 +133,44 @@ def test_kept_gradients_are_those_made_again(monkeypatch, ns, nm, scalar_gradien
     made = Surface3Kernel().evaluate(geometry, options, crosspoint=cross)
     assert kept.gradients_on_demand.kept is not None and made.gradients_on_demand.kept is None
     assert kept.rows.size > 20
+    # the values too (triangle pairs: made values only when no gradients are kept)
+    np.testing.assert_array_equal(kept.valid, made.valid)
+    np.testing.assert_array_equal(kept.overlap, made.overlap)
+    for name in ("D", "M"):
+        np.testing.assert_array_equal(getattr(kept, name), getattr(made, name))
+    for name in ("Dn", "Mn", "gap", "area"):
+        np.testing.assert_array_equal(getattr(kept, name).value, getattr(made, name).value)
     rows = np.random.default_rng(1).permutation(200)[:120]
     for a, b in zip(kept.gradients_on_demand.gradients(rows),
                     made.gradients_on_demand.gradients(rows), strict=True):
         assert np.abs(b).max() > 0.0
         np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("normals", ["averaged", "slave", "master"])
+@pytest.mark.parametrize("basis", ["standard", "dual"])
+@pytest.mark.parametrize("rule", [1, 3, 7])
+def test_values_only_are_the_values_of_the_full_run(normals, basis, rule):
+    """The triangle kernel without its gradients gives the bits of its values with them
+    (crosspoints too), and writes no gradient; other pairs are refused."""
+    slave, master, nodal, cross = random_facets(300, 3, 3, seed=rule)
+    options = KernelOptions(normals=normals, basis=basis, num_gauss_points=rule,
+                            scalar_gradients=True)
+    call = surface3_compiled._Call.of(3, 3, options)
+    full, values = (surface3_compiled._Buffers(300, call) for _ in range(2))
+    for array in values.arrays.values():
+        array[...] = 7
+    for crosspoint in (None, np.ascontiguousarray(cross, dtype=np.uint8)):
+        a = full.run(slave, master, nodal, crosspoint)
+        b = values.run(slave, master, nodal, crosspoint, values_only=True)
+        assert 50 < a["valid"].sum() < 300
+        for name in ("valid", "overlap") + surface3_compiled._VALUES:
+            np.testing.assert_array_equal(a[name], b[name])
+        for name in surface3_compiled._GRADIENTS:
+            assert np.all(b[name] == 7), name
+    quadrilaterals = surface3_compiled._Buffers(1, surface3_compiled._Call.of(4, 3, options))
+    with pytest.raises(ValueError, match="triangle pairs"):
+        quadrilaterals.run(*random_facets(1, 4, 3, seed=1)[:3], None, values_only=True)
 
 
 def test_gradients_survive_later_requests():

@@ -406,12 +406,13 @@ static void inverse_map(const double C[3][2], int base, const dl (*P)[2], int np
         double o0 = P[p][0].v - C[0][0], o1 = P[p][1].v - C[0][1];
         double xi0 = I00 * o0 + I01 * o1, xi1 = I10 * o0 + I11 * o1;
         double Nk[3] = {1.0 - xi0 - xi1, xi0, xi1};
+        for (int k = 0; k < 3; ++k) N[p][k] = Nk[k];
+        if (!dN) continue;
         double rhs[2][NL];
         for (int r = 0; r < 2; ++r) {
             for (int s = 0; s < NL; ++s) rhs[r][s] = P[p][r].d[s];
             for (int k = 0; k < 3; ++k) rhs[r][base + 2 * k + r] -= Nk[k];
         }
-        for (int k = 0; k < 3; ++k) N[p][k] = Nk[k];
         for (int s = 0; s < NL; ++s) {
             double d0 = I00 * rhs[0][s] + I01 * rhs[1][s];
             double d1 = I10 * rhs[0][s] + I11 * rhs[1][s];
@@ -424,6 +425,7 @@ static void zero_pair(const outputs_t *o, long p) {
     memset(o->D + 9 * p, 0, 9 * sizeof(double)); memset(o->M + 9 * p, 0, 9 * sizeof(double));
     memset(o->Dn + 27 * p, 0, 27 * sizeof(double)); memset(o->Mn + 27 * p, 0, 27 * sizeof(double));
     memset(o->gap + 3 * p, 0, 3 * sizeof(double)); memset(o->area + 3 * p, 0, 3 * sizeof(double));
+    if (!o->gDn) return;
     memset(o->gDn + 27 * NV * p, 0, 27 * NV * sizeof(double));
     memset(o->gMn + 27 * NV * p, 0, 27 * NV * sizeof(double));
     memset(o->ggap + 3 * NV * p, 0, 3 * NV * sizeof(double));
@@ -503,15 +505,22 @@ static int pair(long p, const double *xs, const double *xm, const double *nn, in
         W[c] = scalel(cross2l(ea, eb), 0.5);
     }
     /* the six functions (slave N_0..2, master Nm_0..2) at the points */
+    const int grads = o->gDn != NULL; /* NULL: the values only */
     double F[6][MAXV + 1], dF[6][MAXV + 1][NL];
     {
         double Nv[MAXV + 1][3], dNv[MAXV + 1][3][NL];
-        inverse_map(S, 0, (const dl (*)[2])P, np, Nv, dNv);
+        inverse_map(S, 0, (const dl (*)[2])P, np, Nv, grads ? dNv : NULL);
         for (int q = 0; q < np; ++q)
-            for (int k = 0; k < 3; ++k) { F[k][q] = Nv[q][k]; memcpy(dF[k][q], dNv[q][k], sizeof(double) * NL); }
-        inverse_map(Mp, 6, (const dl (*)[2])P, np, Nv, dNv);
+            for (int k = 0; k < 3; ++k) {
+                F[k][q] = Nv[q][k];
+                if (grads) memcpy(dF[k][q], dNv[q][k], sizeof(double) * NL);
+            }
+        inverse_map(Mp, 6, (const dl (*)[2])P, np, Nv, grads ? dNv : NULL);
         for (int q = 0; q < np; ++q)
-            for (int k = 0; k < 3; ++k) { F[3 + k][q] = Nv[q][k]; memcpy(dF[3 + k][q], dNv[q][k], sizeof(double) * NL); }
+            for (int k = 0; k < 3; ++k) {
+                F[3 + k][q] = Nv[q][k];
+                if (grads) memcpy(dF[3 + k][q], dNv[q][k], sizeof(double) * NL);
+            }
     }
     /* the integrals: values, what multiplies each cell area and each point value */
     double I[NI], coefW[NI][MAXV], coef[NI][3][MAXV + 1];
@@ -539,6 +548,7 @@ static int pair(long p, const double *xs, const double *xm, const double *nn, in
             double tau = (f[u1][0] * s23[0] + f[u1][1] * s23[1]) + f[u1][2] * s23[2];
             I[o] += wc * tau;
             coefW[o][c] = tau;
+            if (!grads) continue;
             for (int r = 0; r < 3; ++r) {
                 coef[o][0][corner[r]] += wc * s23[r];
                 coef[o][1][corner[r]] += wc * s13[r];
@@ -548,7 +558,7 @@ static int pair(long p, const double *xs, const double *xm, const double *nn, in
     }
     /* local gradients of the integrals */
     double dI[NI][NL];
-    for (int o = 0; o < NI; ++o) {
+    for (int o = 0; o < NI && grads; ++o) {
         double g[NL] = {0};
         for (int c = 0; c < V; ++c)
             for (int s = 0; s < NL; ++s) g[s] += coefW[o][c] * W[c].d[s];
@@ -587,14 +597,36 @@ static int pair(long p, const double *xs, const double *xm, const double *nn, in
                     if (c == 0.0) continue;
                     int os = tb->slave_index[a][k][i], om = tb->mixed_index[a][i][k];
                     js += c * I[os]; ks += c * I[om];
-                    for (int s = 0; s < NL; ++s) { gj[s] += c * dI[os][s]; gk[s] += c * dI[om][s]; }
+                    if (grads)
+                        for (int s = 0; s < NL; ++s) { gj[s] += c * dI[os][s]; gk[s] += c * dI[om][s]; }
                 }
                 J[j][k][i] = js; K[j][k][i] = ks;
-                memcpy(dJ[j][k][i], gj, sizeof gj); memcpy(dK[j][k][i], gk, sizeof gk);
+                if (grads) { memcpy(dJ[j][k][i], gj, sizeof gj); memcpy(dK[j][k][i], gk, sizeof gk); }
             }
     /* the outputs: values, local gradients chained, the nodal normals' direct terms */
     double *D = o->D + 9 * p, *M = o->M + 9 * p, *Dn = o->Dn + 27 * p, *Mn = o->Mn + 27 * p;
     double *gap = o->gap + 3 * p, *area = o->area + 3 * p;
+    if (!grads) { /* the values of the loop below, in its order */
+        for (int j = 0; j < 3; ++j) {
+            double area_j = 0.0, gap_m = 0.0, gap_s = 0.0;
+            for (int k = 0; k < 3; ++k) {
+                double d = 0.0, m = 0.0;
+                for (int i = 0; i < 3; ++i) { d += J[j][k][i]; m += K[j][k][i]; }
+                D[3 * j + k] = d; M[3 * j + k] = m;
+                area_j += d;
+                for (int c = 0; c < 3; ++c) {
+                    int e = (3 * j + k) * 3 + c;
+                    double dn = 0.0, mnv = 0.0;
+                    for (int i = 0; i < 3; ++i) { dn += pl.field[i][c] * J[j][k][i]; mnv += pl.field[i][c] * K[j][k][i]; }
+                    Dn[e] = dn; Mn[e] = mnv;
+                    gap_m += mnv * xm[3 * k + c]; gap_s += dn * xs[3 * k + c];
+                }
+            }
+            area[j] = area_j;
+            gap[j] = gap_m - gap_s;
+        }
+        return 1;
+    }
     double *gDn = o->gDn + 27 * NV * p, *gMn = o->gMn + 27 * NV * p;
     double *ggap = o->ggap + 3 * NV * p, *garea = o->garea + 3 * NV * p;
     for (int j = 0; j < 3; ++j) {
@@ -662,8 +694,9 @@ static int pair(long p, const double *xs, const double *xm, const double *nn, in
 }
 
 /* n pairs: xs, xm, nn (n, 3, 3); crosspoint (n, 3) or NULL; rule 1, 3 or 7; outputs as
- * surface3.pair_quantities (gradients (..., 27)); gD, gM may be NULL. Returns 0, or -1 for a
- * bad rule, or -2 - p if pair p's clip polygon outgrew its slots. */
+ * surface3.pair_quantities (gradients (..., 27)); gD, gM may be NULL, and so may all six
+ * gradients (the values only, for an evaluation whose gradients are made again on demand).
+ * Returns 0, or -1 for a bad rule, or -2 - p if pair p's clip polygon outgrew its slots. */
 int surface3_triangles(long n, const double *xs, const double *xm, const double *nn,
                        const unsigned char *crosspoint, int normals, int dual_basis, int rule,
                        unsigned char *valid, double *overlap,

@@ -8,7 +8,9 @@ areas, valid, overlap), the coordinates of the contributing pairs, and their gra
 while these fit in :data:`KEPT_GRADIENTS_BYTES`; above it :class:`CompiledGradients` runs the
 kernel again on the pairs a consumer asks for (the stencils, a chunk at a time), hands over
 their gradients and forgets them. The values and gradients are the same bits as the first
-run's: the kernel is deterministic per pair.
+run's: the kernel is deterministic per pair. Once no gradients are kept, the evaluation runs
+the triangle kernel for the values only (segment-based triangle pairs: the same operations
+without the dual parts; the others make their gradients at evaluation too).
 
 Covered (:func:`covers`): triangle and quadrilateral slave and master facets (a triangle on
 a triangle by the C corner-value path, as the tests' numpy oracle's ``_affine_integrals``; the
@@ -99,6 +101,11 @@ class _Call:
         return self.points is not None
 
     @property
+    def values_only(self) -> bool:
+        """Whether the kernel can skip the gradients (segment-based triangle pairs)."""
+        return not self.element and self.ns == 3 and self.nm == 3
+
+    @property
     def num_variables(self) -> int:
         return 3 * (2 * self.ns + self.nm)
 
@@ -124,10 +131,12 @@ class _Buffers:
         self.arrays.update({name: np.empty((size,) + shape)
                             for name, shape in call.shapes().items()})
 
-    def run(self, slave_x, master_x, slave_normals, crosspoint, on_master=None) -> dict:
+    def run(self, slave_x, master_x, slave_normals, crosspoint, on_master=None,
+            values_only: bool = False) -> dict:
         """The kernel on up to ``size`` pairs (contiguous float64 (m, ns or nm, 3) arrays;
         crosspoint (m, ns) uint8 or None; element-based: on_master (m, q) uint8, the Gauss
-        points given to each pair); returns views of the first m rows."""
+        points given to each pair); returns views of the first m rows. ``values_only``
+        (:attr:`_Call.values_only` calls): the gradients are neither made nor written."""
         m = slave_x.shape[0]
         out = {name: array[:m] for name, array in self.arrays.items()}
         if m == 0:
@@ -141,11 +150,14 @@ class _Buffers:
 
         pairs = (pointer(slave_x), pointer(master_x), pointer(slave_normals),
                  pointer(crosspoint, "unsigned char *"))
+        if values_only and not call.values_only:
+            raise ValueError("only segment-based triangle pairs are integrated values only")
+        grads = {} if values_only else out
         results = (pointer(out["valid"], "unsigned char *"), pointer(out["overlap"]),
                    *(pointer(out[name]) for name in _VALUES),
-                   pointer(out.get("D_grad")), pointer(out.get("M_grad")),
-                   *(pointer(out[name]) for name in ("Dn_grad", "Mn_grad", "gap_grad",
-                                                     "area_grad")))
+                   pointer(grads.get("D_grad")), pointer(grads.get("M_grad")),
+                   *(pointer(grads.get(name)) for name in ("Dn_grad", "Mn_grad", "gap_grad",
+                                                           "area_grad")))
         if call.element:
             status = lib.surface3_element(
                 m, call.ns, call.nm, *pairs, call.normals, int(call.dual_basis),
@@ -242,6 +254,11 @@ class _KeptGradients:
         self.pair_bytes = 8 * sum(int(np.prod(shapes[name])) for name in self.names)
         self.parts: dict[str, list[np.ndarray]] | None = {name: [] for name in self.names}
         self.count = 0
+
+    @property
+    def keeping(self) -> bool:
+        """False once given up: the evaluation's later chunks need no gradients."""
+        return self.parts is not None
 
     def add(self, out: dict) -> None:
         if self.parts is None:
@@ -363,7 +380,8 @@ def evaluate(geometry: PairGeometry, options: KernelOptions,
         part = candidates[start:start + buffers.size]
         out = buffers.run(slave_x[part], master_x[part], slave_normals[part],
                           None if cross is None else cross[part],
-                          None if on_master is None else on_master[part])
+                          None if on_master is None else on_master[part],
+                          values_only=call.values_only and not kept.keeping)
         for name in _VALUES:
             values[name][part] = out[name]
         valid[part] = out["valid"].view(bool)
