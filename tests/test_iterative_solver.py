@@ -44,11 +44,13 @@ def condensed_reference(J: np.ndarray, u: np.ndarray, z: np.ndarray,
     active = d == 0.0
     at_node = G[node_dofs, np.arange(z.size)[:, None]]
     lengths = np.linalg.norm(at_node, axis=1)
+    # the rows of inactive nodes (some without any G) are zero in T
+    inverse_length = np.divide(1.0, lengths, out=np.zeros_like(lengths), where=active)
     T = np.zeros((z.size, u.size))
-    np.put_along_axis(T, node_dofs, np.where(active[:, None], at_node / lengths[:, None], 0.0),
-                      axis=1)
+    np.put_along_axis(T, node_dofs, np.divide(at_node, lengths[:, None], out=np.zeros_like(
+        at_node), where=active[:, None]), axis=1)
     A_prime = A - G @ (np.where(active, 0.0, 1.0 / np.where(active, 1.0, d))[:, None] * C)
-    B1 = A_prime - (G * np.where(active, 1.0 / lengths, 0.0)) @ (T @ A_prime)
+    B1 = A_prime - (G * inverse_length) @ (T @ A_prime)
     C_a = active[:, None] * C
     K_r = B1 - T.T @ (T @ B1 + C_a)
     E = K_r @ T.T - T.T @ (T @ K_r @ T.T)
