@@ -241,6 +241,8 @@ class PairStencil:
         on_demand: list[np.ndarray] = []  # the kernel's gradients of rows, made when needed
         result = np.zeros((len(terms), rows.size, nv))
         factorized = self._factorized_sums(q, rows, len(terms))
+        needed = sorted({int(np.searchsorted(starts, o, side="right")) - 1
+                         for row in terms for o, _ in row if o < end})
         for p, row in enumerate(terms):
             for o, weight in row:
                 if o >= self.NORMAL:
@@ -258,7 +260,7 @@ class PairStencil:
                 if part not in gradients:
                     if q.gradients_on_demand is not None:
                         if not on_demand:
-                            on_demand.extend(q.gradients_on_demand.gradients(rows))
+                            on_demand.extend(q.gradients_on_demand.gradients(rows, needed))
                         grad = on_demand[part]
                     else:
                         grad = _gradient_rows(outputs[part], rows)

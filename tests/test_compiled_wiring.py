@@ -150,27 +150,50 @@ def test_kept_gradients_are_those_made_again(monkeypatch, ns, nm, scalar_gradien
 @pytest.mark.parametrize("normals", ["averaged", "slave", "master"])
 @pytest.mark.parametrize("basis", ["standard", "dual"])
 @pytest.mark.parametrize("rule", [1, 3, 7])
-def test_values_only_are_the_values_of_the_full_run(normals, basis, rule):
-    """The triangle kernel without its gradients gives the bits of its values with them
-    (crosspoints too), and writes no gradient; other pairs are refused."""
+def test_some_gradients_are_those_of_the_full_run(normals, basis, rule):
+    """The triangle kernel asked for no gradient (the values only), or for one, gives the
+    bits of the full run's values and of that gradient (crosspoints too), and writes no
+    other; other pairs are refused."""
     slave, master, nodal, cross = random_facets(300, 3, 3, seed=rule)
     options = KernelOptions(normals=normals, basis=basis, num_gauss_points=rule,
                             scalar_gradients=True)
     call = surface3_compiled._Call.of(3, 3, options)
-    full, values = (surface3_compiled._Buffers(300, call) for _ in range(2))
-    for array in values.arrays.values():
-        array[...] = 7
+    full, some = (surface3_compiled._Buffers(300, call) for _ in range(2))
     for crosspoint in (None, np.ascontiguousarray(cross, dtype=np.uint8)):
         a = full.run(slave, master, nodal, crosspoint)
-        b = values.run(slave, master, nodal, crosspoint, values_only=True)
         assert 50 < a["valid"].sum() < 300
-        for name in ("valid", "overlap") + surface3_compiled._VALUES:
-            np.testing.assert_array_equal(a[name], b[name])
-        for name in surface3_compiled._GRADIENTS:
-            assert np.all(b[name] == 7), name
+        for asked in [()] + [(name,) for name in surface3_compiled._GRADIENTS]:
+            for array in some.arrays.values():
+                array[...] = 7
+            b = some.run(slave, master, nodal, crosspoint, gradients=asked)
+            for name in ("valid", "overlap") + surface3_compiled._VALUES + asked:
+                np.testing.assert_array_equal(a[name], b[name])
+            for name in set(surface3_compiled._GRADIENTS) - set(asked):
+                assert np.all(b[name] == 7), name
     quadrilaterals = surface3_compiled._Buffers(1, surface3_compiled._Call.of(4, 3, options))
     with pytest.raises(ValueError, match="triangle pairs"):
-        quadrilaterals.run(*random_facets(1, 4, 3, seed=1)[:3], None, values_only=True)
+        quadrilaterals.run(*random_facets(1, 4, 3, seed=1)[:3], None, gradients=())
+
+
+@pytest.mark.parametrize(("ns", "nm"), [(3, 3), (4, 4)])
+def test_gradients_of_some_outputs(monkeypatch, ns, nm):
+    """A consumer that asks for some outputs' gradients gets those of all of them, and None
+    for the others (made again on demand, or copied from the kept ones)."""
+    slave, master, nodal, cross = random_facets(200, ns, nm, seed=5)
+    geometry = PairGeometry(slave, master, nodal)
+    rows = np.random.default_rng(2).permutation(200)[:150]
+    for budget in (surface3_compiled.KEPT_GRADIENTS_BYTES, 0):
+        monkeypatch.setattr(surface3_compiled, "KEPT_GRADIENTS_BYTES", budget)
+        q = Surface3Kernel().evaluate(geometry, KernelOptions(), crosspoint=cross)
+        every = [np.array(grad) for grad in q.gradients_on_demand.gradients(rows)]
+        for outputs in ([3], [0, 1], [2]):
+            got = q.gradients_on_demand.gradients(rows, outputs)
+            for index, grad in enumerate(got):
+                if index in outputs:
+                    assert np.abs(grad).max() > 0.0
+                    np.testing.assert_array_equal(grad, every[index])
+                else:
+                    assert grad is None
 
 
 def test_gradients_survive_later_requests():

@@ -126,11 +126,13 @@ class GradientsOnDemand(typing.Protocol):
     chunk: int
     """Pairs asked for at once by the stencils (their gradients then live together)."""
 
-    def gradients(self, rows: np.ndarray) -> list[np.ndarray]:
+    def gradients(self, rows: np.ndarray,
+                  outputs: typing.Sequence[int] | None = None) -> list[np.ndarray | None]:
         """The gradients of the pairs ``rows`` (any pairs of the evaluation; zero outside
         the contributing ones) over the kernel variables, one array per output in the
         order of :meth:`PairQuantities.outputs`, each (len(rows), output shape...,
-        num_variables)."""
+        num_variables). ``outputs``: the indices of the outputs whose gradients the
+        consumer needs (None: all); the others may be None, not made."""
         ...
 
 

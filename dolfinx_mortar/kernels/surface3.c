@@ -425,11 +425,10 @@ static void zero_pair(const outputs_t *o, long p) {
     memset(o->D + 9 * p, 0, 9 * sizeof(double)); memset(o->M + 9 * p, 0, 9 * sizeof(double));
     memset(o->Dn + 27 * p, 0, 27 * sizeof(double)); memset(o->Mn + 27 * p, 0, 27 * sizeof(double));
     memset(o->gap + 3 * p, 0, 3 * sizeof(double)); memset(o->area + 3 * p, 0, 3 * sizeof(double));
-    if (!o->gDn) return;
-    memset(o->gDn + 27 * NV * p, 0, 27 * NV * sizeof(double));
-    memset(o->gMn + 27 * NV * p, 0, 27 * NV * sizeof(double));
-    memset(o->ggap + 3 * NV * p, 0, 3 * NV * sizeof(double));
-    memset(o->garea + 3 * NV * p, 0, 3 * NV * sizeof(double));
+    if (o->gDn) memset(o->gDn + 27 * NV * p, 0, 27 * NV * sizeof(double));
+    if (o->gMn) memset(o->gMn + 27 * NV * p, 0, 27 * NV * sizeof(double));
+    if (o->ggap) memset(o->ggap + 3 * NV * p, 0, 3 * NV * sizeof(double));
+    if (o->garea) memset(o->garea + 3 * NV * p, 0, 3 * NV * sizeof(double));
     if (o->gD) memset(o->gD + 9 * NV * p, 0, 9 * NV * sizeof(double));
     if (o->gM) memset(o->gM + 9 * NV * p, 0, 9 * NV * sizeof(double));
 }
@@ -505,7 +504,8 @@ static int pair(long p, const double *xs, const double *xm, const double *nn, in
         W[c] = scalel(cross2l(ea, eb), 0.5);
     }
     /* the six functions (slave N_0..2, master Nm_0..2) at the points */
-    const int grads = o->gDn != NULL; /* NULL: the values only */
+    /* the gradients asked for (none: the values only) */
+    const int grads = o->gDn || o->gMn || o->ggap || o->garea || o->gD || o->gM;
     double F[6][MAXV + 1], dF[6][MAXV + 1][NL];
     {
         double Nv[MAXV + 1][3], dNv[MAXV + 1][3][NL];
@@ -627,8 +627,9 @@ static int pair(long p, const double *xs, const double *xm, const double *nn, in
         }
         return 1;
     }
-    double *gDn = o->gDn + 27 * NV * p, *gMn = o->gMn + 27 * NV * p;
-    double *ggap = o->ggap + 3 * NV * p, *garea = o->garea + 3 * NV * p;
+    double *gDn = o->gDn ? o->gDn + 27 * NV * p : NULL, *gMn = o->gMn ? o->gMn + 27 * NV * p : NULL;
+    double *ggap = o->ggap ? o->ggap + 3 * NV * p : NULL;
+    double *garea = o->garea ? o->garea + 3 * NV * p : NULL;
     for (int j = 0; j < 3; ++j) {
         double area_j = 0.0, la[NL] = {0}, lgap[NL] = {0};
         double gap_m = 0.0, gap_s = 0.0, gap_normals[3][3] = {{0.0}};
@@ -657,25 +658,26 @@ static int pair(long p, const double *xs, const double *xm, const double *nn, in
                 double xmc = xm[3 * k + c], xsc = xs[3 * k + c];
                 gap_m += mnv * xmc; gap_s += dn * xsc;
                 for (int s = 0; s < NL; ++s) lgap[s] += lmn[s] * xmc - ldn[s] * xsc;
-                chain(&pl, ldn, gDn + e * NV);
-                chain(&pl, lmn, gMn + e * NV);
+                if (gDn) chain(&pl, ldn, gDn + e * NV);
+                if (gMn) chain(&pl, lmn, gMn + e * NV);
                 for (int i = 0; i < 3; ++i) {
                     if (pl.unit_field) {
-                        gDn[e * NV + 18 + 3 * i + c] += J[j][k][i];
-                        gMn[e * NV + 18 + 3 * i + c] += K[j][k][i];
+                        if (gDn) gDn[e * NV + 18 + 3 * i + c] += J[j][k][i];
+                        if (gMn) gMn[e * NV + 18 + 3 * i + c] += K[j][k][i];
                     } else {
                         const double *dn_i = pl.dfield[i][c];
                         for (int v = 0; v < NV; ++v) {
-                            gDn[e * NV + v] += J[j][k][i] * dn_i[v];
-                            gMn[e * NV + v] += K[j][k][i] * dn_i[v];
+                            if (gDn) gDn[e * NV + v] += J[j][k][i] * dn_i[v];
+                            if (gMn) gMn[e * NV + v] += K[j][k][i] * dn_i[v];
                         }
                     }
                 }
             }
         }
         area[j] = area_j;
-        chain(&pl, la, garea + j * NV);
+        if (garea) chain(&pl, la, garea + j * NV);
         gap[j] = gap_m - gap_s;
+        if (!ggap) continue;
         double *g = ggap + j * NV;
         chain(&pl, lgap, g);
         for (int k = 0; k < 3; ++k)
@@ -694,8 +696,9 @@ static int pair(long p, const double *xs, const double *xm, const double *nn, in
 }
 
 /* n pairs: xs, xm, nn (n, 3, 3); crosspoint (n, 3) or NULL; rule 1, 3 or 7; outputs as
- * surface3.pair_quantities (gradients (..., 27)); gD, gM may be NULL, and so may all six
- * gradients (the values only, for an evaluation whose gradients are made again on demand).
+ * surface3.pair_quantities (gradients (..., 27)); any of the six gradients may be NULL (not
+ * made: a consumer that needs a few of them; none, the values only, for an evaluation whose
+ * gradients are made again on demand).
  * Returns 0, or -1 for a bad rule, or -2 - p if pair p's clip polygon outgrew its slots. */
 int surface3_triangles(long n, const double *xs, const double *xm, const double *nn,
                        const unsigned char *crosspoint, int normals, int dual_basis, int rule,

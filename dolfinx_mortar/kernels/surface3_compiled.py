@@ -101,8 +101,9 @@ class _Call:
         return self.points is not None
 
     @property
-    def values_only(self) -> bool:
-        """Whether the kernel can skip the gradients (segment-based triangle pairs)."""
+    def some_gradients(self) -> bool:
+        """Whether the kernel can skip some or all gradients (segment-based triangle
+        pairs)."""
         return not self.element and self.ns == 3 and self.nm == 3
 
     @property
@@ -132,11 +133,12 @@ class _Buffers:
                             for name, shape in call.shapes().items()})
 
     def run(self, slave_x, master_x, slave_normals, crosspoint, on_master=None,
-            values_only: bool = False) -> dict:
+            gradients: tuple[str, ...] | None = None) -> dict:
         """The kernel on up to ``size`` pairs (contiguous float64 (m, ns or nm, 3) arrays;
         crosspoint (m, ns) uint8 or None; element-based: on_master (m, q) uint8, the Gauss
-        points given to each pair); returns views of the first m rows. ``values_only``
-        (:attr:`_Call.values_only` calls): the gradients are neither made nor written."""
+        points given to each pair); returns views of the first m rows. ``gradients``: the
+        names of the gradients to make (None: all the call keeps; fewer only for
+        :attr:`_Call.some_gradients` calls); the others are neither made nor written."""
         m = slave_x.shape[0]
         out = {name: array[:m] for name, array in self.arrays.items()}
         if m == 0:
@@ -150,9 +152,11 @@ class _Buffers:
 
         pairs = (pointer(slave_x), pointer(master_x), pointer(slave_normals),
                  pointer(crosspoint, "unsigned char *"))
-        if values_only and not call.values_only:
-            raise ValueError("only segment-based triangle pairs are integrated values only")
-        grads = {} if values_only else out
+        grads = out
+        if gradients is not None:
+            if not call.some_gradients:
+                raise ValueError("only segment-based triangle pairs make some gradients only")
+            grads = {name: out[name] for name in gradients}
         results = (pointer(out["valid"], "unsigned char *"), pointer(out["overlap"]),
                    *(pointer(out[name]) for name in _VALUES),
                    pointer(grads.get("D_grad")), pointer(grads.get("M_grad")),
@@ -204,43 +208,56 @@ class CompiledGradients:
     def _names(self) -> tuple[str, ...]:
         return _GRADIENTS if self.call.scalar_gradients else _GRADIENTS[:4]
 
-    def _run(self, index: np.ndarray) -> dict:
-        """The kernel on the kept pairs ``index`` (at most a buffer of them)."""
+    def _run(self, index: np.ndarray, names: tuple[str, ...]) -> dict:
+        """The kernel on the kept pairs ``index`` (at most a buffer of them), making the
+        gradients ``names``."""
         def kept(array):
             return None if array is None else array[index]
 
+        some = names if self.call.some_gradients else None
         return self._buffers.run(self.slave_x[index], self.master_x[index],
                                  self.slave_normals[index], kept(self.crosspoint),
-                                 kept(self.on_master))
+                                 kept(self.on_master), gradients=some)
 
-    def gradients(self, rows: np.ndarray) -> list[np.ndarray]:
+    def gradients(self, rows: np.ndarray, outputs=None) -> list[np.ndarray | None]:
         """As :meth:`~.contract.GradientsOnDemand.gradients`; for up to :attr:`chunk`
         contributing rows, views of the kernel's buffers, overwritten by the next call."""
+        names = self._names()
+        if outputs is not None:
+            asked = {names[i] for i in outputs}
+            names = tuple(name for name in names if name in asked)
+        return [result if name in names else None
+                for name, result in zip(self._names(), self._made(rows, names), strict=True)]
+
+    def _made(self, rows: np.ndarray, names: tuple[str, ...]) -> list[np.ndarray | None]:
+        """The gradients ``names`` of ``rows`` in the order of :meth:`_names` (None for the
+        others): copied from the kept ones, or made by the kernel."""
         rows = np.asarray(rows)
         kept = self.rows
         position = np.minimum(np.searchsorted(kept, rows), max(kept.size - 1, 0))
         found = kept[position] == rows if kept.size else np.zeros(rows.shape, dtype=bool)
+        result: dict[str, np.ndarray] = {}
         if self.kept is not None:
-            result = [np.zeros((rows.size,) + grad.shape[1:]) for grad in
-                      (self.kept[name] for name in self._names())]
-            for grad, name in zip(result, self._names(), strict=True):
-                grad[found] = self.kept[name][position[found]]
-            return result
+            for name in names:
+                grad = self.kept[name]
+                result[name] = np.zeros((rows.size,) + grad.shape[1:])
+                result[name][found] = grad[position[found]]
+            return [result.get(name) for name in self._names()]
         if self._buffers is None:
             self._buffers = _Buffers(self.chunk, self.call)
         size = self._buffers.size
         if found.all() and rows.size <= size:
-            out = self._run(position)
-            return [out[name] for name in self._names()]
+            out = self._run(position, names)
+            return [out[name] if name in names else None for name in self._names()]
         shapes = self.call.shapes()
-        result = {name: np.zeros((rows.size,) + shapes[name]) for name in self._names()}
+        result = {name: np.zeros((rows.size,) + shapes[name]) for name in names}
         asked = np.flatnonzero(found)
         for start in range(0, asked.size, size):
             part = asked[start:start + size]
-            out = self._run(position[part])
-            for name in self._names():
+            out = self._run(position[part], names)
+            for name in names:
                 result[name][part] = out[name]
-        return [result[name] for name in self._names()]
+        return [result.get(name) for name in self._names()]
 
 
 class _KeptGradients:
@@ -381,7 +398,7 @@ def evaluate(geometry: PairGeometry, options: KernelOptions,
         out = buffers.run(slave_x[part], master_x[part], slave_normals[part],
                           None if cross is None else cross[part],
                           None if on_master is None else on_master[part],
-                          values_only=call.values_only and not kept.keeping)
+                          gradients=() if call.some_gradients and not kept.keeping else None)
         for name in _VALUES:
             values[name][part] = out[name]
         valid[part] = out["valid"].view(bool)
