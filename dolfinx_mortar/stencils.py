@@ -240,7 +240,6 @@ class PairStencil:
         gradients: dict[int, np.ndarray] = {}
         on_demand: list[np.ndarray] = []  # the kernel's gradients of rows, made when needed
         result = np.zeros((len(terms), rows.size, nv))
-        factorized = self._factorized_sums(q, rows, len(terms))
         needed = sorted({int(np.searchsorted(starts, o, side="right")) - 1
                          for row in terms for o, _ in row if o < end})
         for p, row in enumerate(terms):
@@ -255,8 +254,6 @@ class PairStencil:
                 part = int(np.searchsorted(starts, o, side="right")) - 1
                 index = o - int(starts[part])
                 weight = np.reshape(weight, (-1, 1))
-                if factorized is not None and factorized.add(p, part, index, weight, result):
-                    continue
                 if part not in gradients:
                     if q.gradients_on_demand is not None:
                         if not on_demand:
@@ -266,14 +263,7 @@ class PairStencil:
                         grad = _gradient_rows(outputs[part], rows)
                     gradients[part] = grad.reshape(rows.size, sizes[part], nv)
                 result[p] += gradients[part][:, index, :] * weight
-        if factorized is not None:
-            factorized.finish(result)
         return result
-
-    def _factorized_sums(self, q: PairQuantities, rows: np.ndarray, num_terms: int):
-        """An accumulator of the terms on outputs whose gradients the kernel kept
-        factorized (None: none kept so; :class:`_AffineSums` in 3D)."""
-        return None
 
     def combined_gradients(self, q: PairQuantities, rows: np.ndarray, terms) -> np.ndarray:
         """(len(terms), width * gdim, len(rows)): per row of ``terms``, the sum of
@@ -428,12 +418,6 @@ class Surface3Stencil(PairStencil):
             return None
         return 3 * (self.ns + self.nm) + index
 
-    def _factorized_sums(self, q: PairQuantities, rows: np.ndarray, num_terms: int):
-        if q.affine_factors is None:
-            return None
-        return _AffineSums(q.affine_factors, q.rows, rows, num_terms, self.ns, self.nm,
-                           self.num_variables)
-
     def evaluate(self, node_x: np.ndarray, options: KernelOptions,
                  crosspoint: np.ndarray | None = None) -> PairQuantities:
         slave_x = node_x[self.slave_nodes]
@@ -483,43 +467,6 @@ class Surface3Stencil(PairStencil):
                 result[:, direct + j * width:direct + (j + 1) * width, block] = chained.transpose(
                     1, 2, 0)
         return result
-
-
-class _AffineSums:
-    """The terms of :meth:`PairStencil._row_gradients` on the outputs the 3D kernel kept
-    as :class:`~dolfinx_mortar.kernels.AffineFactors` (Dn, Mn, area): summed over the 12
-    plane coordinates first, chained once to the pair's variables at the end."""
-
-    NAMES = ("Dn", "Mn", "area")  # the outputs 0, 1, 2 of PairQuantities.outputs
-
-    def __init__(self, factors, kept: np.ndarray, rows: np.ndarray, num_terms: int, ns: int,
-                 nm: int, num_variables: int):
-        self.factors, self.kept, self.rows = factors, kept, rows
-        self.ns, self.nm = ns, nm
-        self.local = _rows_of(factors.local.transpose(1, 0, 2), kept, rows)  # (rows, 57, 12)
-        self.weights = {"Dn": _rows_of(factors.slave_weights, kept, rows),
-                        "Mn": _rows_of(factors.master_weights, kept, rows)}
-        self.local_sum = np.zeros((num_terms, rows.size, self.local.shape[-1]))
-        self.first = num_variables - 3 * ns
-
-    def add(self, p: int, part: int, index: int, weight: np.ndarray,
-            result: np.ndarray) -> bool:
-        """Take term (output ``index`` of output family ``part``, weight) of row p if it is
-        factorized (the normal part straight into ``result``); False if it is not."""
-        if part >= len(self.NAMES):
-            return False
-        name = self.NAMES[part]
-        self.local_sum[p] += self.local[:, self.factors.offsets[name] + index] * weight
-        if name != "area":
-            jl, c = divmod(index, 3)
-            j, node = divmod(jl, self.ns if name == "Dn" else self.nm)
-            result[p][:, self.first + c::3] += self.weights[name][:, j, node] * weight
-        return True
-
-    def finish(self, result: np.ndarray) -> None:
-        """Chain the plane-coordinate sums to the pair's variables, into ``result``."""
-        chain = _rows_of(self.factors.chain, self.kept, self.rows)
-        result += (self.local_sum.transpose(1, 0, 2) @ chain).transpose(1, 0, 2)
 
 
 STENCILS: dict[int, type[PairStencil]] = {2: Line2Stencil, 3: Surface3Stencil}

@@ -40,7 +40,7 @@ from .contract import (
     PairGeometry,
     PairQuantities,
 )
-from .factors import AffineFactors, PairGradients
+from .factors import PairGradients
 from .line2 import NUM_PAIR_VARIABLES, Line2Kernel, pair_quantities
 from .line2_rules import dual_basis_coefficients, gauss_legendre
 from .surface3 import Surface3Kernel
@@ -50,7 +50,6 @@ __all__ = [
     "INTEGRATION_OPTIONS",
     "NORMAL_OPTIONS",
     "NUM_PAIR_VARIABLES",
-    "AffineFactors",
     "BasisOption",
     "IntegrationOption",
     "KernelOptions",

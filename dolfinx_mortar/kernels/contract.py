@@ -26,7 +26,7 @@ import numpy as np
 
 from ..deprecation import removed_keyword, warn_removed_variable
 from ..dual import RowSubsetDual
-from .factors import AffineFactors, PairGradients
+from .factors import PairGradients
 
 NormalOption = typing.Literal["averaged", "slave", "master"]
 IntegrationOption = typing.Literal["segment", "element"]
@@ -159,9 +159,6 @@ class PairQuantities:
             D (:class:`~.factors.PairGradients`; the compiled kernel's are kept in full,
             :class:`~.line2_compiled.FullGradients`), over the pairs ``rows``; None once an
             output was replaced (:meth:`replaced`).
-        affine_factors: the 3D kernel's factorized gradients of Dn, Mn and the areas of
-            triangle pairs (:class:`~.factors.AffineFactors`), when it kept them so; their
-            ``grad`` is then expanded only on first use.
         gradients_on_demand: the compiled kernel keeps no gradients: it recomputes those of
             the pairs a consumer asks for (:class:`GradientsOnDemand`), a chunk at a time.
     """
@@ -179,7 +176,6 @@ class PairQuantities:
     M_dual: RowSubsetDual | None = None
     normals_vary: bool = True
     segment_gradients: PairGradients | None = None
-    affine_factors: AffineFactors | None = None
     gradients_on_demand: GradientsOnDemand | None = None
 
     @property
@@ -196,11 +192,12 @@ class PairQuantities:
         return kept
 
     def replaced(self, **changes) -> PairQuantities:
-        """A plain copy with some fields replaced; the factorized gradients, which describe
-        the kernel's own outputs, are dropped unless given."""
+        """A plain copy with some fields replaced; the kernel's own forms of its gradients
+        (``segment_gradients``, ``gradients_on_demand``), which describe its outputs as it
+        made them, are dropped unless given."""
         fields = {field.name: getattr(self, field.name)
                   for field in dataclasses.fields(PairQuantities)}
-        fields.update(segment_gradients=None, affine_factors=None, gradients_on_demand=None)
+        fields.update(segment_gradients=None, gradients_on_demand=None)
         fields.update(changes)
         return PairQuantities(**fields)
 

@@ -10,11 +10,8 @@ its gradients in a cheaper form that combines outputs before expanding them:
   class itself holds the tests' numpy oracle's (``tests/oracle/line2_numpy.py``):
   coefficients on the gradients of a few pair-level quantities (segment limits, facet
   Jacobian, nodal normals).
-- :class:`AffineFactors` (3D, triangle on triangle with averaged normals, the numpy
-  oracle's ``tests/oracle/surface3_numpy.py``): gradients over the 12 plane coordinates
-  and their chain to the pair's variables. The compiled 3D kernel makes its gradients
-  again on demand instead (:mod:`.surface3_compiled`).
 
+The 3D kernel makes its gradients again on demand instead (:mod:`.surface3_compiled`).
 They are the typed optional parts of :class:`~dolfinx_mortar.kernels.contract.
 PairQuantities`; the stencils (:mod:`dolfinx_mortar.stencils`) read them.
 """
@@ -88,55 +85,3 @@ class PairGradients:
         """(n, stop - start, 12): the gradients of outputs start .. stop - 1."""
         rows = self.combine([[(o, 1.0)] for o in range(start, stop)])
         return np.ascontiguousarray(rows.transpose(2, 0, 1))
-
-
-class AffineFactors:
-    """The gradients of Dn, the areas and Mn of triangle pairs with averaged normals, kept
-    as the oracle's ``_affine_integrals`` makes them: over the 12 plane coordinates of the
-    slave and master nodes (``local``, (57, r, 12), output-major so that a consumer reads one output
-    of many pairs at once: Dn (j, k, c), area (j), Mn (j, l, c)), the chain
-    of the plane coordinates to the pair's 27 variables (``chain``, (r, 12, 27)), and what
-    multiplies each nodal normal in Dn and Mn (``slave_weights`` (r, j, k, i),
-    ``master_weights`` (r, j, l, i): d Dn_jk[c] / d n_i[c]). 1,134 numbers a pair instead
-    of the 1,539 of the three gradients; rows are those of ``rows`` (the pairs kept).
-    """
-
-    def __init__(self, num_rows: int, ns: int, nm: int, nvar: int):
-        self.ns, self.nm, self.nvar = ns, nm, nvar
-        self.local = np.empty((ns * ns * 3 + ns + ns * nm * 3, num_rows, 2 * (ns + nm)))
-        self.chain = np.empty((num_rows, 2 * (ns + nm), nvar))
-        self.slave_weights = np.empty((num_rows, ns, ns, ns))
-        self.master_weights = np.empty((num_rows, ns, nm, ns))
-
-    def put(self, position, factors: dict) -> None:
-        for name, array in factors.items():
-            if name == "local":
-                self.local[:, position] = array.transpose(1, 0, 2)
-            else:
-                getattr(self, name)[position] = array
-
-    @property
-    def offsets(self) -> dict:
-        """The first row of Dn, area and Mn in ``local``."""
-        ns = self.ns
-        return {"Dn": 0, "area": 3 * ns * ns, "Mn": 3 * ns * ns + ns}
-
-    def expanded(self, name: str) -> np.ndarray:
-        """The gradient of Dn, Mn or area over the pair's variables (the kernel's product and
-        the normals' scatter, as the oracle's ``_affine_integrals`` applies them)."""
-        ns, nm, nvar = self.ns, self.nm, self.nvar
-        r = self.local.shape[1]
-        k = {"Dn": 3 * ns * ns, "area": ns, "Mn": 3 * ns * nm}[name]
-        start = self.offsets[name]
-        # the kernel's product of all rows at once (the same bits), then the rows of name
-        local = np.ascontiguousarray(self.local.transpose(1, 0, 2))
-        grad = np.ascontiguousarray((local @ self.chain)[:, start:start + k])
-        if name == "area":
-            return grad.reshape(r, ns, nvar)
-        count = ns if name == "Dn" else nm
-        grad = grad.reshape(r, ns, count, 3, nvar)
-        weights = self.slave_weights if name == "Dn" else self.master_weights
-        first = nvar - 3 * ns
-        for c in range(3):
-            grad[..., c, first + c::3] += weights
-        return grad

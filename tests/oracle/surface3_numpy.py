@@ -57,7 +57,8 @@ from dolfinx_mortar import dual
 from dolfinx_mortar.dual import Dual, RowSubsetDual
 from dolfinx_mortar.kernels import compiled
 from dolfinx_mortar.kernels.contract import KernelOptions, PairGeometry, PairQuantities
-from dolfinx_mortar.kernels.factors import AffineFactors
+
+from .factors import AffineFactors
 
 _FACING_TOLERANCE = 1e-8
 _AREA_TOLERANCE = 1e-14
@@ -371,8 +372,8 @@ def pair_quantities(
             gives each of its Gauss points to one master facet (default: every
             pair a facet of its own). Unused by segment-based integration.
         factorized: triangle pairs with averaged normals and the standard basis keep the
-            gradients of Dn, Mn and the areas factorized (:class:`~.factors.AffineFactors`,
-            ``affine_factors`` of the result; their ``grad`` is expanded on first use).
+            gradients of Dn, Mn and the areas factorized (:class:`~.factors.AffineFactors`),
+            expanded when the result's ``Dn``, ``Mn`` and ``area`` are first asked for them.
     """
     KernelOptions(normals=normals, integration=integration, basis=basis)  # (checks them)
     rule = num_gauss_points or DEFAULT_GAUSS_POINTS
@@ -430,7 +431,7 @@ def pair_quantities(
         D=values["D"], M=values["M"], Dn=subset("Dn"), Mn=subset("Mn"), gap=subset("gap"),
         area=subset("area"), valid=valid, overlap=overlap, num_variables=nvar,
         D_dual=subset("D") if scalar_gradients else None,
-        M_dual=subset("M") if scalar_gradients else None, affine_factors=factors)
+        M_dual=subset("M") if scalar_gradients else None)
 
 
 class Surface3Kernel:
@@ -441,6 +442,8 @@ class Surface3Kernel:
 
     gdim = 3
     default_gauss_points = {"segment": DEFAULT_GAUSS_POINTS, "element": DEFAULT_GAUSS_POINTS}
+    factorized = True
+    """Passed to :func:`pair_quantities` (False: every gradient expanded at evaluation)."""
 
     def evaluate(self, geometry: PairGeometry, options: KernelOptions, *,
                  crosspoint: np.ndarray | None = None,
@@ -452,7 +455,8 @@ class Surface3Kernel:
             geometry.slave_x, geometry.master_x, slave_normals, normals=options.normals,
             integration=options.integration, basis=options.basis,
             num_gauss_points=options.num_gauss_points, crosspoint=crosspoint,
-            slave_facet=slave_facet, scalar_gradients=options.scalar_gradients)
+            slave_facet=slave_facet, scalar_gradients=options.scalar_gradients,
+            factorized=self.factorized)
 
 
 def _normal_field(xs: Dual, xm: Dual, nodal: Dual, normals: str, ns: int, nm: int) -> Dual:
