@@ -202,7 +202,7 @@ class MortarInterface:
         set before the first search)."""
         self.assembly_chunk: int | None = self._stencil_type.assembly_chunk
         """Pairs whose gradient blocks (G, K) are formed at once in an assembly (None:
-        all, summed as one array; 2D's factorized gradients combine all pairs in one go)."""
+        all, summed as one array; 2D's kernel gradients combine all pairs in one go)."""
 
     def mean_slave_edge_length(self) -> float:
         """h: the mean length of the undeformed slave facets' edges, over all ranks (every

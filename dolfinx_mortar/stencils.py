@@ -17,9 +17,9 @@ Every stencil calls its kernel through the one contract of
 lives in one class each, chosen once by :data:`STENCILS`:
 
 - :class:`Line2Stencil`: 2D, the stencil ``p, a, b, q, c, d`` of
-  :mod:`~dolfinx_mortar.kernels.line2`, whose gradients are already on it (the compiled
-  kernel's :class:`~dolfinx_mortar.kernels.line2_compiled.FullGradients`, or the factorized
-  :class:`~dolfinx_mortar.kernels.PairGradients` of the tests' numpy oracle).
+  :mod:`~dolfinx_mortar.kernels.line2`, whose gradients are already on it
+  (:class:`~dolfinx_mortar.kernels.PairGradients`, the compiled kernel's
+  :class:`~dolfinx_mortar.kernels.line2_compiled.FullGradients`).
 - :class:`Surface3Stencil`: 3D, slave facet nodes, master facet nodes and, per
   slave node, the nodes of its averaged normal's star; the kernel
   :mod:`~dolfinx_mortar.kernels.surface3` differentiates with respect to the

@@ -254,7 +254,8 @@ class ContactSystem:
         d(-B^T z)/du, d(-B^T z)/dz = -B^T, d C/du (2D: 8 x 12, 8 x 2, 2 x 12); with
         friction also d(-T^T y)/du, -T^T and the tangential conditions' d C_t/du
         (:class:`~dolfinx_mortar.friction.PairTangents`). Only the
-        pairs that contribute, from the factorized gradients (no full dual numbers).
+        pairs that contribute, from the kernel's gradients of those pairs (no full dual
+        numbers over every candidate pair).
         None before the first evaluation (no pairs yet).
         """
         interface = self.interfaces[k]

@@ -7,7 +7,8 @@ derivatives with respect to the pair's variables.
 
 - :mod:`.contract`: what every kernel takes and returns
   (:class:`MortarKernel`, :class:`PairGeometry`, :class:`KernelOptions`,
-  :class:`PairQuantities`); :mod:`.factors`: the forms gradients are kept in.
+  :class:`PairQuantities`, and the forms a result's gradients come in:
+  :class:`PairGradients` in 2D, ``GradientsOnDemand`` in 3D).
 - :mod:`.line2` (:class:`Line2Kernel`): 2D, two-node facets (projection and
   interval clipping); its variables are the six nodes ``p, a, b, q, c, d`` of a pair.
 - :mod:`.surface3` (:class:`Surface3Kernel`): 3D, triangle and quadrilateral
@@ -38,9 +39,9 @@ from .contract import (
     MortarKernel,
     NormalOption,
     PairGeometry,
+    PairGradients,
     PairQuantities,
 )
-from .factors import PairGradients
 from .line2 import NUM_PAIR_VARIABLES, Line2Kernel, pair_quantities
 from .line2_rules import dual_basis_coefficients, gauss_legendre
 from .surface3 import Surface3Kernel

@@ -26,7 +26,6 @@ import numpy as np
 
 from ..deprecation import removed_keyword, warn_removed_variable
 from ..dual import RowSubsetDual
-from .factors import PairGradients
 
 NormalOption = typing.Literal["averaged", "slave", "master"]
 IntegrationOption = typing.Literal["segment", "element"]
@@ -119,6 +118,29 @@ class PairGeometry:
         return self.slave_x.shape[0]
 
 
+class PairGradients(typing.Protocol):
+    """The 2D kernel's gradients of its outputs over the contributing pairs, in the form the
+    kernel keeps them, and what the stencils ask of them: linear combinations of outputs
+    (:meth:`combine`; in 2D they hold every pair at once) and the gradients of a range of
+    outputs. Outputs are numbered ``Dn`` (0-7, 4 j + 2 k + c), ``Mn`` (8-15, 8 + 4 j + 2 l
+    + c), ``area`` (16, 17), ``gap`` (18, 19), ``D`` (20-23, 20 + 2 j + k: the covered dual
+    basis of :mod:`dolfinx_mortar.covered` needs it) and, where kept, ``M`` (24-27)."""
+
+    @property
+    def num_pairs(self) -> int:
+        """The contributing pairs (the result's ``rows``)."""
+        ...
+
+    def combine(self, terms) -> np.ndarray:
+        """(len(terms), 12, num_pairs): row p sums weight * d output / dx over (output,
+        weight) in terms[p]; a weight is a number or a (num_pairs,) array."""
+        ...
+
+    def outputs(self, start: int, stop: int) -> np.ndarray:
+        """(num_pairs, stop - start, 12): the gradients of outputs start .. stop - 1."""
+        ...
+
+
 class GradientsOnDemand(typing.Protocol):
     """The gradients of a kernel's outputs, made again for the pairs a consumer asks for
     rather than kept for every pair (a 3D pair's are ~1,700 numbers)."""
@@ -155,10 +177,10 @@ class PairQuantities:
             (:attr:`KernelOptions.scalar_gradients`); else None.
         normals_vary: whether the nodal normal variables follow the coordinates (False
             for integrals frozen in the reference configuration).
-        segment_gradients: the 2D kernel's factorized gradients of Dn, Mn, area, gap and
-            D (:class:`~.factors.PairGradients`; the compiled kernel's are kept in full,
-            :class:`~.line2_compiled.FullGradients`), over the pairs ``rows``; None once an
-            output was replaced (:meth:`replaced`).
+        segment_gradients: the 2D kernel's gradients of Dn, Mn, area, gap and D (and M where
+            kept) over the pairs ``rows`` (:class:`PairGradients`; the compiled kernel keeps
+            them in full, :class:`~.line2_compiled.FullGradients`); None once an output was
+            replaced (:meth:`replaced`).
         gradients_on_demand: the compiled kernel keeps no gradients: it recomputes those of
             the pairs a consumer asks for (:class:`GradientsOnDemand`), a chunk at a time.
     """

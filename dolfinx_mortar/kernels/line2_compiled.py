@@ -5,14 +5,14 @@ averaged, slave or master; segment- or element-based; standard or dual basis; an
 rule; crosspoints). Unlike the 3D glue (:mod:`.surface3_compiled`) it keeps the gradients of
 the contributing pairs from the evaluation rather than making them again on demand: a 2D
 pair's are 288 numbers (Dn, Mn, the areas, the gaps and D over 12 variables; 336 with M),
-fewer than a factorized form would keep (:class:`~.factors.PairGradients`), and
-the one C pass that makes the values makes them for a few percent more time, where a second
+fewer than a factorized form would keep (the numpy oracle's, ``tests/oracle/factors.py``),
+and the one C pass that makes the values makes them for a few percent more time, where a second
 pass per Jacobian would cost the whole kernel again.
 
 They are kept row by row, ``(rows, outputs, 12)`` in the stencils' output numbering
 (:class:`FullGradients`), as the kernel writes them; a linear combination of outputs, what
 every consumer asks for (:meth:`FullGradients.combine`, as
-:meth:`.factors.PairGradients.combine`), is one C pass over them (``line2_combine``) that
+:meth:`.contract.PairGradients.combine`), is one C pass over them (``line2_combine``) that
 writes the stencils' layout ``(terms, 12, rows)``.
 """
 
@@ -23,7 +23,6 @@ import numpy as np
 from ..dual import RowSubsetDual
 from . import compiled
 from .contract import KernelOptions, PairGeometry, PairQuantities
-from .factors import PairGradients
 
 NUM_VARIABLES = compiled.LINE2_NUM_VARIABLES
 _SHAPES = {"Dn": (2, 2, 2), "Mn": (2, 2, 2), "area": (2,), "gap": (2,), "D": (2, 2),
@@ -31,14 +30,18 @@ _SHAPES = {"Dn": (2, 2, 2), "Mn": (2, 2, 2), "area": (2,), "gap": (2,), "D": (2,
 _FIRST = {"Dn": 0, "Mn": 8, "area": 16, "gap": 18, "D": 20, "M": 24}
 
 
-class FullGradients(PairGradients):
+class FullGradients:
     """Every kept output's gradient of the contributing pairs, as the compiled kernel made
-    them: ``grad`` (rows, outputs, 12), outputs numbered as :class:`~.factors.PairGradients`
-    numbers them (Dn 0-7, Mn 8-15, area 16-17, gap 18-19, D 20-23) and, when kept, M 24-27."""
+    them (:class:`~.contract.PairGradients`): ``grad`` (rows, outputs, 12), outputs numbered
+    as the contract numbers them (Dn 0-7, Mn 8-15, area 16-17, gap 18-19, D 20-23) and, when
+    kept, M 24-27."""
 
     def __init__(self, grad: np.ndarray):
-        super().__init__(grad.shape[0], [], [])
         self.grad = grad
+
+    @property
+    def num_pairs(self) -> int:
+        return self.grad.shape[0]
 
     @property
     def num_outputs(self) -> int:

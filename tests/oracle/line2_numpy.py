@@ -43,12 +43,13 @@ from dolfinx_mortar.kernels.contract import (
     PairGeometry,
     PairQuantities,
 )
-from dolfinx_mortar.kernels.factors import PairGradients
 from dolfinx_mortar.kernels.line2_rules import DEFAULT_GAUSS_POINTS, gauss_legendre
 from dolfinx_mortar.kernels.line2_rules import DUAL_COEFFICIENTS as _DUAL_COEFFICIENTS
 from dolfinx_mortar.kernels.line2_rules import (
     one_master_facet_per_point as _one_master_facet_per_point,
 )
+
+from .factors import FactorizedPairGradients
 
 NUM_PAIR_VARIABLES = 12
 
@@ -275,7 +276,7 @@ def _integrate(X, has_neighbour, normals, integration, basis, points, weights, c
 
     ``on_master`` (g, n): element-based, which Gauss points count. Returns
     the values D, M (n, 2, 2), Dn, Mn (n, 2, 2, 2), area, gap (n, 2); their
-    derivatives in the factorized form of :class:`PairGradients`
+    derivatives in the factorized form of :class:`FactorizedPairGradients`
     (``coefficients``, ``directions``, ``direction_rows``, ``direct``); and,
     segment-based, the pairs found to have a Gauss point where the master is
     parallel to the normal (they are not valid and contribute nothing).
@@ -586,7 +587,7 @@ def _pair_quantities(X, has_neighbour, *, normals, integration, basis, num_gauss
         parallel[start:stop] = part["parallel"]
         parts.append((start, stop, part["coefficients"], part["directions"], part["direct"]))
         direction_rows = part["direction_rows"]
-    gradients = PairGradients(rows.size, direction_rows, parts)
+    gradients = FactorizedPairGradients(rows.size, direction_rows, parts)
     if integration == "segment":
         parallel_rows = rows[parallel]
         valid[parallel_rows] = False
@@ -604,10 +605,10 @@ def _pair_quantities(X, has_neighbour, *, normals, integration, basis, num_gauss
 
     return PairQuantities(
         D=result["D"], M=result["M"],
-        Dn=subset_dual("Dn", PairGradients.DN, (2, 2, 2)),
-        Mn=subset_dual("Mn", PairGradients.MN, (2, 2, 2)),
-        gap=subset_dual("gap", PairGradients.GAP, (2,)),
-        area=subset_dual("area", PairGradients.AREA, (2,)),
+        Dn=subset_dual("Dn", FactorizedPairGradients.DN, (2, 2, 2)),
+        Mn=subset_dual("Mn", FactorizedPairGradients.MN, (2, 2, 2)),
+        gap=subset_dual("gap", FactorizedPairGradients.GAP, (2,)),
+        area=subset_dual("area", FactorizedPairGradients.AREA, (2,)),
         valid=valid & overlapping, overlap=overlap, num_variables=NUM_PAIR_VARIABLES,
         segment_gradients=gradients,
     )
