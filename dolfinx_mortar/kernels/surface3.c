@@ -6,11 +6,12 @@
  * surface3_triangles: segment-based integration of a triangle slave facet on a triangle master
  * facet, any normal field (numpy's corner-value path, _affine_integrals):
  *  1. the normal field's nodal normals, the auxiliary plane (x0, n0, e1, e2) and the slave
- *     and master nodes in plane coordinates S, Mp, in forward-mode dual numbers over the
- *     pair's 27 variables (slave xyz, master xyz, slave nodal normals), the values with
- *     numpy's operation order so that the clip topology is decided on the same bits;
+ *     and master nodes in plane coordinates S, Mp, on plain values in numpy's operation order
+ *     so that the clip topology is decided on the same bits;
  *  2. screening on values: facing test, separation test, Sutherland-Hodgman clip with vertex
- *     labels, the clip area against the area tolerance;
+ *     labels, the clip area against the area tolerance; for a pair that passes and whose
+ *     gradients are asked for, the plane's derivatives over the pair's 27 variables (slave
+ *     xyz, master xyz, slave nodal normals) in forward-mode dual numbers;
  *  3. the clip vertices recomputed from their labels, the fan cells around the vertex mean,
  *     both (affine) inverse maps at the centre and the vertices, in dual numbers over the 12
  *     plane coordinates (local variables);
@@ -300,10 +301,75 @@ static inline void cross27(const d27 *a, const d27 *b, d27 *out) {
     out[2] = sub27(mul27(a[0], b[1]), mul27(a[1], b[0]));
 }
 
-/* normals 0 averaged (the nodal normals), 1 slave (the slave facet's corner normals), 2 master
+static inline void cross3(const double *a, const double *b, double *out) {
+    out[0] = a[1] * b[2] - a[2] * b[1];
+    out[1] = a[2] * b[0] - a[0] * b[2];
+    out[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+static inline void normalize3(const double *v, double *out) {
+    double inverse = 1.0 / sqrt((v[0] * v[0] + v[1] * v[1]) + v[2] * v[2]);
+    for (int c = 0; c < 3; ++c) out[c] = v[c] * inverse;
+}
+
+/* The auxiliary plane's values: the values of plane_derivatives' dual numbers, operation for
+ * operation (the screening of a pair that does not overlap needs nothing more).
+ * normals 0 averaged (the nodal normals), 1 slave (the slave facet's corner normals), 2 master
  * (minus the master facet's unit normal at every slave node) */
-static void auxiliary_plane(const double *xs, const double *xm, const double *nn, int normals,
-                            plane_t *pl) {
+static void plane_values(const double *xs, const double *xm, const double *nn, int normals,
+                         plane_t *pl) {
+    double N[3][3];
+    if (normals == 0) {
+        memcpy(N, nn, sizeof N);
+    } else if (normals == 1) {
+        for (int i = 0; i < 3; ++i) {
+            double a[3], b[3], v[3];
+            for (int c = 0; c < 3; ++c) {
+                a[c] = xs[3 * ((i + 1) % 3) + c] - xs[3 * i + c];
+                b[c] = xs[3 * ((i + 2) % 3) + c] - xs[3 * i + c];
+            }
+            cross3(a, b, v);
+            normalize3(v, N[i]);
+        }
+    } else {
+        double a[3], b[3], v[3], unit[3];
+        for (int c = 0; c < 3; ++c) { a[c] = xm[3 + c] - xm[c]; b[c] = xm[6 + c] - xm[c]; }
+        cross3(a, b, v);
+        normalize3(v, unit);
+        for (int i = 0; i < 3; ++i)
+            for (int c = 0; c < 3; ++c) N[i][c] = unit[c] * -1.0;
+    }
+    pl->unit_field = normals == 0;
+    memcpy(pl->field, N, sizeof N);
+    double x0[3], v[3], n0[3], edge[3], w[3];
+    for (int c = 0; c < 3; ++c) {
+        x0[c] = ((xs[c] + xs[3 + c]) + xs[6 + c]) * (1.0 / 3.0);
+        v[c] = ((N[0][c] + N[1][c]) + N[2][c]) * (1.0 / 3.0);
+    }
+    normalize3(v, n0);
+    for (int c = 0; c < 3; ++c) edge[c] = xs[3 + c] - xs[c];
+    double along = (edge[0] * n0[0] + edge[1] * n0[1]) + edge[2] * n0[2];
+    for (int c = 0; c < 3; ++c) w[c] = edge[c] - n0[c] * along;
+    normalize3(w, pl->e[0]);
+    const double *e0 = pl->e[0];
+    pl->e[1][0] = n0[1] * e0[2] - n0[2] * e0[1];
+    pl->e[1][1] = n0[2] * e0[0] - n0[0] * e0[2];
+    pl->e[1][2] = n0[0] * e0[1] - n0[1] * e0[0];
+    for (int c = 0; c < 3; ++c) pl->n0[c] = n0[c];
+    for (int k = 0; k < 3; ++k) {
+        for (int c = 0; c < 3; ++c) { pl->os[k][c] = xs[3 * k + c] - x0[c]; pl->om[k][c] = xm[3 * k + c] - x0[c]; }
+        for (int a = 0; a < 2; ++a) {
+            const double *ea = pl->e[a];
+            pl->S[k][a] = (pl->os[k][0] * ea[0] + pl->os[k][1] * ea[1]) + pl->os[k][2] * ea[2];
+            pl->Mp[k][a] = (pl->om[k][0] * ea[0] + pl->om[k][1] * ea[1]) + pl->om[k][2] * ea[2];
+        }
+    }
+}
+
+/* The derivatives of the auxiliary plane over the 27 variables (de, dfield), for the pairs that
+ * overlap when gradients are asked for. */
+static void plane_derivatives(const double *xs, const double *xm, const double *nn, int normals,
+                              plane_t *pl) {
     d27 N[3][3], X[3][3], Y[3][3];
     memset(N, 0, sizeof N); memset(X, 0, sizeof X); memset(Y, 0, sizeof Y);
     for (int k = 0; k < 3; ++k)
@@ -332,18 +398,10 @@ static void auxiliary_plane(const double *xs, const double *xm, const double *nn
         for (int i = 0; i < 3; ++i)
             for (int c = 0; c < 3; ++c) N[i][c] = scale27(unit[c], -1.0);
     }
-    pl->unit_field = normals == 0;
     for (int i = 0; i < 3; ++i)
-        for (int c = 0; c < 3; ++c) {
-            pl->field[i][c] = N[i][c].v;
-            memcpy(pl->dfield[i][c], N[i][c].d, sizeof(double) * NV);
-        }
-    double x0[3];
+        for (int c = 0; c < 3; ++c) memcpy(pl->dfield[i][c], N[i][c].d, sizeof(double) * NV);
     d27 v[3], n0[3], edge[3], w[3], e[2][3];
-    for (int c = 0; c < 3; ++c) {
-        x0[c] = ((xs[c] + xs[3 + c]) + xs[6 + c]) * (1.0 / 3.0);
-        v[c] = scale27(add27(add27(N[0][c], N[1][c]), N[2][c]), 1.0 / 3.0);
-    }
+    for (int c = 0; c < 3; ++c) v[c] = scale27(add27(add27(N[0][c], N[1][c]), N[2][c]), 1.0 / 3.0);
     normalize27(v, n0);
     for (int c = 0; c < 3; ++c) edge[c] = sub27(X[1][c], X[0][c]);
     d27 along = dot27(edge, n0);
@@ -353,16 +411,7 @@ static void auxiliary_plane(const double *xs, const double *xm, const double *nn
     e[1][1] = sub27(mul27(n0[2], e[0][0]), mul27(n0[0], e[0][2]));
     e[1][2] = sub27(mul27(n0[0], e[0][1]), mul27(n0[1], e[0][0]));
     for (int a = 0; a < 2; ++a)
-        for (int c = 0; c < 3; ++c) { pl->e[a][c] = e[a][c].v; memcpy(pl->de[a][c], e[a][c].d, sizeof(double) * NV); }
-    for (int c = 0; c < 3; ++c) pl->n0[c] = n0[c].v;
-    for (int k = 0; k < 3; ++k) {
-        for (int c = 0; c < 3; ++c) { pl->os[k][c] = xs[3 * k + c] - x0[c]; pl->om[k][c] = xm[3 * k + c] - x0[c]; }
-        for (int a = 0; a < 2; ++a) {
-            const double *ea = pl->e[a];
-            pl->S[k][a] = (pl->os[k][0] * ea[0] + pl->os[k][1] * ea[1]) + pl->os[k][2] * ea[2];
-            pl->Mp[k][a] = (pl->om[k][0] * ea[0] + pl->om[k][1] * ea[1]) + pl->om[k][2] * ea[2];
-        }
-    }
+        for (int c = 0; c < 3; ++c) memcpy(pl->de[a][c], e[a][c].d, sizeof(double) * NV);
 }
 
 /* out (27) = q (12, over S then Mp) chained to the pair's variables:
@@ -437,7 +486,7 @@ static int pair(long p, const double *xs, const double *xm, const double *nn, in
                 const unsigned char *crosspoint, int dual_basis, const double T[3][3][3],
                 const tables_t *tb, const outputs_t *o, unsigned char *valid, double *overlap) {
     plane_t pl;
-    auxiliary_plane(xs, xm, nn, normals, &pl);
+    plane_values(xs, xm, nn, normals, &pl);
     const double (*S)[2] = (const double (*)[2])pl.S, (*Mp)[2] = (const double (*)[2])pl.Mp;
     const double *n0 = pl.n0;
     /* facing: n0 . (master unit normal) < -tol */
@@ -456,6 +505,9 @@ static int pair(long p, const double *xs, const double *xm, const double *nn, in
     valid[p] = 1;
     overlap[p] = clip_area / slave_area;
     const int V = poly.count, np = V + 1;
+    /* the gradients asked for (none: the values only) */
+    const int grads = o->gDn || o->gMn || o->ggap || o->garea || o->gD || o->gM;
+    if (grads) plane_derivatives(xs, xm, nn, normals, &pl);
 
     /* clip vertices over the local variables, recomputed from the labels */
     dl Sl[3][2], Ml[3][2];
@@ -504,8 +556,6 @@ static int pair(long p, const double *xs, const double *xm, const double *nn, in
         W[c] = scalel(cross2l(ea, eb), 0.5);
     }
     /* the six functions (slave N_0..2, master Nm_0..2) at the points */
-    /* the gradients asked for (none: the values only) */
-    const int grads = o->gDn || o->gMn || o->ggap || o->garea || o->gD || o->gM;
     double F[6][MAXV + 1], dF[6][MAXV + 1][NL];
     {
         double Nv[MAXV + 1][3], dNv[MAXV + 1][3][NL];

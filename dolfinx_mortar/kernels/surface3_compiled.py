@@ -8,9 +8,14 @@ areas, valid, overlap), the coordinates of the contributing pairs, and their gra
 while these fit in :data:`KEPT_GRADIENTS_BYTES`; above it :class:`CompiledGradients` runs the
 kernel again on the pairs a consumer asks for (the stencils, a chunk at a time), hands over
 their gradients and forgets them. The values and gradients are the same bits as the first
-run's: the kernel is deterministic per pair. Once no gradients are kept, the evaluation runs
-the triangle kernel for the values only (segment-based triangle pairs: the same operations
-without the dual parts; the others make their gradients at evaluation too).
+run's: the kernel is deterministic per pair.
+
+Segment-based triangle pairs are evaluated for their values only: the kernel screens a pair
+on plain values (most of a search's candidates do not overlap) and computes the dual parts
+only for the gradients asked for; the contributing pairs' gradients are then made in a second
+pass if they are kept. The other pairs make their gradients with their values (their dual
+numbers run through the whole pointwise path), in chunks, after a numpy prefilter
+(:func:`_near`), and keep them while they fit.
 
 Covered (:func:`covers`): triangle and quadrilateral slave and master facets (a triangle on
 a triangle by the C corner-value path, as the tests' numpy oracle's ``_affine_integrals``; the
@@ -110,6 +115,16 @@ class _Call:
     def num_variables(self) -> int:
         return 3 * (2 * self.ns + self.nm)
 
+    @property
+    def gradient_names(self) -> tuple[str, ...]:
+        return _GRADIENTS if self.scalar_gradients else _GRADIENTS[:4]
+
+    @property
+    def gradient_bytes(self) -> int:
+        """The bytes of one pair's gradients."""
+        shapes = self.shapes()
+        return 8 * sum(int(np.prod(shapes[name])) for name in self.gradient_names)
+
     def shapes(self) -> dict[str, tuple]:
         """The per-pair shapes of the values and of the gradients kept."""
         ns, nm, nv = self.ns, self.nm, self.num_variables
@@ -134,49 +149,58 @@ class _Buffers:
 
     def run(self, slave_x, master_x, slave_normals, crosspoint, on_master=None,
             gradients: tuple[str, ...] | None = None) -> dict:
-        """The kernel on up to ``size`` pairs (contiguous float64 (m, ns or nm, 3) arrays;
-        crosspoint (m, ns) uint8 or None; element-based: on_master (m, q) uint8, the Gauss
-        points given to each pair); returns views of the first m rows. ``gradients``: the
-        names of the gradients to make (None: all the call keeps; fewer only for
-        :attr:`_Call.some_gradients` calls); the others are neither made nor written."""
+        """The kernel on up to ``size`` pairs (as :func:`_run`); returns views of the first m
+        rows of the buffers."""
         m = slave_x.shape[0]
         out = {name: array[:m] for name, array in self.arrays.items()}
-        if m == 0:
-            return out
-        call = self.call
-        module = compiled._get()
-        ffi, lib = module.ffi, module.lib
-
-        def pointer(array, ctype="double *"):
-            return compiled._pointer(ffi, array, ctype)
-
-        pairs = (pointer(slave_x), pointer(master_x), pointer(slave_normals),
-                 pointer(crosspoint, "unsigned char *"))
-        grads = out
-        if gradients is not None:
-            if not call.some_gradients:
-                raise ValueError("only segment-based triangle pairs make some gradients only")
-            grads = {name: out[name] for name in gradients}
-        results = (pointer(out["valid"], "unsigned char *"), pointer(out["overlap"]),
-                   *(pointer(out[name]) for name in _VALUES),
-                   pointer(grads.get("D_grad")), pointer(grads.get("M_grad")),
-                   *(pointer(grads.get(name)) for name in ("Dn_grad", "Mn_grad", "gap_grad",
-                                                           "area_grad")))
-        if call.element:
-            status = lib.surface3_element(
-                m, call.ns, call.nm, *pairs, call.normals, int(call.dual_basis),
-                call.points.shape[0], pointer(call.points), pointer(call.point_weights),
-                pointer(on_master, "unsigned char *"), *results)
-        elif call.ns == 3 and call.nm == 3:
-            status = lib.surface3_triangles(m, *pairs, call.normals, int(call.dual_basis),
-                                            call.rule, *results)
-        else:
-            status = lib.surface3_pairs(m, call.ns, call.nm, *pairs, call.normals,
-                                        int(call.dual_basis), call.rule, *results)
-        if status != 0:
-            raise RuntimeError(f"compiled 3D kernel failed (status {status}): a clip polygon "
-                               "outgrew its slots or a bad rule")
+        _run(self.call, slave_x, master_x, slave_normals, crosspoint, on_master, out,
+             gradients)
         return out
+
+
+def _run(call: _Call, slave_x, master_x, slave_normals, crosspoint, on_master, out: dict,
+         gradients: tuple[str, ...] | None = None) -> None:
+    """The kernel on m pairs (contiguous float64 (m, ns or nm, 3) arrays; crosspoint (m, ns)
+    uint8 or None; element-based: on_master (m, q) uint8, the Gauss points given to each
+    pair), written into ``out``: contiguous arrays of m rows, ``valid`` (uint8), ``overlap``,
+    the values and the gradients made. ``gradients``: the names of the gradients to make
+    (None: all the call keeps; fewer only for :attr:`_Call.some_gradients` calls, whose
+    ``out`` then needs no others); the others are neither made nor written."""
+    m = slave_x.shape[0]
+    if m == 0:
+        return
+    module = compiled._get()
+    ffi, lib = module.ffi, module.lib
+
+    def pointer(array, ctype="double *"):
+        return compiled._pointer(ffi, array, ctype)
+
+    pairs = (pointer(slave_x), pointer(master_x), pointer(slave_normals),
+             pointer(crosspoint, "unsigned char *"))
+    grads = out
+    if gradients is not None:
+        if not call.some_gradients:
+            raise ValueError("only segment-based triangle pairs make some gradients only")
+        grads = {name: out[name] for name in gradients}
+    results = (pointer(out["valid"], "unsigned char *"), pointer(out["overlap"]),
+               *(pointer(out[name]) for name in _VALUES),
+               pointer(grads.get("D_grad")), pointer(grads.get("M_grad")),
+               *(pointer(grads.get(name)) for name in ("Dn_grad", "Mn_grad", "gap_grad",
+                                                       "area_grad")))
+    if call.element:
+        status = lib.surface3_element(
+            m, call.ns, call.nm, *pairs, call.normals, int(call.dual_basis),
+            call.points.shape[0], pointer(call.points), pointer(call.point_weights),
+            pointer(on_master, "unsigned char *"), *results)
+    elif call.ns == 3 and call.nm == 3:
+        status = lib.surface3_triangles(m, *pairs, call.normals, int(call.dual_basis),
+                                        call.rule, *results)
+    else:
+        status = lib.surface3_pairs(m, call.ns, call.nm, *pairs, call.normals,
+                                    int(call.dual_basis), call.rule, *results)
+    if status != 0:
+        raise RuntimeError(f"compiled 3D kernel failed (status {status}): a clip polygon "
+                           "outgrew its slots or a bad rule")
 
 
 def _contiguous(array: np.ndarray) -> np.ndarray:
@@ -205,8 +229,16 @@ class CompiledGradients:
         self.chunk = _pairs_per_call(type(self).chunk, call.num_variables)
         self._buffers: _Buffers | None = None
 
+    def keep(self) -> None:
+        """Make the gradients of every contributing pair now and keep them."""
+        names = self._names()
+        made = self._made(self.rows, names)  # (views of the kernel's buffers if one chunk)
+        self.kept = {name: grad if grad.base is None else grad.copy()
+                     for name, grad in zip(names, made, strict=True)}
+        self._buffers = None
+
     def _names(self) -> tuple[str, ...]:
-        return _GRADIENTS if self.call.scalar_gradients else _GRADIENTS[:4]
+        return self.call.gradient_names
 
     def _run(self, index: np.ndarray, names: tuple[str, ...]) -> dict:
         """The kernel on the kept pairs ``index`` (at most a buffer of them), making the
@@ -266,16 +298,10 @@ class _KeptGradients:
     :data:`KEPT_GRADIENTS_BYTES`; given up, and then made again on demand, above it."""
 
     def __init__(self, call: _Call):
-        self.names = _GRADIENTS if call.scalar_gradients else _GRADIENTS[:4]
-        shapes = call.shapes()
-        self.pair_bytes = 8 * sum(int(np.prod(shapes[name])) for name in self.names)
+        self.names = call.gradient_names
+        self.pair_bytes = call.gradient_bytes
         self.parts: dict[str, list[np.ndarray]] | None = {name: [] for name in self.names}
         self.count = 0
-
-    @property
-    def keeping(self) -> bool:
-        """False once given up: the evaluation's later chunks need no gradients."""
-        return self.parts is not None
 
     def add(self, out: dict) -> None:
         if self.parts is None:
@@ -322,7 +348,8 @@ def _near(slave_x: np.ndarray, master_x: np.ndarray, slave_normals: np.ndarray,
     bounding discs (centre the node mean, radius the farthest node; projecting along the
     plane normal moves no two points apart) lie apart by a millionth of their radii, far more
     than the kernel's separation tolerance, so the kernel would find them separated. Spares
-    the segment-based kernel most of a search's candidates."""
+    the kernels whose screening runs on dual numbers (quadrilaterals, other normal fields)
+    most of a search's candidates."""
     s, m = slave_x.transpose(1, 2, 0), master_x.transpose(1, 2, 0)  # (node, xyz, pair)
     slave_centre, master_centre = s.sum(axis=0) / s.shape[0], m.sum(axis=0) / m.shape[0]
 
@@ -382,32 +409,42 @@ def evaluate(geometry: PairGeometry, options: KernelOptions,
                                      dtype=np.uint8)
     shapes = call.shapes()
     values = {name: np.zeros((n,) + shapes[name]) for name in _VALUES}
-    valid = np.zeros(n, dtype=bool)
+    valid = np.zeros(n, dtype=np.uint8)
     overlap = np.zeros(n)
     on_master = None
-    if call.element:
-        on_master = _points_on_master(call, slave_x, master_x, slave_normals, slave_facet)
-        candidates = np.flatnonzero(on_master.any(axis=1))
+    kept = None
+    if call.some_gradients:
+        # the triangle kernel screens every candidate on plain values and writes the values
+        # in place; the contributing pairs' gradients are made afterwards, or on demand
+        _run(call, slave_x, master_x, slave_normals, cross, None,
+             {"valid": valid, "overlap": overlap, **values}, gradients=())
     else:
-        candidates = _near(slave_x, master_x, slave_normals, options.normals)
-    size = _pairs_per_call(EVALUATION_CHUNK, call.num_variables)
-    buffers = _Buffers(min(size, max(candidates.size, 1)), call)
-    kept = _KeptGradients(call)
-    for start in range(0, candidates.size, buffers.size):
-        part = candidates[start:start + buffers.size]
-        out = buffers.run(slave_x[part], master_x[part], slave_normals[part],
-                          None if cross is None else cross[part],
-                          None if on_master is None else on_master[part],
-                          gradients=() if call.some_gradients and not kept.keeping else None)
-        for name in _VALUES:
-            values[name][part] = out[name]
-        valid[part] = out["valid"].view(bool)
-        overlap[part] = out["overlap"]
-        kept.add(out)
-    del buffers
+        if call.element:
+            on_master = _points_on_master(call, slave_x, master_x, slave_normals, slave_facet)
+            candidates = np.flatnonzero(on_master.any(axis=1))
+        else:
+            candidates = _near(slave_x, master_x, slave_normals, options.normals)
+        size = _pairs_per_call(EVALUATION_CHUNK, call.num_variables)
+        buffers = _Buffers(min(size, max(candidates.size, 1)), call)
+        keeping = _KeptGradients(call)
+        for start in range(0, candidates.size, buffers.size):
+            part = candidates[start:start + buffers.size]
+            out = buffers.run(slave_x[part], master_x[part], slave_normals[part],
+                              None if cross is None else cross[part],
+                              None if on_master is None else on_master[part])
+            for name in _VALUES:
+                values[name][part] = out[name]
+            valid[part] = out["valid"]
+            overlap[part] = out["overlap"]
+            keeping.add(out)
+        del buffers
+        kept = keeping.arrays()
+    valid = valid.view(bool)
     rows = np.flatnonzero(valid)
     source = CompiledGradients(rows, call, slave_x, master_x, slave_normals, cross, on_master,
-                               kept.arrays())
+                               kept)
+    if call.some_gradients and rows.size * call.gradient_bytes <= KEPT_GRADIENTS_BYTES:
+        source.keep()
     names = ("Dn", "Mn", "area", "gap") + (("D", "M") if options.scalar_gradients else ())
     cached: list = []
 
