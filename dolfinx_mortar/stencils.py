@@ -47,6 +47,7 @@ from .kernels import (
     PairGeometry,
     PairQuantities,
     Surface3Kernel,
+    compiled,
 )
 
 
@@ -84,6 +85,36 @@ def _gradient_rows(item: RowSubsetDual, rows: np.ndarray) -> np.ndarray:
     """The gradients of ``rows`` of a :class:`RowSubsetDual`, without building its full
     gradient."""
     return _rows_of(item.grad_rows, item.rows, rows)
+
+
+def _add_combined(result: np.ndarray, grad: np.ndarray, entries: list) -> None:
+    """result (terms, rows, nv) += weight * grad[:, index, :] into row p of result for each
+    (p, index, weight) of ``entries`` (a weight is a number or one per row), in C: one pass
+    over the rows of grad (rows, outputs, nv)."""
+    n, size, nv = grad.shape
+    if n == 0 or not entries:
+        return
+    term = np.array([p for p, _, _ in entries], dtype=np.intc)
+    index = np.array([i for _, i, _ in entries], dtype=np.intc)
+    step = np.array([np.ndim(w) != 0 for _, _, w in entries], dtype=np.intc)
+    lengths = np.where(step == 1, n, 1)
+    weight_start = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
+    weights = np.empty(int(lengths.sum()))
+    for e, (_, _, w) in enumerate(entries):
+        weights[weight_start[e]:weight_start[e] + lengths[e]] = np.ravel(w)
+    grad = np.ascontiguousarray(grad, dtype=np.float64)
+    module = compiled.load("surface3")
+    ffi = module.ffi
+
+    def pointer(array, ctype="double *"):
+        return compiled._pointer(ffi, array, ctype)
+
+    status = module.lib.gradients_combine(
+        n, nv, size, pointer(grad), len(entries), pointer(term, "int *"),
+        pointer(index, "int *"), pointer(weight_start, "long *"), pointer(step, "int *"),
+        pointer(weights), pointer(result))
+    if status != 0:
+        raise ValueError(f"an output index outside the {size} of its family")
 
 
 class PairStencil:
@@ -237,11 +268,8 @@ class PairStencil:
         sizes = [int(np.prod(item.value.shape[1:])) for item in outputs]
         starts = np.cumsum([0] + sizes[:-1])
         end = int(starts[-1]) + sizes[-1]
-        gradients: dict[int, np.ndarray] = {}
-        on_demand: list[np.ndarray] = []  # the kernel's gradients of rows, made when needed
         result = np.zeros((len(terms), rows.size, nv))
-        needed = sorted({int(np.searchsorted(starts, o, side="right")) - 1
-                         for row in terms for o, _ in row if o < end})
+        entries: dict[int, list] = {}  # per output family: (term, index in it, weight)
         for p, row in enumerate(terms):
             for o, weight in row:
                 if o >= self.NORMAL:
@@ -252,17 +280,13 @@ class PairStencil:
                 if o >= end:
                     raise ValueError(f"output {o} was not kept by the kernel")
                 part = int(np.searchsorted(starts, o, side="right")) - 1
-                index = o - int(starts[part])
-                weight = np.reshape(weight, (-1, 1))
-                if part not in gradients:
-                    if q.gradients_on_demand is not None:
-                        if not on_demand:
-                            on_demand.extend(q.gradients_on_demand.gradients(rows, needed))
-                        grad = on_demand[part]
-                    else:
-                        grad = _gradient_rows(outputs[part], rows)
-                    gradients[part] = grad.reshape(rows.size, sizes[part], nv)
-                result[p] += gradients[part][:, index, :] * weight
+                entries.setdefault(part, []).append((p, o - int(starts[part]), weight))
+        made = None  # the kernel's gradients of rows, made again
+        if q.gradients_on_demand is not None and entries:
+            made = q.gradients_on_demand.gradients(rows, sorted(entries))
+        for part, family in entries.items():
+            grad = made[part] if made is not None else _gradient_rows(outputs[part], rows)
+            _add_combined(result, grad.reshape(rows.size, sizes[part], nv), family)
         return result
 
     def combined_gradients(self, q: PairQuantities, rows: np.ndarray, terms) -> np.ndarray:
@@ -439,34 +463,34 @@ class Surface3Stencil(PairStencil):
                                     slave_facet=self.slave_facets)
 
     def combined_gradients(self, q: PairQuantities, rows, terms) -> np.ndarray:
+        result = np.empty((len(terms), 3 * self.width, rows.size))
         source = q.gradients_on_demand
-        if source is not None and rows.size > source.chunk:
-            # the kernel's gradients made again a chunk of rows at a time
-            result = np.empty((len(terms), 3 * self.width, rows.size))
-            for start in range(0, rows.size, source.chunk):
-                stop = min(rows.size, start + source.chunk)
-                part = [[(o, w if np.ndim(w) == 0 else w[start:stop]) for o, w in row]
-                        for row in terms]
-                result[:, :, start:stop] = self.combined_gradients(q, rows[start:stop], part)
-            return result
-        kernel = self._row_gradients(q, rows, terms)  # (T, rows, nv)
-        direct = 3 * (self.ns + self.nm)
-        chain = bool(self.max_star) and self._normal_jacobian is not None
-        result = np.zeros((len(terms), 3 * self.width, rows.size))
-        width = 3 * self.max_star
-        # in blocks of rows: the transposes to the pair axis last stay in cache
-        for start in range(0, rows.size, 512):
-            block = slice(start, min(rows.size, start + 512))
-            result[:, :direct, block] = kernel[:, block, :direct].transpose(0, 2, 1)
-            for j in range(self.ns if chain else 0):
-                # d n_j[a] / d x[star, b] of the rows (rows, a, s b), one product per row
-                J = self._normal_jacobian[self._pair_star_rows[rows[block], j]].reshape(
-                    -1, 3, width)
-                by_normal = kernel[:, block, direct + 3 * j:direct + 3 * j + 3].transpose(1, 0, 2)
-                chained = np.ascontiguousarray(by_normal) @ J  # (rows, T, s b)
-                result[:, direct + j * width:direct + (j + 1) * width, block] = chained.transpose(
-                    1, 2, 0)
+        step = rows.size if source is None else source.chunk
+        # (the kernel's gradients made again a chunk of rows at a time)
+        for start in range(0, rows.size, max(step, 1)):
+            stop = min(rows.size, start + step)
+            part = terms if (start, stop) == (0, rows.size) else [
+                [(o, w if np.ndim(w) == 0 else w[start:stop]) for o, w in row]
+                for row in terms]
+            self._columns(q, rows[start:stop], part, result, start)
         return result
+
+    def _columns(self, q: PairQuantities, rows, terms, result: np.ndarray, first: int) -> None:
+        """result[:, :, first:first + rows.size] = the combined gradients of ``rows`` on the
+        stencil's columns: the facet nodes' directly, the nodal normals' chained through
+        their stars (in C, ``stencil_columns``)."""
+        kernel = self._row_gradients(q, rows, terms)  # (T, rows, nv)
+        chain = bool(self.max_star) and self._normal_jacobian is not None
+        J = None
+        if chain:  # d n_j[a] / d x[star, b] of the rows: (rows, j, a, s b)
+            J = np.ascontiguousarray(self._normal_jacobian[self._pair_star_rows[rows]])
+        module = compiled.load("surface3")
+        ffi = module.ffi
+        base = ffi.cast("double *", ffi.from_buffer(result)) + first
+        module.lib.stencil_columns(
+            rows.size, result.shape[2], len(terms), self.num_variables, 3 * (self.ns + self.nm),
+            self.ns, 3 * self.max_star, compiled._pointer(ffi, kernel, "double *"),
+            compiled._pointer(ffi, J, "double *"), base)
 
 
 STENCILS: dict[int, type[PairStencil]] = {2: Line2Stencil, 3: Surface3Stencil}

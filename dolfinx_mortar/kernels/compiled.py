@@ -76,6 +76,11 @@ int surface3_element(long n, int ns, int nm, const double *xs, const double *xm,
                      double *D, double *M, double *Dn, double *Mn, double *gap, double *area,
                      double *gD, double *gM, double *gDn, double *gMn, double *ggap,
                      double *garea);
+int gradients_combine(long num_rows, int nv, int size, const double *grad, int num_entries,
+                      const int *term, const int *index, const long *weight_start,
+                      const int *weight_step, const double *weights, double *out);
+void stencil_columns(long num_rows, long row_stride, int num_terms, int nv, int direct, int ns,
+                     int width3, const double *kernel, const double *J, double *out);
 """,
     "line2": """
 void line2_screen(long n, const double *slave, const double *master, const double *neighbour,
