@@ -1189,12 +1189,80 @@ static void write_outputs(const integrals_t *in, sizes_t z, long p, const dx (*x
     }
 }
 
+/* The facing and separation tests of pair_general on plain values, with the operations (and
+ * so the bits) of the values of its dual numbers: 0 if they reject the pair, before any dual
+ * number is made. */
+static int passes_screening(sizes_t z, const double *xsv, const double *xmv, const double *nnv,
+                            int normals) {
+    const int ns = z.ns, nm = z.nm;
+    const double (*xs)[3] = (const double (*)[3])xsv, (*xm)[3] = (const double (*)[3])xmv;
+    double node_normals[4][3];
+    if (normals == 0) {
+        memcpy(node_normals, nnv, sizeof(double) * 3 * ns);
+    } else if (normals == 1) {
+        for (int i = 0; i < ns; ++i) {
+            double a[3], b[3], v[3];
+            for (int c = 0; c < 3; ++c) {
+                a[c] = xs[(i + 1) % ns][c] - xs[i][c];
+                b[c] = xs[(i + ns - 1) % ns][c] - xs[i][c];
+            }
+            cross3(a, b, v);
+            normalize3(v, node_normals[i]);
+        }
+    } else {
+        double a[3], b[3], v[3], unit[3];
+        for (int c = 0; c < 3; ++c) {
+            if (nm == 4) { a[c] = xm[2][c] - xm[0][c]; b[c] = xm[3][c] - xm[1][c]; }
+            else { a[c] = xm[1][c] - xm[0][c]; b[c] = xm[2][c] - xm[0][c]; }
+        }
+        cross3(a, b, v);
+        normalize3(v, unit);
+        for (int i = 0; i < ns; ++i)
+            for (int c = 0; c < 3; ++c) node_normals[i][c] = -unit[c];
+    }
+    double x0[3], sum[3], n0[3], edge[3], wv[3], e[2][3];
+    for (int c = 0; c < 3; ++c) {
+        x0[c] = xs[0][c]; sum[c] = node_normals[0][c];
+        for (int k = 1; k < ns; ++k) { x0[c] = x0[c] + xs[k][c]; sum[c] = sum[c] + node_normals[k][c]; }
+        x0[c] = x0[c] * (1.0 / ns);
+        sum[c] = sum[c] * (1.0 / ns);
+    }
+    normalize3(sum, n0);
+    for (int c = 0; c < 3; ++c) edge[c] = xs[1][c] - xs[0][c];
+    double along = (edge[0] * n0[0] + edge[1] * n0[1]) + edge[2] * n0[2];
+    for (int c = 0; c < 3; ++c) wv[c] = edge[c] - n0[c] * along;
+    normalize3(wv, e[0]);
+    cross3(n0, e[0], e[1]);
+    double u[3], w[3], mn[3];
+    for (int c = 0; c < 3; ++c) {
+        if (nm == 4) { u[c] = xmv[6 + c] - xmv[c]; w[c] = xmv[9 + c] - xmv[3 + c]; }
+        else { u[c] = xmv[3 + c] - xmv[c]; w[c] = xmv[6 + c] - xmv[c]; }
+    }
+    mn[0] = u[1] * w[2] - u[2] * w[1]; mn[1] = u[2] * w[0] - u[0] * w[2]; mn[2] = u[0] * w[1] - u[1] * w[0];
+    double length = sqrt((mn[0] * mn[0] + mn[1] * mn[1]) + mn[2] * mn[2]);
+    for (int c = 0; c < 3; ++c) mn[c] = mn[c] / length;
+    if (!(((n0[0] * mn[0] + n0[1] * mn[1]) + n0[2] * mn[2]) < -FACING_TOLERANCE)) return 0;
+    double S[4][2], Mp[4][2];
+    for (int k = 0; k < ns; ++k)
+        for (int a = 0; a < 2; ++a) {
+            double o0 = xs[k][0] - x0[0], o1 = xs[k][1] - x0[1], o2 = xs[k][2] - x0[2];
+            S[k][a] = (o0 * e[a][0] + o1 * e[a][1]) + o2 * e[a][2];
+        }
+    for (int k = 0; k < nm; ++k)
+        for (int a = 0; a < 2; ++a) {
+            double o0 = xm[k][0] - x0[0], o1 = xm[k][1] - x0[1], o2 = xm[k][2] - x0[2];
+            Mp[k][a] = (o0 * e[a][0] + o1 * e[a][1]) + o2 * e[a][2];
+        }
+    return !separated_k((const double (*)[2])S, ns, (const double (*)[2])Mp, nm);
+}
+
 /* The pair's outputs (values and gradients over its nv variables): zero unless valid */
 static int pair_general(long p, sizes_t z, const double *xsv, const double *xmv, const double *nnv,
                         const unsigned char *crosspoint, int normals, int dual_basis,
                         int q, const double (*bary)[3], const double *rule_weights,
                         const outputs_t *o, unsigned char *valid, double *overlap) {
     const int ns = z.ns, nm = z.nm;
+    if (!passes_screening(z, xsv, xmv, nnv, normals)) return 0;
     dx xs[4][3], xm[4][3], node_normals[4][3];
     pair_variables_x(z, xsv, xmv, nnv, normals, xs, xm, node_normals);
     /* the auxiliary plane */

@@ -293,8 +293,9 @@ class CompiledGradients:
 
 
 class _KeptGradients:
-    """The contributing pairs' gradients of an evaluation, copied out of the kernel's buffers
-    chunk by chunk (in the order of the candidates, that of the rows) while they fit in
+    """The contributing pairs' gradients of an evaluation whose kernel makes them with the
+    values (quadrilateral or element-based pairs), copied out of the kernel's buffers chunk by
+    chunk (in the order of the candidates, that of the rows) while they fit in
     :data:`KEPT_GRADIENTS_BYTES`; given up, and then made again on demand, above it."""
 
     def __init__(self, call: _Call):
