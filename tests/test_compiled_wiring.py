@@ -104,19 +104,18 @@ def test_kernel_equals_numpy(rule, basis, scalar_gradients):
             assert_close(a, b.grad[rows], what=("rows", index))
 
 
-def test_screened_candidates_are_far():
-    """The candidates the compiled evaluation does not give the kernel (projected bounding
-    discs apart) are not valid for the numpy kernel either; the others still reach it."""
-    slave, master, nodal, _ = random_pairs(2000, seed=6)
-    shift = np.random.default_rng(7).uniform(-2.0, 2.0, (2000, 1, 3))
-    master = master + shift
-    near = surface3_compiled._near(slave, master, nodal)
-    assert 100 < near.size < 1900
-    geometry = PairGeometry(slave, master, nodal)
+@pytest.mark.parametrize(("ns", "nm"), [(3, 3), (4, 4)])
+def test_far_candidates_are_screened_as_the_oracle_screens_them(ns, nm):
+    """Every candidate reaches the kernel, most of them far apart (as most of a search's
+    candidates are): its screening on plain values keeps the numpy oracle's pairs."""
+    slave, master, nodal, _ = random_facets(1000, ns, nm, seed=6)
+    shift = np.random.default_rng(7).uniform(-2.0, 2.0, (1000, 1, 3))
+    geometry = PairGeometry(slave, master + shift, nodal)
     expected = ORACLE.evaluate(geometry, KernelOptions())
-    assert np.isin(expected.rows, near).all() and expected.rows.size > 50
+    assert 30 < expected.rows.size < 500
     got = Surface3Kernel().evaluate(geometry, KernelOptions())
     np.testing.assert_array_equal(got.rows, expected.rows)
+    np.testing.assert_allclose(got.overlap, expected.overlap, rtol=1e-12, atol=1e-15)
 
 
 @pytest.mark.parametrize(("ns", "nm"), [(3, 3), (4, 3), (4, 4)])
@@ -172,7 +171,35 @@ def test_some_gradients_are_those_of_the_full_run(normals, basis, rule):
                 assert np.all(b[name] == 7), name
     quadrilaterals = surface3_compiled._Buffers(1, surface3_compiled._Call.of(4, 3, options))
     with pytest.raises(ValueError, match="triangle pairs"):
-        quadrilaterals.run(*random_facets(1, 4, 3, seed=1)[:3], None, gradients=())
+        quadrilaterals.run(*random_facets(1, 4, 3, seed=1)[:3], None, gradients=("gap_grad",))
+    element = surface3_compiled._Buffers(
+        1, surface3_compiled._Call.of(3, 3, KernelOptions(integration="element")))
+    with pytest.raises(ValueError, match="segment-based pairs none"):
+        element.run(*random_facets(1, 3, 3, seed=1)[:3], None, np.ones((1, 7), np.uint8),
+                    gradients=())
+
+
+@pytest.mark.parametrize(("ns", "nm"), [(4, 4), (4, 3), (3, 4)])
+@pytest.mark.parametrize("normals", ["averaged", "slave", "master"])
+@pytest.mark.parametrize("basis", ["standard", "dual"])
+def test_general_kernel_values_only_are_those_of_the_full_run(ns, nm, normals, basis):
+    """The general kernel (quadrilaterals) asked for no gradient carries no derivatives in its
+    dual numbers: the same bits of the values, valid pairs and overlaps as the full run
+    (crosspoints too), and no gradient written."""
+    slave, master, nodal, cross = random_facets(300, ns, nm, seed=ns + 2 * nm, noise=0.04)
+    options = KernelOptions(normals=normals, basis=basis, scalar_gradients=True)
+    call = surface3_compiled._Call.of(ns, nm, options)
+    full, values = (surface3_compiled._Buffers(300, call) for _ in range(2))
+    for crosspoint in (None, np.ascontiguousarray(cross, dtype=np.uint8)):
+        a = full.run(slave, master, nodal, crosspoint)
+        assert 50 < a["valid"].sum() < 300
+        for array in values.arrays.values():
+            array[...] = 7
+        b = values.run(slave, master, nodal, crosspoint, gradients=())
+        for name in ("valid", "overlap") + surface3_compiled._VALUES:
+            np.testing.assert_array_equal(a[name], b[name])
+        for name in surface3_compiled._GRADIENTS:
+            assert np.all(b[name] == 7), name
 
 
 @pytest.mark.parametrize(("ns", "nm"), [(3, 3), (4, 4)])

@@ -788,27 +788,30 @@ int surface3_triangles(long n, const double *xs, const double *xm, const double 
 #define NX 36
 
 typedef struct { double v, d[NX]; } dx;
+/* The derivatives the dual numbers carry: all of them, or none in a values-only call of
+ * surface3_pairs (no gradient outputs): the values' operations are the same either way. */
+static int nx_ = NX;
 
 static inline dx constx(double v) { dx r; memset(&r, 0, sizeof r); r.v = v; return r; }
-static inline dx addx(dx a, dx b) { dx r; r.v = a.v + b.v; for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] + b.d[i]; return r; }
-static inline dx subx(dx a, dx b) { dx r; r.v = a.v - b.v; for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] - b.d[i]; return r; }
-static inline dx mulx(dx a, dx b) { dx r; r.v = a.v * b.v; for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] * b.v + b.d[i] * a.v; return r; }
-static inline dx scalex(dx a, double s) { dx r; r.v = a.v * s; for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] * s; return r; }
-static inline dx negx(dx a) { dx r; r.v = -a.v; for (int i = 0; i < NX; ++i) r.d[i] = -a.d[i]; return r; }
+static inline dx addx(dx a, dx b) { dx r; r.v = a.v + b.v; for (int i = 0; i < nx_; ++i) r.d[i] = a.d[i] + b.d[i]; return r; }
+static inline dx subx(dx a, dx b) { dx r; r.v = a.v - b.v; for (int i = 0; i < nx_; ++i) r.d[i] = a.d[i] - b.d[i]; return r; }
+static inline dx mulx(dx a, dx b) { dx r; r.v = a.v * b.v; for (int i = 0; i < nx_; ++i) r.d[i] = a.d[i] * b.v + b.d[i] * a.v; return r; }
+static inline dx scalex(dx a, double s) { dx r; r.v = a.v * s; for (int i = 0; i < nx_; ++i) r.d[i] = a.d[i] * s; return r; }
+static inline dx negx(dx a) { dx r; r.v = -a.v; for (int i = 0; i < nx_; ++i) r.d[i] = -a.d[i]; return r; }
 static inline dx divx(dx a, dx b) {
     dx r; double inverse = 1.0 / b.v; r.v = a.v * inverse;
-    for (int i = 0; i < NX; ++i) r.d[i] = (a.d[i] - b.d[i] * r.v) * inverse;
+    for (int i = 0; i < nx_; ++i) r.d[i] = (a.d[i] - b.d[i] * r.v) * inverse;
     return r;
 }
 static inline dx sqrtx(dx a) {
     dx r; r.v = sqrt(a.v); double f = r.v > 0.0 ? 0.5 / r.v : 0.0;
-    for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] * f;
+    for (int i = 0; i < nx_; ++i) r.d[i] = a.d[i] * f;
     return r;
 }
 /* r += a * b */
 static inline void accumulatex(dx *r, dx a, dx b) {
     r->v += a.v * b.v;
-    for (int i = 0; i < NX; ++i) r->d[i] += a.d[i] * b.v + b.d[i] * a.v;
+    for (int i = 0; i < nx_; ++i) r->d[i] += a.d[i] * b.v + b.d[i] * a.v;
 }
 static inline dx dotx(const dx *a, const dx *b) { return addx(addx(mulx(a[0], b[0]), mulx(a[1], b[1])), mulx(a[2], b[2])); }
 static inline void crossx(const dx *a, const dx *b, dx *out) {
@@ -854,22 +857,23 @@ static void shape_duals(const dx *xi, int nodes, dx *N) {
  * 2 ns + 2 l + a): everything in the plane depends on the pair's variables through them */
 #define NP 16
 typedef struct { double v, d[NP]; } dp;
+static int np_ = NP;
 
 static inline dp constp(double v) { dp r; memset(&r, 0, sizeof r); r.v = v; return r; }
-static inline dp addp(dp a, dp b) { dp r; r.v = a.v + b.v; for (int i = 0; i < NP; ++i) r.d[i] = a.d[i] + b.d[i]; return r; }
-static inline dp subp(dp a, dp b) { dp r; r.v = a.v - b.v; for (int i = 0; i < NP; ++i) r.d[i] = a.d[i] - b.d[i]; return r; }
-static inline dp mulp(dp a, dp b) { dp r; r.v = a.v * b.v; for (int i = 0; i < NP; ++i) r.d[i] = a.d[i] * b.v + b.d[i] * a.v; return r; }
-static inline dp scalep(dp a, double s) { dp r; r.v = a.v * s; for (int i = 0; i < NP; ++i) r.d[i] = a.d[i] * s; return r; }
-static inline dp negp(dp a) { dp r; r.v = -a.v; for (int i = 0; i < NP; ++i) r.d[i] = -a.d[i]; return r; }
+static inline dp addp(dp a, dp b) { dp r; r.v = a.v + b.v; for (int i = 0; i < np_; ++i) r.d[i] = a.d[i] + b.d[i]; return r; }
+static inline dp subp(dp a, dp b) { dp r; r.v = a.v - b.v; for (int i = 0; i < np_; ++i) r.d[i] = a.d[i] - b.d[i]; return r; }
+static inline dp mulp(dp a, dp b) { dp r; r.v = a.v * b.v; for (int i = 0; i < np_; ++i) r.d[i] = a.d[i] * b.v + b.d[i] * a.v; return r; }
+static inline dp scalep(dp a, double s) { dp r; r.v = a.v * s; for (int i = 0; i < np_; ++i) r.d[i] = a.d[i] * s; return r; }
+static inline dp negp(dp a) { dp r; r.v = -a.v; for (int i = 0; i < np_; ++i) r.d[i] = -a.d[i]; return r; }
 static inline dp divp(dp a, dp b) {
     dp r; double inverse = 1.0 / b.v; r.v = a.v * inverse;
-    for (int i = 0; i < NP; ++i) r.d[i] = (a.d[i] - b.d[i] * r.v) * inverse;
+    for (int i = 0; i < np_; ++i) r.d[i] = (a.d[i] - b.d[i] * r.v) * inverse;
     return r;
 }
 /* r += a * b */
 static inline void accumulatep(dp *r, dp a, dp b) {
     r->v += a.v * b.v;
-    for (int i = 0; i < NP; ++i) r->d[i] += a.d[i] * b.v + b.d[i] * a.v;
+    for (int i = 0; i < np_; ++i) r->d[i] += a.d[i] * b.v + b.d[i] * a.v;
 }
 static inline dp cross2p(const dp *a, const dp *b) { return subp(mulp(a[0], b[1]), mulp(a[1], b[0])); }
 
@@ -1002,15 +1006,15 @@ static void dual_coefficients_x(const dx (*xs)[3], int ns, dx A[4][4]) {
     for (int j = 0; j < 4; ++j)
         for (int k = 0; k < 4; ++k) {
             A[j][k].v = Av[j][k];
-            for (int s = 0; s < NX; ++s) A[j][k].d[s] = lumped[j].d[s] * inverse[j][k];
+            for (int s = 0; s < nx_; ++s) A[j][k].d[s] = lumped[j].d[s] * inverse[j][k];
         }
     for (int i = 0; i < 4; ++i)
         for (int m = 0; m < 4; ++m) {
             double B[NX] = {0.0};
             for (int l = 0; l < 4; ++l)
-                for (int s = 0; s < NX; ++s) B[s] += Av[i][l] * mass[l][m].d[s];
+                for (int s = 0; s < nx_; ++s) B[s] += Av[i][l] * mass[l][m].d[s];
             for (int k = 0; k < 4; ++k)
-                for (int s = 0; s < NX; ++s) A[i][k].d[s] -= B[s] * inverse[m][k];
+                for (int s = 0; s < nx_; ++s) A[i][k].d[s] -= B[s] * inverse[m][k];
         }
 }
 
@@ -1165,16 +1169,16 @@ static void write_outputs(const integrals_t *in, sizes_t z, long p, const dx (*x
         for (int k = 0; k < ns; ++k)
             for (int c = 0; c < 3; ++c) gap = subx(gap, mulx(in->Dn[j][k][c], xs[k][c]));
         o->gap[ns * p + j] = gap.v;
-        memcpy(o->ggap + (ns * p + j) * nv, gap.d, sizeof(double) * nv);
+        if (o->ggap) memcpy(o->ggap + (ns * p + j) * nv, gap.d, sizeof(double) * nv);
         o->area[ns * p + j] = in->area[j].v;
-        memcpy(o->garea + (ns * p + j) * nv, in->area[j].d, sizeof(double) * nv);
+        if (o->garea) memcpy(o->garea + (ns * p + j) * nv, in->area[j].d, sizeof(double) * nv);
         for (int k = 0; k < ns; ++k) {
             long e = (long)ns * ns * p + ns * j + k;
             o->D[e] = in->D[j][k].v;
             if (o->gD) memcpy(o->gD + e * nv, in->D[j][k].d, sizeof(double) * nv);
             for (int c = 0; c < 3; ++c) {
                 o->Dn[3 * e + c] = in->Dn[j][k][c].v;
-                memcpy(o->gDn + (3 * e + c) * nv, in->Dn[j][k][c].d, sizeof(double) * nv);
+                if (o->gDn) memcpy(o->gDn + (3 * e + c) * nv, in->Dn[j][k][c].d, sizeof(double) * nv);
             }
         }
         for (int l = 0; l < nm; ++l) {
@@ -1183,7 +1187,7 @@ static void write_outputs(const integrals_t *in, sizes_t z, long p, const dx (*x
             if (o->gM) memcpy(o->gM + e * nv, in->M[j][l].d, sizeof(double) * nv);
             for (int c = 0; c < 3; ++c) {
                 o->Mn[3 * e + c] = in->Mn[j][l][c].v;
-                memcpy(o->gMn + (3 * e + c) * nv, in->Mn[j][l][c].d, sizeof(double) * nv);
+                if (o->gMn) memcpy(o->gMn + (3 * e + c) * nv, in->Mn[j][l][c].d, sizeof(double) * nv);
             }
         }
     }
@@ -1382,17 +1386,17 @@ static int pair_general(long p, sizes_t z, const double *xsv, const double *xmv,
     /* chained to the pair's variables through the plane coordinates */
     double chain[NP][NX];
     for (int k = 0; k < ns; ++k)
-        for (int a = 0; a < 2; ++a) memcpy(chain[2 * k + a], Sx[k][a].d, sizeof(double) * NX);
+        for (int a = 0; a < 2; ++a) memcpy(chain[2 * k + a], Sx[k][a].d, sizeof(double) * nx_);
     for (int l = 0; l < nm; ++l)
-        for (int a = 0; a < 2; ++a) memcpy(chain[2 * ns + 2 * l + a], Mx[l][a].d, sizeof(double) * NX);
+        for (int a = 0; a < 2; ++a) memcpy(chain[2 * ns + 2 * l + a], Mx[l][a].d, sizeof(double) * nx_);
     const int nl = 2 * (ns + nm);
     dx Lx[4], Ix[4][4], Kx[4][4], Tx[4][4][4], Ux[4][4][4];
 #define CHAIN(out, in) do { \
         (out).v = (in).v; \
-        for (int v_ = 0; v_ < NX; ++v_) (out).d[v_] = 0.0; \
+        for (int v_ = 0; v_ < nx_; ++v_) (out).d[v_] = 0.0; \
         for (int s_ = 0; s_ < nl; ++s_) { \
             double f_ = (in).d[s_]; \
-            for (int v_ = 0; v_ < NX; ++v_) (out).d[v_] += f_ * chain[s_][v_]; \
+            for (int v_ = 0; v_ < nx_; ++v_) (out).d[v_] += f_ * chain[s_][v_]; \
         } \
     } while (0)
     for (int a = 0; a < ns; ++a) {
@@ -1488,10 +1492,10 @@ static void zero_pair_general(const outputs_t *o, sizes_t z, long p) {
     memset(o->Mn + 3 * sm * p, 0, 3 * sm * sizeof(double));
     memset(o->gap + z.ns * p, 0, z.ns * sizeof(double));
     memset(o->area + z.ns * p, 0, z.ns * sizeof(double));
-    memset(o->gDn + 3 * ss * nv * p, 0, 3 * ss * nv * sizeof(double));
-    memset(o->gMn + 3 * sm * nv * p, 0, 3 * sm * nv * sizeof(double));
-    memset(o->ggap + z.ns * nv * p, 0, z.ns * nv * sizeof(double));
-    memset(o->garea + z.ns * nv * p, 0, z.ns * nv * sizeof(double));
+    if (o->gDn) memset(o->gDn + 3 * ss * nv * p, 0, 3 * ss * nv * sizeof(double));
+    if (o->gMn) memset(o->gMn + 3 * sm * nv * p, 0, 3 * sm * nv * sizeof(double));
+    if (o->ggap) memset(o->ggap + z.ns * nv * p, 0, z.ns * nv * sizeof(double));
+    if (o->garea) memset(o->garea + z.ns * nv * p, 0, z.ns * nv * sizeof(double));
     if (o->gD) memset(o->gD + ss * nv * p, 0, ss * nv * sizeof(double));
     if (o->gM) memset(o->gM + sm * nv * p, 0, sm * nv * sizeof(double));
 }
@@ -1536,16 +1540,23 @@ int surface3_pairs(long n, int ns, int nm, const double *xs, const double *xm, c
     }
     sizes_t z = {ns, nm, 3 * (2 * ns + nm)};
     outputs_t o = {D, M, Dn, Mn, gap, area, gD, gM, gDn, gMn, ggap, garea};
-    for (long p = 0; p < n; ++p) {
+    const int values_only = !gD && !gM && !gDn && !gMn && !ggap && !garea;
+    if (!values_only && (!gDn || !gMn || !ggap || !garea)) return -1;
+    nx_ = values_only ? 0 : NX;
+    np_ = values_only ? 0 : NP;
+    int status = 0;
+    for (long p = 0; p < n && status >= 0; ++p) {
         valid[p] = 0;
         overlap[p] = 0.0;
-        int status = pair_general(p, z, xs + 3 * ns * p, xm + 3 * nm * p, nn + 3 * ns * p,
-                                  crosspoint ? crosspoint + ns * p : NULL, normals, dual_basis,
-                                  q, (const double (*)[3])bary, weights, &o, valid, overlap);
-        if (status < 0) return -2 - (int)p;
-        if (status == 0) zero_pair_general(&o, z, p);
+        status = pair_general(p, z, xs + 3 * ns * p, xm + 3 * nm * p, nn + 3 * ns * p,
+                              crosspoint ? crosspoint + ns * p : NULL, normals, dual_basis,
+                              q, (const double (*)[3])bary, weights, &o, valid, overlap);
+        if (status < 0) status = -2 - (int)p;
+        else if (status == 0) zero_pair_general(&o, z, p);
     }
-    return 0;
+    nx_ = NX;
+    np_ = NP;
+    return status < 0 ? status : 0;
 }
 
 /* ======================================================================================

@@ -10,12 +10,12 @@ kernel again on the pairs a consumer asks for (the stencils, a chunk at a time),
 their gradients and forgets them. The values and gradients are the same bits as the first
 run's: the kernel is deterministic per pair.
 
-Segment-based triangle pairs are evaluated for their values only: the kernel screens a pair
-on plain values (most of a search's candidates do not overlap) and computes the dual parts
-only for the gradients asked for; the contributing pairs' gradients are then made in a second
-pass if they are kept. The other pairs make their gradients with their values (their dual
-numbers run through the whole pointwise path), in chunks, after a numpy prefilter
-(:func:`_near`), and keep them while they fit.
+Segment-based pairs are evaluated for their values only: the kernel screens a pair on plain
+values (most of a search's candidates do not overlap) and computes dual parts only for the
+gradients asked for (the triangle kernel skips them, the general one carries no derivatives
+in its dual numbers); the contributing pairs' gradients are then made in a second pass if
+they are kept. Element-based pairs make their gradients with their values, in chunks, and
+keep them while they fit.
 
 Covered (:func:`covers`): triangle and quadrilateral slave and master facets (a triangle on
 a triangle by the C corner-value path, as the tests' numpy oracle's ``_affine_integrals``; the
@@ -42,8 +42,9 @@ from . import compiled
 from .contract import KernelOptions, PairGeometry, PairQuantities
 
 EVALUATION_CHUNK = 2048
-"""Candidate triangle pairs per kernel call at evaluation (their discarded gradients live
-together); fewer quadrilateral pairs, as many gradient numbers (:func:`_pairs_per_call`)."""
+"""Candidate triangle pairs per kernel call at an element-based evaluation (their gradients
+live together); fewer quadrilateral pairs, as many gradient numbers
+(:func:`_pairs_per_call`)."""
 GRADIENT_CHUNK = 2048
 """Triangle pairs whose gradients a consumer gets at once (:attr:`CompiledGradients.chunk`)."""
 KEPT_GRADIENTS_BYTES = 128 * 2**20
@@ -106,6 +107,13 @@ class _Call:
         return self.points is not None
 
     @property
+    def values_only(self) -> bool:
+        """Whether the kernel can make the values without any gradient (segment-based
+        pairs: the triangle kernel skips its dual parts, the general one carries no
+        derivatives in its dual numbers)."""
+        return not self.element
+
+    @property
     def some_gradients(self) -> bool:
         """Whether the kernel can skip some or all gradients (segment-based triangle
         pairs)."""
@@ -164,7 +172,8 @@ def _run(call: _Call, slave_x, master_x, slave_normals, crosspoint, on_master, o
     uint8 or None; element-based: on_master (m, q) uint8, the Gauss points given to each
     pair), written into ``out``: contiguous arrays of m rows, ``valid`` (uint8), ``overlap``,
     the values and the gradients made. ``gradients``: the names of the gradients to make
-    (None: all the call keeps; fewer only for :attr:`_Call.some_gradients` calls, whose
+    (None: all the call keeps; fewer only for :attr:`_Call.some_gradients` calls, none for
+    :attr:`_Call.values_only` calls, whose
     ``out`` then needs no others); the others are neither made nor written."""
     m = slave_x.shape[0]
     if m == 0:
@@ -179,8 +188,9 @@ def _run(call: _Call, slave_x, master_x, slave_normals, crosspoint, on_master, o
              pointer(crosspoint, "unsigned char *"))
     grads = out
     if gradients is not None:
-        if not call.some_gradients:
-            raise ValueError("only segment-based triangle pairs make some gradients only")
+        if not (call.some_gradients or (call.values_only and not gradients)):
+            raise ValueError("only segment-based triangle pairs make some gradients only, "
+                             "only segment-based pairs none")
         grads = {name: out[name] for name in gradients}
     results = (pointer(out["valid"], "unsigned char *"), pointer(out["overlap"]),
                *(pointer(out[name]) for name in _VALUES),
@@ -294,7 +304,7 @@ class CompiledGradients:
 
 class _KeptGradients:
     """The contributing pairs' gradients of an evaluation whose kernel makes them with the
-    values (quadrilateral or element-based pairs), copied out of the kernel's buffers chunk by
+    values (element-based pairs), copied out of the kernel's buffers chunk by
     chunk (in the order of the candidates, that of the rows) while they fit in
     :data:`KEPT_GRADIENTS_BYTES`; given up, and then made again on demand, above it."""
 
@@ -319,52 +329,6 @@ class _KeptGradients:
         if self.parts is None or not self.parts[self.names[0]]:
             return None
         return {name: np.concatenate(parts) for name, parts in self.parts.items()}
-
-
-def _field_directions(slave_x: np.ndarray, master_x: np.ndarray, slave_normals: np.ndarray,
-                      normals: str) -> np.ndarray:
-    """(n, 3) a vector along each pair's auxiliary plane normal n0 (any length): the sum of
-    the normal field's nodal normals (averaged: the given ones; slave: the slave facet's unit
-    corner normals; master: the master facet's normal, at every node)."""
-    if normals == "averaged":
-        return slave_normals.sum(axis=1)
-    if normals == "master":
-        nm = master_x.shape[1]
-        if nm == 4:
-            return np.cross(master_x[:, 2] - master_x[:, 0], master_x[:, 3] - master_x[:, 1])
-        return np.cross(master_x[:, 1] - master_x[:, 0], master_x[:, 2] - master_x[:, 0])
-    ns = slave_x.shape[1]
-    total = np.zeros((slave_x.shape[0], 3))
-    for i in range(ns):
-        corner = np.cross(slave_x[:, (i + 1) % ns] - slave_x[:, i],
-                          slave_x[:, (i - 1) % ns] - slave_x[:, i])
-        length = np.linalg.norm(corner, axis=1, keepdims=True)
-        total += corner / np.where(length > 0.0, length, np.nan)
-    return total
-
-
-def _near(slave_x: np.ndarray, master_x: np.ndarray, slave_normals: np.ndarray,
-          normals: str = "averaged") -> np.ndarray:
-    """The candidates whose facets may overlap on the auxiliary plane: the others' projected
-    bounding discs (centre the node mean, radius the farthest node; projecting along the
-    plane normal moves no two points apart) lie apart by a millionth of their radii, far more
-    than the kernel's separation tolerance, so the kernel would find them separated. Spares
-    the kernels whose screening runs on dual numbers (quadrilaterals, other normal fields)
-    most of a search's candidates."""
-    s, m = slave_x.transpose(1, 2, 0), master_x.transpose(1, 2, 0)  # (node, xyz, pair)
-    slave_centre, master_centre = s.sum(axis=0) / s.shape[0], m.sum(axis=0) / m.shape[0]
-
-    def radius(nodes, centre):
-        return np.sqrt(np.max([((node - centre) ** 2).sum(axis=0) for node in nodes], axis=0))
-
-    normal = _field_directions(slave_x, master_x, slave_normals, normals).T
-    length2 = (normal**2).sum(axis=0)
-    offset = master_centre - slave_centre
-    along = (offset * normal).sum(axis=0)
-    flat = np.where(length2 > 0.0, along**2 / np.where(length2 > 0.0, length2, 1.0), 0.0)
-    in_plane2 = (offset**2).sum(axis=0) - flat
-    reach = (radius(s, slave_centre) + radius(m, master_centre)) * (1.0 + 1e-6)
-    return np.flatnonzero((in_plane2 <= reach**2) | ~(length2 > 0.0))
 
 
 def _points_on_master(call: _Call, slave_x, master_x, slave_normals,
@@ -414,17 +378,14 @@ def evaluate(geometry: PairGeometry, options: KernelOptions,
     overlap = np.zeros(n)
     on_master = None
     kept = None
-    if call.some_gradients:
-        # the triangle kernel screens every candidate on plain values and writes the values
-        # in place; the contributing pairs' gradients are made afterwards, or on demand
+    if call.values_only:
+        # the kernel screens every candidate on plain values and writes the values in place;
+        # the contributing pairs' gradients are made afterwards, or on demand
         _run(call, slave_x, master_x, slave_normals, cross, None,
              {"valid": valid, "overlap": overlap, **values}, gradients=())
     else:
-        if call.element:
-            on_master = _points_on_master(call, slave_x, master_x, slave_normals, slave_facet)
-            candidates = np.flatnonzero(on_master.any(axis=1))
-        else:
-            candidates = _near(slave_x, master_x, slave_normals, options.normals)
+        on_master = _points_on_master(call, slave_x, master_x, slave_normals, slave_facet)
+        candidates = np.flatnonzero(on_master.any(axis=1))
         size = _pairs_per_call(EVALUATION_CHUNK, call.num_variables)
         buffers = _Buffers(min(size, max(candidates.size, 1)), call)
         keeping = _KeptGradients(call)
@@ -444,7 +405,7 @@ def evaluate(geometry: PairGeometry, options: KernelOptions,
     rows = np.flatnonzero(valid)
     source = CompiledGradients(rows, call, slave_x, master_x, slave_normals, cross, on_master,
                                kept)
-    if call.some_gradients and rows.size * call.gradient_bytes <= KEPT_GRADIENTS_BYTES:
+    if call.values_only and rows.size * call.gradient_bytes <= KEPT_GRADIENTS_BYTES:
         source.keep()
     names = ("Dn", "Mn", "area", "gap") + (("D", "M") if options.scalar_gradients else ())
     cached: list = []
