@@ -793,25 +793,25 @@ typedef struct { double v, d[NX]; } dx;
 static int nx_ = NX;
 
 static inline dx constx(double v) { dx r; memset(&r, 0, sizeof r); r.v = v; return r; }
-static inline dx addx(dx a, dx b) { dx r; r.v = a.v + b.v; for (int i = 0; i < nx_; ++i) r.d[i] = a.d[i] + b.d[i]; return r; }
-static inline dx subx(dx a, dx b) { dx r; r.v = a.v - b.v; for (int i = 0; i < nx_; ++i) r.d[i] = a.d[i] - b.d[i]; return r; }
-static inline dx mulx(dx a, dx b) { dx r; r.v = a.v * b.v; for (int i = 0; i < nx_; ++i) r.d[i] = a.d[i] * b.v + b.d[i] * a.v; return r; }
-static inline dx scalex(dx a, double s) { dx r; r.v = a.v * s; for (int i = 0; i < nx_; ++i) r.d[i] = a.d[i] * s; return r; }
-static inline dx negx(dx a) { dx r; r.v = -a.v; for (int i = 0; i < nx_; ++i) r.d[i] = -a.d[i]; return r; }
+static inline dx addx(dx a, dx b) { dx r; r.v = a.v + b.v; if (nx_) for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] + b.d[i]; return r; }
+static inline dx subx(dx a, dx b) { dx r; r.v = a.v - b.v; if (nx_) for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] - b.d[i]; return r; }
+static inline dx mulx(dx a, dx b) { dx r; r.v = a.v * b.v; if (nx_) for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] * b.v + b.d[i] * a.v; return r; }
+static inline dx scalex(dx a, double s) { dx r; r.v = a.v * s; if (nx_) for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] * s; return r; }
+static inline dx negx(dx a) { dx r; r.v = -a.v; if (nx_) for (int i = 0; i < NX; ++i) r.d[i] = -a.d[i]; return r; }
 static inline dx divx(dx a, dx b) {
     dx r; double inverse = 1.0 / b.v; r.v = a.v * inverse;
-    for (int i = 0; i < nx_; ++i) r.d[i] = (a.d[i] - b.d[i] * r.v) * inverse;
+    if (nx_) for (int i = 0; i < NX; ++i) r.d[i] = (a.d[i] - b.d[i] * r.v) * inverse;
     return r;
 }
 static inline dx sqrtx(dx a) {
     dx r; r.v = sqrt(a.v); double f = r.v > 0.0 ? 0.5 / r.v : 0.0;
-    for (int i = 0; i < nx_; ++i) r.d[i] = a.d[i] * f;
+    if (nx_) for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] * f;
     return r;
 }
 /* r += a * b */
 static inline void accumulatex(dx *r, dx a, dx b) {
     r->v += a.v * b.v;
-    for (int i = 0; i < nx_; ++i) r->d[i] += a.d[i] * b.v + b.d[i] * a.v;
+    if (nx_) for (int i = 0; i < NX; ++i) r->d[i] += a.d[i] * b.v + b.d[i] * a.v;
 }
 static inline dx dotx(const dx *a, const dx *b) { return addx(addx(mulx(a[0], b[0]), mulx(a[1], b[1])), mulx(a[2], b[2])); }
 static inline void crossx(const dx *a, const dx *b, dx *out) {
@@ -860,20 +860,20 @@ typedef struct { double v, d[NP]; } dp;
 static int np_ = NP;
 
 static inline dp constp(double v) { dp r; memset(&r, 0, sizeof r); r.v = v; return r; }
-static inline dp addp(dp a, dp b) { dp r; r.v = a.v + b.v; for (int i = 0; i < np_; ++i) r.d[i] = a.d[i] + b.d[i]; return r; }
-static inline dp subp(dp a, dp b) { dp r; r.v = a.v - b.v; for (int i = 0; i < np_; ++i) r.d[i] = a.d[i] - b.d[i]; return r; }
-static inline dp mulp(dp a, dp b) { dp r; r.v = a.v * b.v; for (int i = 0; i < np_; ++i) r.d[i] = a.d[i] * b.v + b.d[i] * a.v; return r; }
-static inline dp scalep(dp a, double s) { dp r; r.v = a.v * s; for (int i = 0; i < np_; ++i) r.d[i] = a.d[i] * s; return r; }
-static inline dp negp(dp a) { dp r; r.v = -a.v; for (int i = 0; i < np_; ++i) r.d[i] = -a.d[i]; return r; }
+static inline dp addp(dp a, dp b) { dp r; r.v = a.v + b.v; if (np_) for (int i = 0; i < NP; ++i) r.d[i] = a.d[i] + b.d[i]; return r; }
+static inline dp subp(dp a, dp b) { dp r; r.v = a.v - b.v; if (np_) for (int i = 0; i < NP; ++i) r.d[i] = a.d[i] - b.d[i]; return r; }
+static inline dp mulp(dp a, dp b) { dp r; r.v = a.v * b.v; if (np_) for (int i = 0; i < NP; ++i) r.d[i] = a.d[i] * b.v + b.d[i] * a.v; return r; }
+static inline dp scalep(dp a, double s) { dp r; r.v = a.v * s; if (np_) for (int i = 0; i < NP; ++i) r.d[i] = a.d[i] * s; return r; }
+static inline dp negp(dp a) { dp r; r.v = -a.v; if (np_) for (int i = 0; i < NP; ++i) r.d[i] = -a.d[i]; return r; }
 static inline dp divp(dp a, dp b) {
     dp r; double inverse = 1.0 / b.v; r.v = a.v * inverse;
-    for (int i = 0; i < np_; ++i) r.d[i] = (a.d[i] - b.d[i] * r.v) * inverse;
+    if (np_) for (int i = 0; i < NP; ++i) r.d[i] = (a.d[i] - b.d[i] * r.v) * inverse;
     return r;
 }
 /* r += a * b */
 static inline void accumulatep(dp *r, dp a, dp b) {
     r->v += a.v * b.v;
-    for (int i = 0; i < np_; ++i) r->d[i] += a.d[i] * b.v + b.d[i] * a.v;
+    if (np_) for (int i = 0; i < NP; ++i) r->d[i] += a.d[i] * b.v + b.d[i] * a.v;
 }
 static inline dp cross2p(const dp *a, const dp *b) { return subp(mulp(a[0], b[1]), mulp(a[1], b[0])); }
 
@@ -1006,15 +1006,15 @@ static void dual_coefficients_x(const dx (*xs)[3], int ns, dx A[4][4]) {
     for (int j = 0; j < 4; ++j)
         for (int k = 0; k < 4; ++k) {
             A[j][k].v = Av[j][k];
-            for (int s = 0; s < nx_; ++s) A[j][k].d[s] = lumped[j].d[s] * inverse[j][k];
+            if (nx_) for (int s = 0; s < NX; ++s) A[j][k].d[s] = lumped[j].d[s] * inverse[j][k];
         }
     for (int i = 0; i < 4; ++i)
         for (int m = 0; m < 4; ++m) {
             double B[NX] = {0.0};
             for (int l = 0; l < 4; ++l)
-                for (int s = 0; s < nx_; ++s) B[s] += Av[i][l] * mass[l][m].d[s];
+                if (nx_) for (int s = 0; s < NX; ++s) B[s] += Av[i][l] * mass[l][m].d[s];
             for (int k = 0; k < 4; ++k)
-                for (int s = 0; s < nx_; ++s) A[i][k].d[s] -= B[s] * inverse[m][k];
+                if (nx_) for (int s = 0; s < NX; ++s) A[i][k].d[s] -= B[s] * inverse[m][k];
         }
 }
 
@@ -1393,10 +1393,10 @@ static int pair_general(long p, sizes_t z, const double *xsv, const double *xmv,
     dx Lx[4], Ix[4][4], Kx[4][4], Tx[4][4][4], Ux[4][4][4];
 #define CHAIN(out, in) do { \
         (out).v = (in).v; \
-        for (int v_ = 0; v_ < nx_; ++v_) (out).d[v_] = 0.0; \
+        if (nx_) for (int v_ = 0; v_ < NX; ++v_) (out).d[v_] = 0.0; \
         for (int s_ = 0; s_ < nl; ++s_) { \
             double f_ = (in).d[s_]; \
-            for (int v_ = 0; v_ < nx_; ++v_) (out).d[v_] += f_ * chain[s_][v_]; \
+            if (nx_) for (int v_ = 0; v_ < NX; ++v_) (out).d[v_] += f_ * chain[s_][v_]; \
         } \
     } while (0)
     for (int a = 0; a < ns; ++a) {
