@@ -1295,19 +1295,7 @@ static int pair_general(long p, sizes_t z, const double *xsv, const double *xmv,
         for (int c = 0; c < 3; ++c) offset[c] = subx(xm[k][c], x0[c]);
         for (int a = 0; a < 2; ++a) { Mx[k][a] = dotx(offset, e[a]); Mp[k][a] = Mx[k][a].v; }
     }
-    /* screening on values */
-    {
-        double u[3], w[3], mn[3];
-        for (int c = 0; c < 3; ++c) {
-            if (nm == 4) { u[c] = xmv[6 + c] - xmv[c]; w[c] = xmv[9 + c] - xmv[3 + c]; }
-            else { u[c] = xmv[3 + c] - xmv[c]; w[c] = xmv[6 + c] - xmv[c]; }
-        }
-        mn[0] = u[1] * w[2] - u[2] * w[1]; mn[1] = u[2] * w[0] - u[0] * w[2]; mn[2] = u[0] * w[1] - u[1] * w[0];
-        double length = sqrt((mn[0] * mn[0] + mn[1] * mn[1]) + mn[2] * mn[2]);
-        for (int c = 0; c < 3; ++c) mn[c] = mn[c] / length;
-        if (!(((n0[0].v * mn[0] + n0[1].v * mn[1]) + n0[2].v * mn[2]) < -FACING_TOLERANCE)) return 0;
-    }
-    if (separated_k((const double (*)[2])S, ns, (const double (*)[2])Mp, nm)) return 0;
+    /* (facing and separation: passes_screening, on the same values) */
     polygon_t poly;
     if (clip_k((const double (*)[2])S, ns, (const double (*)[2])Mp, nm, &poly) != 0) return -1;
     double slave_area = fabs(polygon_area_k((const double (*)[2])S, ns));
