@@ -96,12 +96,7 @@ def _add_combined(result: np.ndarray, grad: np.ndarray, entries: list) -> None:
         return
     term = np.array([p for p, _, _ in entries], dtype=np.intc)
     index = np.array([i for _, i, _ in entries], dtype=np.intc)
-    step = np.array([np.ndim(w) != 0 for _, _, w in entries], dtype=np.intc)
-    lengths = np.where(step == 1, n, 1)
-    weight_start = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
-    weights = np.empty(int(lengths.sum()))
-    for e, (_, _, w) in enumerate(entries):
-        weights[weight_start[e]:weight_start[e] + lengths[e]] = np.ravel(w)
+    weight_start, step, weights = compiled.packed_weights([w for _, _, w in entries], n)
     grad = np.ascontiguousarray(grad, dtype=np.float64)
     module = compiled.load("surface3")
     ffi = module.ffi

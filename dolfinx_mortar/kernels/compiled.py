@@ -236,6 +236,19 @@ def build_info(kernel: str = "surface3") -> dict:
     return dict(_infos.get(kernel, {}))
 
 
+def packed_weights(weights, num_rows: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The weights of a C combination pass (``line2_combine``, ``gradients_combine``): each a
+    number or one per row, packed as (weight_start int64, weight_step int, values), weight e
+    of row r being values[weight_start[e] + r * weight_step[e]]."""
+    step = np.array([np.ndim(w) != 0 for w in weights], dtype=np.intc)
+    lengths = np.where(step == 1, num_rows, 1)
+    start = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
+    values = np.empty(int(lengths.sum()))
+    for e, w in enumerate(weights):
+        values[start[e]:start[e] + lengths[e]] = np.ravel(w)
+    return start, step, values
+
+
 def _pointer(ffi, array: np.ndarray | None, ctype: str):
     if array is None:
         return ffi.NULL

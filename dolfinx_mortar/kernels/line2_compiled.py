@@ -58,12 +58,7 @@ class FullGradients:
         if np.any((output < 0) | (output >= self.num_outputs)):
             raise ValueError(f"outputs {output[(output < 0) | (output >= self.num_outputs)]} "
                              "were not kept by the compiled 2D kernel")
-        step = np.array([np.ndim(w) != 0 for _, w in entries], dtype=np.intc)
-        sizes = np.where(step == 1, n, 1)
-        weight_start = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
-        weights = np.empty(int(sizes.sum()))
-        for e, (_, w) in enumerate(entries):
-            weights[weight_start[e]:weight_start[e] + sizes[e]] = w
+        weight_start, step, weights = compiled.packed_weights([w for _, w in entries], n)
         if n == 0 or not terms:
             return np.zeros_like(result)
         module = compiled.load("line2")
