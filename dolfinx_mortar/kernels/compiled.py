@@ -1,10 +1,11 @@
 """Compiled mortar kernels: C source compiled at first use through cffi, cached across processes.
 
 As FFCx compiles dolfinx's form kernels: each C source next to this file (``surface3.c``, the
-3D triangle kernel; ``line2.c``, the 2D kernel) is its own module, loaded with
-:func:`load` (``load("line2")``). Its source, declarations, the compiler flags and the cffi and
-Python versions are hashed into the module's name; the module is compiled once into a cache
-directory and loaded from there by every later process. The cache directory is
+3D kernel, which includes its general pair path ``surface3_general.h`` twice; ``line2.c``, the
+2D kernel) is its own module, loaded with :func:`load` (``load("line2")``). Its source (local
+includes inlined), declarations, the compiler flags and the cffi and Python versions are hashed
+into the module's name; the module is compiled once into a cache directory and loaded from
+there by every later process. The cache directory is
 ``$DOLFINX_MORTAR_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/dolfinx_mortar``, else
 ``~/.cache/dolfinx_mortar``.
 
@@ -36,6 +37,7 @@ import logging
 import os
 import pathlib
 import platform
+import re
 import shutil
 import sys
 import tempfile
@@ -126,10 +128,17 @@ def cache_dir() -> pathlib.Path:
     return pathlib.Path(base) / "dolfinx_mortar"
 
 
+_LOCAL_INCLUDE = re.compile(r'^#include "([\w.]+)"$', re.MULTILINE)
+
+
 def _source(kernel: str) -> str:
+    """The kernel's C source with its local ``#include "x.h"`` files inlined, so that one
+    string is both hashed and compiled."""
     if kernel not in _CDEFS:
         raise ValueError(f"unknown compiled kernel {kernel!r}; expected one of {KERNELS}")
-    return pathlib.Path(__file__).with_name(kernel + ".c").read_text()
+    here = pathlib.Path(__file__).parent
+    return _LOCAL_INCLUDE.sub(lambda match: (here / match.group(1)).read_text(),
+                              (here / (kernel + ".c")).read_text())
 
 
 def module_name(compile_args=COMPILE_ARGS, kernel: str = "surface3") -> str:

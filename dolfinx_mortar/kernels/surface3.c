@@ -26,7 +26,8 @@
  *
  * surface3_pairs: segment-based integration of any triangle or quadrilateral facets, any
  * normal field (numpy's pointwise path): the same screening, then every Gauss point of every
- * fan cell in dual numbers over the pair's 3 (2 ns + nm) variables.
+ * fan cell in dual numbers over the pair's 3 (2 ns + nm) variables (surface3_general.h; its
+ * values-only instance when no gradient is asked for).
  *
  * surface3_element_scores, surface3_element: element-based integration (the slave facet's
  * Gauss points projected onto the master facet; which pair gets a point is decided between the
@@ -783,48 +784,10 @@ int surface3_triangles(long n, const double *xs, const double *xm, const double 
  * (3 (2 ns + nm) <= 36 of them: slave xyz, master xyz, slave nodal normals): the clip cells,
  * the Gauss points, both inverse maps (Newton for quadrilaterals, then one Newton step in dual
  * arithmetic at the converged point) and the integrands. The screening (facing, separation,
- * clip, area) is on values in numpy's operation order, as for triangles.
+ * clip, area) is on values in numpy's operation order, as for triangles. The dual-number part
+ * is surface3_general.h, compiled twice: with the derivatives, and for the values only (one
+ * unused derivative slot: a values-only call moves 16-byte numbers, not 296-byte ones).
  * ====================================================================================== */
-#define NX 36
-
-typedef struct { double v, d[NX]; } dx;
-/* The derivatives the dual numbers carry: all of them, or none in a values-only call of
- * surface3_pairs (no gradient outputs): the values' operations are the same either way. */
-static int nx_ = NX;
-
-static inline dx constx(double v) { dx r; memset(&r, 0, sizeof r); r.v = v; return r; }
-static inline dx addx(dx a, dx b) { dx r; r.v = a.v + b.v; if (nx_) for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] + b.d[i]; return r; }
-static inline dx subx(dx a, dx b) { dx r; r.v = a.v - b.v; if (nx_) for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] - b.d[i]; return r; }
-static inline dx mulx(dx a, dx b) { dx r; r.v = a.v * b.v; if (nx_) for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] * b.v + b.d[i] * a.v; return r; }
-static inline dx scalex(dx a, double s) { dx r; r.v = a.v * s; if (nx_) for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] * s; return r; }
-static inline dx negx(dx a) { dx r; r.v = -a.v; if (nx_) for (int i = 0; i < NX; ++i) r.d[i] = -a.d[i]; return r; }
-static inline dx divx(dx a, dx b) {
-    dx r; double inverse = 1.0 / b.v; r.v = a.v * inverse;
-    if (nx_) for (int i = 0; i < NX; ++i) r.d[i] = (a.d[i] - b.d[i] * r.v) * inverse;
-    return r;
-}
-static inline dx sqrtx(dx a) {
-    dx r; r.v = sqrt(a.v); double f = r.v > 0.0 ? 0.5 / r.v : 0.0;
-    if (nx_) for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] * f;
-    return r;
-}
-/* r += a * b */
-static inline void accumulatex(dx *r, dx a, dx b) {
-    r->v += a.v * b.v;
-    if (nx_) for (int i = 0; i < NX; ++i) r->d[i] += a.d[i] * b.v + b.d[i] * a.v;
-}
-static inline dx dotx(const dx *a, const dx *b) { return addx(addx(mulx(a[0], b[0]), mulx(a[1], b[1])), mulx(a[2], b[2])); }
-static inline void crossx(const dx *a, const dx *b, dx *out) {
-    out[0] = subx(mulx(a[1], b[2]), mulx(a[2], b[1]));
-    out[1] = subx(mulx(a[2], b[0]), mulx(a[0], b[2]));
-    out[2] = subx(mulx(a[0], b[1]), mulx(a[1], b[0]));
-}
-static inline void normalizex(const dx *v, dx *out) {
-    dx length = sqrtx(dotx(v, v));
-    for (int c = 0; c < 3; ++c) out[c] = divx(v[c], length);
-}
-static inline dx cross2x(const dx *a, const dx *b) { return subx(mulx(a[0], b[1]), mulx(a[1], b[0])); }
-
 /* the reference facets: triangles (0,0), (1,0), (0,1); quadrilaterals (-1,-1), (1,-1), (1,1), (-1,1) */
 static const double QUAD_SIGNS[4][2] = {{-1.0, -1.0}, {1.0, -1.0}, {1.0, 1.0}, {-1.0, 1.0}};
 
@@ -838,103 +801,6 @@ static void shape_values(double r, double s, int nodes, double *N, double dN[][2
         double a = QUAD_SIGNS[k][0], b = QUAD_SIGNS[k][1];
         N[k] = (1.0 + r * a) * (1.0 + s * b) * 0.25;
         if (dN) { dN[k][0] = a * (1.0 + s * b) * 0.25; dN[k][1] = b * (1.0 + r * a) * 0.25; }
-    }
-}
-
-static void shape_duals(const dx *xi, int nodes, dx *N) {
-    if (nodes == 3) {
-        N[0] = subx(subx(constx(1.0), xi[0]), xi[1]); N[1] = xi[0]; N[2] = xi[1];
-        return;
-    }
-    for (int k = 0; k < 4; ++k) {
-        dx u = addx(constx(1.0), scalex(xi[0], QUAD_SIGNS[k][0]));
-        dx w = addx(constx(1.0), scalex(xi[1], QUAD_SIGNS[k][1]));
-        N[k] = scalex(mulx(u, w), 0.25);
-    }
-}
-
-/* the same over the plane coordinates S, Mp only (NP local variables: S_ka at 2 k + a, Mp_la at
- * 2 ns + 2 l + a): everything in the plane depends on the pair's variables through them */
-#define NP 16
-typedef struct { double v, d[NP]; } dp;
-static int np_ = NP;
-
-static inline dp constp(double v) { dp r; memset(&r, 0, sizeof r); r.v = v; return r; }
-static inline dp addp(dp a, dp b) { dp r; r.v = a.v + b.v; if (np_) for (int i = 0; i < NP; ++i) r.d[i] = a.d[i] + b.d[i]; return r; }
-static inline dp subp(dp a, dp b) { dp r; r.v = a.v - b.v; if (np_) for (int i = 0; i < NP; ++i) r.d[i] = a.d[i] - b.d[i]; return r; }
-static inline dp mulp(dp a, dp b) { dp r; r.v = a.v * b.v; if (np_) for (int i = 0; i < NP; ++i) r.d[i] = a.d[i] * b.v + b.d[i] * a.v; return r; }
-static inline dp scalep(dp a, double s) { dp r; r.v = a.v * s; if (np_) for (int i = 0; i < NP; ++i) r.d[i] = a.d[i] * s; return r; }
-static inline dp negp(dp a) { dp r; r.v = -a.v; if (np_) for (int i = 0; i < NP; ++i) r.d[i] = -a.d[i]; return r; }
-static inline dp divp(dp a, dp b) {
-    dp r; double inverse = 1.0 / b.v; r.v = a.v * inverse;
-    if (np_) for (int i = 0; i < NP; ++i) r.d[i] = (a.d[i] - b.d[i] * r.v) * inverse;
-    return r;
-}
-/* r += a * b */
-static inline void accumulatep(dp *r, dp a, dp b) {
-    r->v += a.v * b.v;
-    if (np_) for (int i = 0; i < NP; ++i) r->d[i] += a.d[i] * b.v + b.d[i] * a.v;
-}
-static inline dp cross2p(const dp *a, const dp *b) { return subp(mulp(a[0], b[1]), mulp(a[1], b[0])); }
-
-static void shape_duals_p(const dp *xi, int nodes, dp *N) {
-    if (nodes == 3) {
-        N[0] = subp(subp(constp(1.0), xi[0]), xi[1]); N[1] = xi[0]; N[2] = xi[1];
-        return;
-    }
-    for (int k = 0; k < 4; ++k) {
-        dp u = addp(constp(1.0), scalep(xi[0], QUAD_SIGNS[k][0]));
-        dp w = addp(constp(1.0), scalep(xi[1], QUAD_SIGNS[k][1]));
-        N[k] = scalep(mulp(u, w), 0.25);
-    }
-}
-
-/* xi with sum_k N_k(xi) C_k = P (plane coordinates): closed form for triangles, Newton for
- * bilinear quadrilaterals; the derivatives dxi = J^-1 (dP - sum_k N_k(xi) dC_k) at the root */
-static void inverse_map_p(const dp (*C)[2], int nodes, const dp *P, dp *xi) {
-    double x[2] = {0.0, 0.0}, N[4], dN[4][2], J[2][2];
-    if (nodes == 3) {
-        double A00 = C[1][0].v - C[0][0].v, A01 = C[2][0].v - C[0][0].v;
-        double A10 = C[1][1].v - C[0][1].v, A11 = C[2][1].v - C[0][1].v;
-        double det = A00 * A11 - A01 * A10;
-        double o0 = P[0].v - C[0][0].v, o1 = P[1].v - C[0][1].v;
-        x[0] = (A11 * o0 - A01 * o1) / det;
-        x[1] = (A00 * o1 - A10 * o0) / det;
-    } else {
-        for (int iteration = 0; iteration < 20; ++iteration) {
-            shape_values(x[0], x[1], 4, N, dN);
-            double residual[2];
-            for (int c = 0; c < 2; ++c) {
-                residual[c] = -P[c].v;
-                for (int k = 0; k < 4; ++k) residual[c] += N[k] * C[k][c].v;
-                for (int d = 0; d < 2; ++d) {
-                    J[c][d] = 0.0;
-                    for (int k = 0; k < 4; ++k) J[c][d] += C[k][c].v * dN[k][d];
-                }
-            }
-            double det = J[0][0] * J[1][1] - J[0][1] * J[1][0];
-            double step0 = (J[1][1] * residual[0] - J[0][1] * residual[1]) / det;
-            double step1 = (J[0][0] * residual[1] - J[1][0] * residual[0]) / det;
-            x[0] -= step0; x[1] -= step1;
-            if (fabs(step0) < 1e-15 * (1.0 + fabs(x[0])) && fabs(step1) < 1e-15 * (1.0 + fabs(x[1]))) break;
-        }
-    }
-    /* one Newton step in dual arithmetic at x: xi = x - J^-1 F(x) */
-    shape_values(x[0], x[1], nodes, N, dN);
-    dp F[2];
-    for (int c = 0; c < 2; ++c) {
-        F[c] = negp(P[c]);
-        for (int k = 0; k < nodes; ++k) F[c] = addp(F[c], scalep(C[k][c], N[k]));
-        for (int d = 0; d < 2; ++d) {
-            J[c][d] = 0.0;
-            for (int k = 0; k < nodes; ++k) J[c][d] += C[k][c].v * dN[k][d];
-        }
-    }
-    double det = J[0][0] * J[1][1] - J[0][1] * J[1][0];
-    double I[2][2] = {{J[1][1] / det, -J[0][1] / det}, {-J[1][0] / det, J[0][0] / det}};
-    for (int a = 0; a < 2; ++a) {
-        xi[a] = constp(x[a]);
-        xi[a] = subp(xi[a], addp(scalep(F[0], I[a][0]), scalep(F[1], I[a][1])));
     }
 }
 
@@ -960,62 +826,6 @@ static void invert(int n, const double A[4][4], double out[4][4]) {
     }
     for (int i = 0; i < n; ++i)
         for (int j = 0; j < n; ++j) out[i][j] = a[i][n + j];
-}
-
-/* A (ns x ns) with Phi = A N biorthogonal on the whole slave facet: A = D_e M_e^-1, for
- * quadrilaterals from the 3 x 3 Gauss rule of the area element, dA = (dD_e - A dM_e) M_e^-1 */
-static void dual_coefficients_x(const dx (*xs)[3], int ns, dx A[4][4]) {
-    if (ns == 3) {
-        for (int j = 0; j < 3; ++j)
-            for (int k = 0; k < 3; ++k) A[j][k] = constx(j == k ? 3.0 : -1.0);
-        return;
-    }
-    const double g[3] = {-0.7745966692414834, 0.0, 0.7745966692414834};
-    const double w[3] = {5.0 / 9.0, 8.0 / 9.0, 5.0 / 9.0};
-    dx mass[4][4], lumped[4];
-    for (int j = 0; j < 4; ++j) {
-        lumped[j] = constx(0.0);
-        for (int k = 0; k < 4; ++k) mass[j][k] = constx(0.0);
-    }
-    for (int a = 0; a < 3; ++a)
-        for (int b = 0; b < 3; ++b) {
-            double N[4], dN[4][2];
-            shape_values(g[a], g[b], 4, N, dN);
-            dx t1[3], t2[3], normal[3];
-            for (int c = 0; c < 3; ++c) {
-                t1[c] = constx(0.0); t2[c] = constx(0.0);
-                for (int k = 0; k < 4; ++k) {
-                    t1[c] = addx(t1[c], scalex(xs[k][c], dN[k][0]));
-                    t2[c] = addx(t2[c], scalex(xs[k][c], dN[k][1]));
-                }
-            }
-            crossx(t1, t2, normal);
-            dx jw = scalex(sqrtx(dotx(normal, normal)), w[a] * w[b]);
-            for (int j = 0; j < 4; ++j) {
-                lumped[j] = addx(lumped[j], scalex(jw, N[j]));
-                for (int k = 0; k < 4; ++k) mass[j][k] = addx(mass[j][k], scalex(jw, N[j] * N[k]));
-            }
-        }
-    double Me[4][4], inverse[4][4], Av[4][4];
-    for (int j = 0; j < 4; ++j)
-        for (int k = 0; k < 4; ++k) Me[j][k] = mass[j][k].v;
-    invert(4, Me, inverse);
-    for (int j = 0; j < 4; ++j)
-        for (int k = 0; k < 4; ++k) Av[j][k] = lumped[j].v * inverse[j][k];
-    /* B = A dM_e (per variable), then dA = dD_e - B M_e^-1 */
-    for (int j = 0; j < 4; ++j)
-        for (int k = 0; k < 4; ++k) {
-            A[j][k].v = Av[j][k];
-            if (nx_) for (int s = 0; s < NX; ++s) A[j][k].d[s] = lumped[j].d[s] * inverse[j][k];
-        }
-    for (int i = 0; i < 4; ++i)
-        for (int m = 0; m < 4; ++m) {
-            double B[NX] = {0.0};
-            for (int l = 0; l < 4; ++l)
-                if (nx_) for (int s = 0; s < NX; ++s) B[s] += Av[i][l] * mass[l][m].d[s];
-            for (int k = 0; k < 4; ++k)
-                if (nx_) for (int s = 0; s < NX; ++s) A[i][k].d[s] -= B[s] * inverse[m][k];
-        }
 }
 
 static double polygon_area_k(const double (*P)[2], int k) {
@@ -1057,50 +867,6 @@ static int separated_k(const double (*S)[2], int ns, const double (*Mp)[2], int 
 
 typedef struct { int ns, nm, nv; } sizes_t;
 
-/* The pair's variables xs, xm as dual numbers and the normal field's nodal normals */
-static void pair_variables_x(sizes_t z, const double *xsv, const double *xmv, const double *nnv,
-                             int normals, dx xs[4][3], dx xm[4][3], dx node_normals[4][3]) {
-    const int ns = z.ns, nm = z.nm;
-    for (int k = 0; k < ns; ++k)
-        for (int c = 0; c < 3; ++c) {
-            xs[k][c] = constx(xsv[3 * k + c]); xs[k][c].d[3 * k + c] = 1.0;
-        }
-    for (int k = 0; k < nm; ++k)
-        for (int c = 0; c < 3; ++c) {
-            xm[k][c] = constx(xmv[3 * k + c]); xm[k][c].d[3 * ns + 3 * k + c] = 1.0;
-        }
-    /* the normal field's nodal normals */
-    if (normals == 0) {
-        for (int k = 0; k < ns; ++k)
-            for (int c = 0; c < 3; ++c) {
-                node_normals[k][c] = constx(nnv[3 * k + c]);
-                node_normals[k][c].d[3 * (ns + nm) + 3 * k + c] = 1.0;
-            }
-    } else if (normals == 1) {
-        for (int i = 0; i < ns; ++i) {
-            dx a[3], b[3], v[3];
-            for (int c = 0; c < 3; ++c) {
-                a[c] = subx(xs[(i + 1) % ns][c], xs[i][c]);
-                b[c] = subx(xs[(i + ns - 1) % ns][c], xs[i][c]);
-            }
-            crossx(a, b, v);
-            normalizex(v, node_normals[i]);
-        }
-    } else {
-        dx a[3], b[3], v[3], unit[3];
-        for (int c = 0; c < 3; ++c) {
-            if (nm == 4) { a[c] = subx(xm[2][c], xm[0][c]); b[c] = subx(xm[3][c], xm[1][c]); }
-            else { a[c] = subx(xm[1][c], xm[0][c]); b[c] = subx(xm[2][c], xm[0][c]); }
-        }
-        crossx(a, b, v);
-        normalizex(v, unit);
-        for (int i = 0; i < ns; ++i)
-            for (int c = 0; c < 3; ++c) node_normals[i][c] = negx(unit[c]);
-    }
-}
-
-typedef struct { dx D[4][4], M[4][4], Dn[4][4][3], Mn[4][4][3], area[4]; } integrals_t;
-
 /* the crosspoint flags; returns the share of a crosspoint's function each other node gets */
 static double crosspoint_shares(int ns, const unsigned char *crosspoint, int *cross, int *any) {
     int others = 0;
@@ -1113,86 +879,6 @@ static double crosspoint_shares(int ns, const unsigned char *crosspoint, int *cr
     return others > 0 ? 1.0 / others : 0.0;
 }
 
-static void multiplier_basis(int ns, int dual_basis, const dx A[4][4], const dx *N, dx *Phi) {
-    for (int j = 0; j < ns; ++j) {
-        if (dual_basis) {
-            Phi[j] = mulx(N[0], A[j][0]);
-            for (int k = 1; k < ns; ++k) Phi[j] = addx(Phi[j], mulx(N[k], A[j][k]));
-        } else {
-            Phi[j] = N[j];
-        }
-    }
-}
-
-/* One Gauss point of weight W: D += W Phi_j N_k, M += W Phi_j Nm_l, Dn, Mn times the normal
- * field n = sum_j N_j n_j, area += W Phi_j; a crosspoint's Phi shared by the other nodes */
-static void accumulate_point(integrals_t *in, int ns, int nm, dx W, dx *Phi, const dx *N,
-                             const dx *Nm, const dx (*node_normals)[3], const int *cross,
-                             int any_cross, double share) {
-    dx normal[3];
-    if (any_cross) {
-        dx shared = constx(0.0);
-        for (int j = 0; j < ns; ++j) if (cross[j]) shared = addx(shared, Phi[j]);
-        for (int j = 0; j < ns; ++j)
-            Phi[j] = cross[j] ? constx(0.0) : addx(Phi[j], scalex(shared, share));
-    }
-    for (int c = 0; c < 3; ++c) {
-        normal[c] = mulx(node_normals[0][c], N[0]);
-        for (int j = 1; j < ns; ++j) normal[c] = addx(normal[c], mulx(node_normals[j][c], N[j]));
-    }
-    for (int j = 0; j < ns; ++j) {
-        if (cross[j]) continue;
-        dx Q = mulx(W, Phi[j]);
-        in->area[j] = addx(in->area[j], Q);
-        for (int k = 0; k < ns; ++k) {
-            dx QN = mulx(Q, N[k]);
-            in->D[j][k] = addx(in->D[j][k], QN);
-            for (int c = 0; c < 3; ++c) accumulatex(&in->Dn[j][k][c], QN, normal[c]);
-        }
-        for (int l = 0; l < nm; ++l) {
-            dx QN = mulx(Q, Nm[l]);
-            in->M[j][l] = addx(in->M[j][l], QN);
-            for (int c = 0; c < 3; ++c) accumulatex(&in->Mn[j][l][c], QN, normal[c]);
-        }
-    }
-}
-
-/* D, M, Dn, Mn, the areas and gap_j = sum_lc Mn_jlc xm_lc - sum_kc Dn_jkc xs_kc into pair p's
- * output slots */
-static void write_outputs(const integrals_t *in, sizes_t z, long p, const dx (*xs)[3],
-                          const dx (*xm)[3], const outputs_t *o) {
-    const int ns = z.ns, nm = z.nm, nv = z.nv;
-    for (int j = 0; j < ns; ++j) {
-        dx gap = constx(0.0);
-        for (int l = 0; l < nm; ++l)
-            for (int c = 0; c < 3; ++c) accumulatex(&gap, in->Mn[j][l][c], xm[l][c]);
-        for (int k = 0; k < ns; ++k)
-            for (int c = 0; c < 3; ++c) gap = subx(gap, mulx(in->Dn[j][k][c], xs[k][c]));
-        o->gap[ns * p + j] = gap.v;
-        if (o->ggap) memcpy(o->ggap + (ns * p + j) * nv, gap.d, sizeof(double) * nv);
-        o->area[ns * p + j] = in->area[j].v;
-        if (o->garea) memcpy(o->garea + (ns * p + j) * nv, in->area[j].d, sizeof(double) * nv);
-        for (int k = 0; k < ns; ++k) {
-            long e = (long)ns * ns * p + ns * j + k;
-            o->D[e] = in->D[j][k].v;
-            if (o->gD) memcpy(o->gD + e * nv, in->D[j][k].d, sizeof(double) * nv);
-            for (int c = 0; c < 3; ++c) {
-                o->Dn[3 * e + c] = in->Dn[j][k][c].v;
-                if (o->gDn) memcpy(o->gDn + (3 * e + c) * nv, in->Dn[j][k][c].d, sizeof(double) * nv);
-            }
-        }
-        for (int l = 0; l < nm; ++l) {
-            long e = (long)ns * nm * p + nm * j + l;
-            o->M[e] = in->M[j][l].v;
-            if (o->gM) memcpy(o->gM + e * nv, in->M[j][l].d, sizeof(double) * nv);
-            for (int c = 0; c < 3; ++c) {
-                o->Mn[3 * e + c] = in->Mn[j][l][c].v;
-                if (o->gMn) memcpy(o->gMn + (3 * e + c) * nv, in->Mn[j][l][c].d, sizeof(double) * nv);
-            }
-        }
-    }
-}
-
 /* The facing and separation tests of pair_general on plain values, with the operations (and
  * so the bits) of the values of its dual numbers: 0 if they reject the pair, before any dual
  * number is made. */
@@ -1200,7 +886,7 @@ static int passes_screening(sizes_t z, const double *xsv, const double *xmv, con
                             int normals) {
     const int ns = z.ns, nm = z.nm;
     const double (*xs)[3] = (const double (*)[3])xsv, (*xm)[3] = (const double (*)[3])xmv;
-    double node_normals[4][3];
+    double node_normals[4][3] = {{0.0}};
     if (normals == 0) {
         memcpy(node_normals, nnv, sizeof(double) * 3 * ns);
     } else if (normals == 1) {
@@ -1260,217 +946,139 @@ static int passes_screening(sizes_t z, const double *xsv, const double *xmv, con
     return !separated_k((const double (*)[2])S, ns, (const double (*)[2])Mp, nm);
 }
 
-/* The pair's outputs (values and gradients over its nv variables): zero unless valid */
-static int pair_general(long p, sizes_t z, const double *xsv, const double *xmv, const double *nnv,
-                        const unsigned char *crosspoint, int normals, int dual_basis,
-                        int q, const double (*bary)[3], const double *rule_weights,
-                        const outputs_t *o, unsigned char *valid, double *overlap) {
-    const int ns = z.ns, nm = z.nm;
-    if (!passes_screening(z, xsv, xmv, nnv, normals)) return 0;
-    dx xs[4][3], xm[4][3], node_normals[4][3];
-    pair_variables_x(z, xsv, xmv, nnv, normals, xs, xm, node_normals);
-    /* the auxiliary plane */
-    dx x0[3], sum[3], n0[3], edge[3], wv[3], e[2][3];
-    for (int c = 0; c < 3; ++c) {
-        x0[c] = xs[0][c]; sum[c] = node_normals[0][c];
-        for (int k = 1; k < ns; ++k) { x0[c] = addx(x0[c], xs[k][c]); sum[c] = addx(sum[c], node_normals[k][c]); }
-        x0[c] = scalex(x0[c], 1.0 / ns);
-        sum[c] = scalex(sum[c], 1.0 / ns);
-    }
-    normalizex(sum, n0);
-    for (int c = 0; c < 3; ++c) edge[c] = subx(xs[1][c], xs[0][c]);
-    dx along = dotx(edge, n0);
-    for (int c = 0; c < 3; ++c) wv[c] = subx(edge[c], mulx(n0[c], along));
-    normalizex(wv, e[0]);
-    crossx(n0, e[0], e[1]);
-    dx Sx[4][2], Mx[4][2];
-    double S[4][2], Mp[4][2];
-    for (int k = 0; k < ns; ++k) {
-        dx offset[3];
-        for (int c = 0; c < 3; ++c) offset[c] = subx(xs[k][c], x0[c]);
-        for (int a = 0; a < 2; ++a) { Sx[k][a] = dotx(offset, e[a]); S[k][a] = Sx[k][a].v; }
-    }
-    for (int k = 0; k < nm; ++k) {
-        dx offset[3];
-        for (int c = 0; c < 3; ++c) offset[c] = subx(xm[k][c], x0[c]);
-        for (int a = 0; a < 2; ++a) { Mx[k][a] = dotx(offset, e[a]); Mp[k][a] = Mx[k][a].v; }
-    }
-    /* (facing and separation: passes_screening, on the same values) */
-    polygon_t poly;
-    if (clip_k((const double (*)[2])S, ns, (const double (*)[2])Mp, nm, &poly) != 0) return -1;
-    double slave_area = fabs(polygon_area_k((const double (*)[2])S, ns));
-    double clip_area = padded_area(&poly);
-    if (!(poly.count >= 3 && clip_area > AREA_TOLERANCE * slave_area)) return 0;
-    valid[p] = 1;
-    overlap[p] = clip_area / slave_area;
-    const int V = poly.count;
+/* the general pair path (surface3_general.h), values only: the same source over one unused
+ * derivative slot, its names suffixed */
+#define DERIVATIVES 0
+#define NX 1
+#define NP 1
+#define dx dx_values
+#define constx constx_values
+#define addx addx_values
+#define subx subx_values
+#define mulx mulx_values
+#define scalex scalex_values
+#define negx negx_values
+#define divx divx_values
+#define sqrtx sqrtx_values
+#define accumulatex accumulatex_values
+#define dotx dotx_values
+#define crossx crossx_values
+#define normalizex normalizex_values
+#define cross2x cross2x_values
+#define dp dp_values
+#define constp constp_values
+#define addp addp_values
+#define subp subp_values
+#define mulp mulp_values
+#define scalep scalep_values
+#define negp negp_values
+#define divp divp_values
+#define accumulatep accumulatep_values
+#define cross2p cross2p_values
+#define shape_duals_p shape_duals_p_values
+#define inverse_map_p inverse_map_p_values
+#define dual_coefficients_x dual_coefficients_x_values
+#define pair_variables_x pair_variables_x_values
+#define integrals_t integrals_t_values
+#define write_outputs write_outputs_values
+#define pair_general pair_general_values
+#include "surface3_general.h"
+#undef dx
+#undef constx
+#undef addx
+#undef subx
+#undef mulx
+#undef scalex
+#undef negx
+#undef divx
+#undef sqrtx
+#undef accumulatex
+#undef dotx
+#undef crossx
+#undef normalizex
+#undef cross2x
+#undef dp
+#undef constp
+#undef addp
+#undef subp
+#undef mulp
+#undef scalep
+#undef negp
+#undef divp
+#undef accumulatep
+#undef cross2p
+#undef shape_duals_p
+#undef inverse_map_p
+#undef dual_coefficients_x
+#undef pair_variables_x
+#undef integrals_t
+#undef write_outputs
+#undef pair_general
+#undef DERIVATIVES
+#undef NX
+#undef NP
 
-    /* the plane coordinates as local variables */
-    dp Sl[4][2], Ml[4][2];
-    for (int k = 0; k < ns; ++k)
-        for (int a = 0; a < 2; ++a) { Sl[k][a] = constp(S[k][a]); Sl[k][a].d[2 * k + a] = 1.0; }
-    for (int l = 0; l < nm; ++l)
-        for (int a = 0; a < 2; ++a) { Ml[l][a] = constp(Mp[l][a]); Ml[l][a].d[2 * ns + 2 * l + a] = 1.0; }
-    /* the clip vertices from their labels, the centre */
-    dp vertex[MAXV][2], centre[2];
-    for (int k = 0; k < V; ++k) {
-        int kind = poly.label[k][0], i = poly.label[k][1], j = poly.label[k][2];
-        if (kind == 0) {
-            vertex[k][0] = Sl[i][0]; vertex[k][1] = Sl[i][1];
-        } else if (kind == 1) {
-            int node = ((nm - 1 - j) % nm + nm) % nm;
-            vertex[k][0] = Ml[node][0]; vertex[k][1] = Ml[node][1];
-        } else {
-            int es = ((nm - 2 - j) % nm + nm) % nm;
-            const dp *a0 = Sl[i], *a1 = Sl[(i + 1) % ns], *b0 = Ml[es], *b1 = Ml[(es + 1) % nm];
-            dp da[2] = {subp(a1[0], a0[0]), subp(a1[1], a0[1])};
-            dp db[2] = {subp(b1[0], b0[0]), subp(b1[1], b0[1])};
-            dp ba[2] = {subp(b0[0], a0[0]), subp(b0[1], a0[1])};
-            dp denominator = cross2p(da, db), numerator = cross2p(ba, db);
-            dp t = denominator.v != 0.0 ? divp(numerator, denominator) : numerator;
-            vertex[k][0] = addp(a0[0], mulp(da[0], t));
-            vertex[k][1] = addp(a0[1], mulp(da[1], t));
-        }
+/* ... and with the derivatives over the pair's 3 (2 ns + nm) <= 36 variables and the 16 plane
+ * coordinates */
+#define DERIVATIVES 1
+#define NX 36
+#define NP 16
+#include "surface3_general.h"
+
+static void shape_duals(const dx *xi, int nodes, dx *N) {
+    if (nodes == 3) {
+        N[0] = subx(subx(constx(1.0), xi[0]), xi[1]); N[1] = xi[0]; N[2] = xi[1];
+        return;
     }
-    double weight = 1.0 / V;
-    for (int a = 0; a < 2; ++a) {
-        centre[a] = scalep(vertex[0][a], weight);
-        for (int k = 1; k < V; ++k) centre[a] = addp(centre[a], scalep(vertex[k][a], weight));
+    for (int k = 0; k < 4; ++k) {
+        dx u = addx(constx(1.0), scalex(xi[0], QUAD_SIGNS[k][0]));
+        dx w = addx(constx(1.0), scalex(xi[1], QUAD_SIGNS[k][1]));
+        N[k] = scalex(mulx(u, w), 0.25);
     }
-    /* the integrals of products of N_a, N_k, N_i (slave) and Nm_l (master) over the clip
-     * polygon, over the local variables: L_a = int N_a, I_ak, K_al = int N_a Nm_l, T_aki
-     * (a <= k <= i), U_ail = int N_a N_i Nm_l (a <= i) */
-    dp L[4], I[4][4], K[4][4], T[4][4][4], U[4][4][4];
-    memset(L, 0, sizeof L); memset(I, 0, sizeof I); memset(K, 0, sizeof K);
-    memset(T, 0, sizeof T); memset(U, 0, sizeof U);
-    for (int cell = 0; cell < V; ++cell) {
-        const dp *v0 = vertex[cell], *v1 = vertex[(cell + 1) % V];
-        dp ea[2] = {subp(v0[0], centre[0]), subp(v0[1], centre[1])};
-        dp eb[2] = {subp(v1[0], centre[0]), subp(v1[1], centre[1])};
-        dp cell_area = scalep(cross2p(ea, eb), 0.5);
-        for (int g = 0; g < q; ++g) {
-            dp P[2], xi[2], eta[2], N[4], Nm[4], WN[4], WNN[4][4];
-            for (int a = 0; a < 2; ++a)
-                P[a] = addp(addp(scalep(centre[a], bary[g][0]), scalep(v0[a], bary[g][1])),
-                            scalep(v1[a], bary[g][2]));
-            dp W = scalep(cell_area, rule_weights[g]);
-            inverse_map_p((const dp (*)[2])Sl, ns, P, xi);
-            inverse_map_p((const dp (*)[2])Ml, nm, P, eta);
-            shape_duals_p(xi, ns, N);
-            shape_duals_p(eta, nm, Nm);
-            for (int a = 0; a < ns; ++a) {
-                WN[a] = mulp(W, N[a]);
-                L[a] = addp(L[a], WN[a]);
-                for (int l = 0; l < nm; ++l) accumulatep(&K[a][l], WN[a], Nm[l]);
-                for (int k = a; k < ns; ++k) {
-                    WNN[a][k] = mulp(WN[a], N[k]);
-                    I[a][k] = addp(I[a][k], WNN[a][k]);
-                    for (int i = k; i < ns; ++i) accumulatep(&T[a][k][i], WNN[a][k], N[i]);
-                    for (int l = 0; l < nm; ++l) accumulatep(&U[a][k][l], WNN[a][k], Nm[l]);
-                }
-            }
-        }
-    }
-    /* chained to the pair's variables through the plane coordinates */
-    double chain[NP][NX];
-    for (int k = 0; k < ns; ++k)
-        for (int a = 0; a < 2; ++a) memcpy(chain[2 * k + a], Sx[k][a].d, sizeof(double) * nx_);
-    for (int l = 0; l < nm; ++l)
-        for (int a = 0; a < 2; ++a) memcpy(chain[2 * ns + 2 * l + a], Mx[l][a].d, sizeof(double) * nx_);
-    const int nl = 2 * (ns + nm);
-    dx Lx[4], Ix[4][4], Kx[4][4], Tx[4][4][4], Ux[4][4][4];
-#define CHAIN(out, in) do { \
-        (out).v = (in).v; \
-        if (nx_) for (int v_ = 0; v_ < NX; ++v_) (out).d[v_] = 0.0; \
-        for (int s_ = 0; s_ < nl; ++s_) { \
-            double f_ = (in).d[s_]; \
-            if (nx_) for (int v_ = 0; v_ < NX; ++v_) (out).d[v_] += f_ * chain[s_][v_]; \
-        } \
-    } while (0)
-    for (int a = 0; a < ns; ++a) {
-        CHAIN(Lx[a], L[a]);
-        for (int l = 0; l < nm; ++l) CHAIN(Kx[a][l], K[a][l]);
-        for (int k = a; k < ns; ++k) {
-            CHAIN(Ix[a][k], I[a][k]);
-            Ix[k][a] = Ix[a][k];
-            for (int l = 0; l < nm; ++l) { CHAIN(Ux[a][k][l], U[a][k][l]); Ux[k][a][l] = Ux[a][k][l]; }
-            for (int i = k; i < ns; ++i) {
-                CHAIN(Tx[a][k][i], T[a][k][i]);
-                Tx[a][i][k] = Tx[k][a][i] = Tx[k][i][a] = Tx[i][a][k] = Tx[i][k][a] = Tx[a][k][i];
-            }
-        }
-    }
-#undef CHAIN
-    /* the multiplier basis Phi_j = sum_a A_ja N_a, a crosspoint's share given to the others */
-    dx A[4][4];
-    if (dual_basis) {
-        dual_coefficients_x((const dx (*)[3])xs, ns, A);
-    } else {
-        for (int j = 0; j < ns; ++j)
-            for (int a = 0; a < ns; ++a) A[j][a] = constx(j == a ? 1.0 : 0.0);
-    }
-    int cross[4], any_cross;
-    double share = crosspoint_shares(ns, crosspoint, cross, &any_cross);
-    if (any_cross) {
-        for (int a = 0; a < ns; ++a) {
-            dx shared = constx(0.0);
-            for (int j = 0; j < ns; ++j) if (cross[j]) shared = addx(shared, A[j][a]);
-            for (int j = 0; j < ns; ++j)
-                A[j][a] = cross[j] ? constx(0.0) : addx(A[j][a], scalex(shared, share));
-        }
-    }
-    const int identity = !dual_basis && !any_cross;
-    /* D, M, the areas; Dn_jkc = sum_i n_ic G_jki, G_jki = sum_a A_ja T_aki; Mn likewise */
-    integrals_t in;
-    memset(&in, 0, sizeof in);
+}
+
+static void multiplier_basis(int ns, int dual_basis, const dx A[4][4], const dx *N, dx *Phi) {
     for (int j = 0; j < ns; ++j) {
-        dx G[4][4], H[4][4];
-        if (identity) {
-            in.area[j] = Lx[j];
-            for (int k = 0; k < ns; ++k) in.D[j][k] = Ix[j][k];
-            for (int l = 0; l < nm; ++l) in.M[j][l] = Kx[j][l];
+        if (dual_basis) {
+            Phi[j] = mulx(N[0], A[j][0]);
+            for (int k = 1; k < ns; ++k) Phi[j] = addx(Phi[j], mulx(N[k], A[j][k]));
         } else {
-            in.area[j] = constx(0.0);
-            for (int k = 0; k < ns; ++k) in.D[j][k] = constx(0.0);
-            for (int l = 0; l < nm; ++l) in.M[j][l] = constx(0.0);
-            for (int a = 0; a < ns; ++a) {
-                accumulatex(&in.area[j], A[j][a], Lx[a]);
-                for (int k = 0; k < ns; ++k) accumulatex(&in.D[j][k], A[j][a], Ix[a][k]);
-                for (int l = 0; l < nm; ++l) accumulatex(&in.M[j][l], A[j][a], Kx[a][l]);
-            }
-        }
-        for (int k = 0; k < ns; ++k) {
-            for (int i = 0; i < ns; ++i) {
-                if (identity) {
-                    G[k][i] = Tx[j][k][i];
-                } else {
-                    G[k][i] = constx(0.0);
-                    for (int a = 0; a < ns; ++a) accumulatex(&G[k][i], A[j][a], Tx[a][k][i]);
-                }
-            }
-        }
-        for (int i = 0; i < ns; ++i)
-            for (int l = 0; l < nm; ++l) {
-                if (identity) {
-                    H[i][l] = Ux[j][i][l];
-                } else {
-                    H[i][l] = constx(0.0);
-                    for (int a = 0; a < ns; ++a) accumulatex(&H[i][l], A[j][a], Ux[a][i][l]);
-                }
-            }
-        for (int c = 0; c < 3; ++c) {
-            for (int k = 0; k < ns; ++k) {
-                in.Dn[j][k][c] = constx(0.0);
-                for (int i = 0; i < ns; ++i) accumulatex(&in.Dn[j][k][c], node_normals[i][c], G[k][i]);
-            }
-            for (int l = 0; l < nm; ++l) {
-                in.Mn[j][l][c] = constx(0.0);
-                for (int i = 0; i < ns; ++i) accumulatex(&in.Mn[j][l][c], node_normals[i][c], H[i][l]);
-            }
+            Phi[j] = N[j];
         }
     }
-    write_outputs(&in, z, p, (const dx (*)[3])xs, (const dx (*)[3])xm, o);
-    return 1;
+}
+
+/* One Gauss point of weight W: D += W Phi_j N_k, M += W Phi_j Nm_l, Dn, Mn times the normal
+ * field n = sum_j N_j n_j, area += W Phi_j; a crosspoint's Phi shared by the other nodes */
+static void accumulate_point(integrals_t *in, int ns, int nm, dx W, dx *Phi, const dx *N,
+                             const dx *Nm, const dx (*node_normals)[3], const int *cross,
+                             int any_cross, double share) {
+    dx normal[3];
+    if (any_cross) {
+        dx shared = constx(0.0);
+        for (int j = 0; j < ns; ++j) if (cross[j]) shared = addx(shared, Phi[j]);
+        for (int j = 0; j < ns; ++j)
+            Phi[j] = cross[j] ? constx(0.0) : addx(Phi[j], scalex(shared, share));
+    }
+    for (int c = 0; c < 3; ++c) {
+        normal[c] = mulx(node_normals[0][c], N[0]);
+        for (int j = 1; j < ns; ++j) normal[c] = addx(normal[c], mulx(node_normals[j][c], N[j]));
+    }
+    for (int j = 0; j < ns; ++j) {
+        if (cross[j]) continue;
+        dx Q = mulx(W, Phi[j]);
+        in->area[j] = addx(in->area[j], Q);
+        for (int k = 0; k < ns; ++k) {
+            dx QN = mulx(Q, N[k]);
+            in->D[j][k] = addx(in->D[j][k], QN);
+            for (int c = 0; c < 3; ++c) accumulatex(&in->Dn[j][k][c], &QN, &normal[c]);
+        }
+        for (int l = 0; l < nm; ++l) {
+            dx QN = mulx(Q, Nm[l]);
+            in->M[j][l] = addx(in->M[j][l], QN);
+            for (int c = 0; c < 3; ++c) accumulatex(&in->Mn[j][l][c], &QN, &normal[c]);
+        }
+    }
 }
 
 static void zero_pair_general(const outputs_t *o, sizes_t z, long p) {
@@ -1530,20 +1138,20 @@ int surface3_pairs(long n, int ns, int nm, const double *xs, const double *xm, c
     outputs_t o = {D, M, Dn, Mn, gap, area, gD, gM, gDn, gMn, ggap, garea};
     const int values_only = !gD && !gM && !gDn && !gMn && !ggap && !garea;
     if (!values_only && (!gDn || !gMn || !ggap || !garea)) return -1;
-    nx_ = values_only ? 0 : NX;
-    np_ = values_only ? 0 : NP;
+    int (*integrate)(long, sizes_t, const double *, const double *, const double *,
+                     const unsigned char *, int, int, int, const double (*)[3], const double *,
+                     const outputs_t *, unsigned char *, double *) =
+        values_only ? pair_general_values : pair_general;
     int status = 0;
     for (long p = 0; p < n && status >= 0; ++p) {
         valid[p] = 0;
         overlap[p] = 0.0;
-        status = pair_general(p, z, xs + 3 * ns * p, xm + 3 * nm * p, nn + 3 * ns * p,
-                              crosspoint ? crosspoint + ns * p : NULL, normals, dual_basis,
-                              q, (const double (*)[3])bary, weights, &o, valid, overlap);
+        status = integrate(p, z, xs + 3 * ns * p, xm + 3 * nm * p, nn + 3 * ns * p,
+                           crosspoint ? crosspoint + ns * p : NULL, normals, dual_basis,
+                           q, (const double (*)[3])bary, weights, &o, valid, overlap);
         if (status < 0) status = -2 - (int)p;
         else if (status == 0) zero_pair_general(&o, z, p);
     }
-    nx_ = NX;
-    np_ = NP;
     return status < 0 ? status : 0;
 }
 
