@@ -961,6 +961,8 @@ static int passes_screening(sizes_t z, const double *xsv, const double *xmv, con
 #define divx divx_values
 #define sqrtx sqrtx_values
 #define accumulatex accumulatex_values
+#define subtract_productx subtract_productx_values
+#define zerox zerox_values
 #define dotx dotx_values
 #define crossx crossx_values
 #define normalizex normalizex_values
@@ -993,6 +995,8 @@ static int passes_screening(sizes_t z, const double *xsv, const double *xmv, con
 #undef divx
 #undef sqrtx
 #undef accumulatex
+#undef subtract_productx
+#undef zerox
 #undef dotx
 #undef crossx
 #undef normalizex

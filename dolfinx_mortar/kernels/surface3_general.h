@@ -27,6 +27,12 @@ static inline dx sqrtx(dx a) {
     for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] * f;
     return r;
 }
+static inline void zerox(dx *r) { memset(r, 0, sizeof *r); }
+/* r -= a * b */
+static inline void subtract_productx(dx *r, const dx *a, const dx *b) {
+    r->v = r->v - a->v * b->v;
+    for (int i = 0; i < NX; ++i) r->d[i] = r->d[i] - (a->d[i] * b->v + b->d[i] * a->v);
+}
 /* r += a * b */
 static inline void accumulatex(dx *r, const dx *a, const dx *b) {
     r->v += a->v * b->v;
@@ -139,8 +145,8 @@ static void dual_coefficients_x(const dx (*xs)[3], int ns, dx A[4][4]) {
     const double w[3] = {5.0 / 9.0, 8.0 / 9.0, 5.0 / 9.0};
     dx mass[4][4], lumped[4];
     for (int j = 0; j < 4; ++j) {
-        lumped[j] = constx(0.0);
-        for (int k = 0; k < 4; ++k) mass[j][k] = constx(0.0);
+        zerox(&lumped[j]);
+        for (int k = 0; k < 4; ++k) zerox(&mass[j][k]);
     }
     for (int a = 0; a < 3; ++a)
         for (int b = 0; b < 3; ++b) {
@@ -148,7 +154,7 @@ static void dual_coefficients_x(const dx (*xs)[3], int ns, dx A[4][4]) {
             shape_values(g[a], g[b], 4, N, dN);
             dx t1[3], t2[3], normal[3];
             for (int c = 0; c < 3; ++c) {
-                t1[c] = constx(0.0); t2[c] = constx(0.0);
+                zerox(&t1[c]); zerox(&t2[c]);
                 for (int k = 0; k < 4; ++k) {
                     t1[c] = addx(t1[c], scalex(xs[k][c], dN[k][0]));
                     t2[c] = addx(t2[c], scalex(xs[k][c], dN[k][1]));
@@ -233,11 +239,12 @@ static void write_outputs(const integrals_t *in, sizes_t z, long p, const dx (*x
                           const dx (*xm)[3], const outputs_t *o) {
     const int ns = z.ns, nm = z.nm, nv = z.nv;
     for (int j = 0; j < ns; ++j) {
-        dx gap = constx(0.0);
+        dx gap;
+        zerox(&gap);
         for (int l = 0; l < nm; ++l)
             for (int c = 0; c < 3; ++c) accumulatex(&gap, &in->Mn[j][l][c], &xm[l][c]);
         for (int k = 0; k < ns; ++k)
-            for (int c = 0; c < 3; ++c) gap = subx(gap, mulx(in->Dn[j][k][c], xs[k][c]));
+            for (int c = 0; c < 3; ++c) subtract_productx(&gap, &in->Dn[j][k][c], &xs[k][c]);
         o->gap[ns * p + j] = gap.v;
         if (DERIVATIVES && o->ggap) memcpy(o->ggap + (ns * p + j) * nv, gap.d, sizeof(double) * nv);
         o->area[ns * p + j] = in->area[j].v;
@@ -431,7 +438,6 @@ static int pair_general(long p, sizes_t z, const double *xsv, const double *xmv,
     const int identity = !dual_basis && !any_cross;
     /* D, M, the areas; Dn_jkc = sum_i n_ic G_jki, G_jki = sum_a A_ja T_aki; Mn likewise */
     integrals_t in;
-    memset(&in, 0, sizeof in);
     for (int j = 0; j < ns; ++j) {
         dx G[4][4], H[4][4];
         if (identity) {
@@ -439,9 +445,9 @@ static int pair_general(long p, sizes_t z, const double *xsv, const double *xmv,
             for (int k = 0; k < ns; ++k) in.D[j][k] = Ix[j][k];
             for (int l = 0; l < nm; ++l) in.M[j][l] = Kx[j][l];
         } else {
-            in.area[j] = constx(0.0);
-            for (int k = 0; k < ns; ++k) in.D[j][k] = constx(0.0);
-            for (int l = 0; l < nm; ++l) in.M[j][l] = constx(0.0);
+            zerox(&in.area[j]);
+            for (int k = 0; k < ns; ++k) zerox(&in.D[j][k]);
+            for (int l = 0; l < nm; ++l) zerox(&in.M[j][l]);
             for (int a = 0; a < ns; ++a) {
                 accumulatex(&in.area[j], &A[j][a], &Lx[a]);
                 for (int k = 0; k < ns; ++k) accumulatex(&in.D[j][k], &A[j][a], &Ix[a][k]);
@@ -453,7 +459,7 @@ static int pair_general(long p, sizes_t z, const double *xsv, const double *xmv,
                 if (identity) {
                     G[k][i] = Tx[j][k][i];
                 } else {
-                    G[k][i] = constx(0.0);
+                    zerox(&G[k][i]);
                     for (int a = 0; a < ns; ++a) accumulatex(&G[k][i], &A[j][a], &Tx[a][k][i]);
                 }
             }
@@ -463,17 +469,17 @@ static int pair_general(long p, sizes_t z, const double *xsv, const double *xmv,
                 if (identity) {
                     H[i][l] = Ux[j][i][l];
                 } else {
-                    H[i][l] = constx(0.0);
+                    zerox(&H[i][l]);
                     for (int a = 0; a < ns; ++a) accumulatex(&H[i][l], &A[j][a], &Ux[a][i][l]);
                 }
             }
         for (int c = 0; c < 3; ++c) {
             for (int k = 0; k < ns; ++k) {
-                in.Dn[j][k][c] = constx(0.0);
+                zerox(&in.Dn[j][k][c]);
                 for (int i = 0; i < ns; ++i) accumulatex(&in.Dn[j][k][c], &node_normals[i][c], &G[k][i]);
             }
             for (int l = 0; l < nm; ++l) {
-                in.Mn[j][l][c] = constx(0.0);
+                zerox(&in.Mn[j][l][c]);
                 for (int i = 0; i < ns; ++i) accumulatex(&in.Mn[j][l][c], &node_normals[i][c], &H[i][l]);
             }
         }
