@@ -174,15 +174,16 @@ def flag_comparison(args, repeats: int) -> dict:
     result = {}
     default = compiled._get()
     with tempfile.TemporaryDirectory() as cache:
-        for flags in (("-O2",) + compiled.COMPILE_ARGS[1:],
-                      ("-O3",) + compiled.COMPILE_ARGS[1:],
-                      ("-O3", "-march=native") + compiled.COMPILE_ARGS[1:]):
+        for flags in (("-O2",) + compiled.PORTABLE_ARGS[1:],
+                      compiled.PORTABLE_ARGS,
+                      compiled.PORTABLE_ARGS + ("-mavx2",),
+                      compiled.PORTABLE_ARGS + ("-march=native",)):
             module, info = compiled.build(flags, directory=cache)
-            compiled._module = module
+            compiled._modules["surface3"] = module
             try:
                 seconds = median_time(compiled_kernel, args, repeats)
             finally:
-                compiled._module = default
+                compiled._modules["surface3"] = default
             result[" ".join(flags)] = {"seconds_per_pair": seconds / args[0].shape[0],
                                        "compile_seconds": info.get("compile_seconds")}
     return result
