@@ -1,11 +1,12 @@
 """Compiled mortar kernels: C source compiled at first use through cffi, cached across processes.
 
 As FFCx compiles dolfinx's form kernels: each C source next to this file (``surface3.c``, the
-3D kernel, which includes its general pair path ``surface3_general.h`` twice; ``line2.c``, the
-2D kernel) is its own module, loaded with :func:`load` (``load("line2")``). Its source (local
-includes inlined), declarations, the compiler flags and the cffi and Python versions are hashed
-into the module's name; the module is compiled once into a cache directory and loaded from
-there by every later process. The cache directory is
+3D kernel, which includes its general pair path ``surface3_general.h`` twice and its stencil
+passes ``surface3_stencils.h``; ``line2.c``, the 2D kernel) is its own module, loaded with
+:func:`load` (``load("line2")``). Its source (local includes inlined), declarations, the
+compiler flags and the cffi and Python versions are hashed into the module's name; the module
+is compiled once into a cache directory and loaded from there by every later process. The
+cache directory is
 ``$DOLFINX_MORTAR_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/dolfinx_mortar``, else
 ``~/.cache/dolfinx_mortar``.
 
