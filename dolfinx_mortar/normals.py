@@ -160,32 +160,68 @@ def averaged_nodal_normals(x: np.ndarray, facets: np.ndarray) -> NodalNormals:
         (3, 2, 3, 2)
     """
     x = np.asarray(x, dtype=np.float64)
-    facets = np.asarray(facets, dtype=np.int64)
-    num_nodes, gdim = x.shape
-    nf, k = facets.shape
-    corner_normals, corner_derivative = facet_corner_normals(x, facets, jacobian=True)
-    summed = np.zeros((num_nodes, gdim))
-    np.add.at(summed, facets, corner_normals)
-    length = np.linalg.norm(summed, axis=1)
-    on_surface = length > 0.0
-    normals = np.zeros_like(summed)
-    normals[on_surface] = summed[on_surface] / length[on_surface, None]
+    stars = NormalStars(facets, x.shape[0])
+    normals, jacobian = stars.normals_and_jacobian(x)
+    return NodalNormals(normals=normals, star=stars.star, jacobian=jacobian)
 
-    # d m_j / d x_s, summed over the (facet, corner) entries with node j at the corner
-    node = np.repeat(facets, k, axis=1).reshape(-1)          # j: the corner's node
-    other = np.tile(facets, (1, k)).reshape(-1)              # s: a node of the same facet
-    blocks = corner_derivative.reshape(nf * k * k, gdim, gdim)
-    keys, inverse = np.unique(node * num_nodes + other, return_inverse=True)
-    accumulated = np.zeros((keys.size, gdim, gdim))
-    np.add.at(accumulated, inverse.reshape(-1), blocks)
-    rows, columns = keys // num_nodes, keys % num_nodes
-    first = np.searchsorted(rows, np.arange(num_nodes))
-    slot = np.arange(keys.size) - first[rows]
-    max_star = int(slot.max()) + 1 if keys.size else 0
-    star = np.full((num_nodes, max_star), -1, dtype=np.int64)
-    star[rows, slot] = columns
-    P = np.zeros((num_nodes, gdim, gdim))
-    P[on_surface] = _normalize_jacobian(normals[on_surface], length[on_surface])
-    jacobian = np.zeros((num_nodes, gdim, max_star, gdim))
-    jacobian[rows, :, slot, :] = P[rows] @ accumulated
-    return NodalNormals(normals=normals, star=star, jacobian=jacobian)
+
+class NormalStars:
+    """The star of every node of a set of facets, and the averaged normals at any positions
+    of their nodes.
+
+    The stars are topology: a stencil builds them once per search and evaluates the
+    normals at every update from them, their derivatives only when a Jacobian asks
+    (a residual or a values-only update needs none).
+
+    Attributes:
+        star: (num_nodes, max_star) the nodes each normal depends on, -1 padded,
+            increasing (:attr:`NodalNormals.star`).
+    """
+
+    def __init__(self, facets: np.ndarray, num_nodes: int):
+        facets = np.asarray(facets, dtype=np.int64)
+        self.facets, self.num_nodes = facets, int(num_nodes)
+        nf, k = facets.shape
+        node = np.repeat(facets, k, axis=1).reshape(-1)          # j: the corner's node
+        other = np.tile(facets, (1, k)).reshape(-1)              # s: a node of the same facet
+        keys, inverse = np.unique(node * num_nodes + other, return_inverse=True)
+        rows, columns = keys // num_nodes, keys % num_nodes
+        first = np.searchsorted(rows, np.arange(num_nodes))
+        slot = np.arange(keys.size) - first[rows]
+        max_star = int(slot.max()) + 1 if keys.size else 0
+        self.star = np.full((num_nodes, max_star), -1, dtype=np.int64)
+        self.star[rows, slot] = columns
+        self._entry = inverse.reshape(-1)  # (facet, corner, node) -> its (node, star node) key
+        self._rows, self._slot = rows, slot
+
+    def normals(self, x: np.ndarray) -> np.ndarray:
+        """(num_nodes, gdim) unit averaged normals of the nodes at positions ``x`` (zero for
+        a node on no facet)."""
+        return self._averaged(facet_corner_normals(x, self.facets))[0]
+
+    def normals_and_jacobian(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The normals and (num_nodes, gdim, max_star, gdim) their derivatives
+        d normals[i, a] / d x[star[i, s], b] (zero in padded slots)."""
+        corner_normals, corner_derivative = facet_corner_normals(x, self.facets, jacobian=True)
+        normals, length, on_surface = self._averaged(corner_normals)
+        gdim = normals.shape[1]
+        # d m_j / d x_s, summed over the (facet, corner) entries with node j at the corner
+        blocks = corner_derivative.reshape(-1, gdim * gdim)
+        accumulated = np.stack([np.bincount(self._entry, blocks[:, c], self._rows.size)
+                                for c in range(gdim * gdim)], axis=1).reshape(-1, gdim, gdim)
+        P = np.zeros((self.num_nodes, gdim, gdim))
+        P[on_surface] = _normalize_jacobian(normals[on_surface], length[on_surface])
+        jacobian = np.zeros((self.num_nodes, gdim, self.star.shape[1], gdim))
+        jacobian[self._rows, :, self._slot, :] = P[self._rows] @ accumulated
+        return normals, jacobian
+
+    def _averaged(self, corner_normals: np.ndarray):
+        gdim = corner_normals.shape[-1]
+        corner_nodes = self.facets.reshape(-1)
+        summed = np.stack([np.bincount(corner_nodes, corner_normals[..., c].reshape(-1),
+                                       self.num_nodes) for c in range(gdim)], axis=1)
+        length = np.linalg.norm(summed, axis=1)
+        on_surface = length > 0.0
+        normals = np.zeros_like(summed)
+        normals[on_surface] = summed[on_surface] / length[on_surface, None]
+        return normals, length, on_surface

@@ -380,10 +380,11 @@ class Surface3Stencil(PairStencil):
         self.num_variables = 3 * (2 * ns + nm)
         self.slave_variables = np.arange(3 * ns)
         self.master_variables = np.arange(3 * ns, 3 * (ns + nm))
-        self._star_table = star_table          # (node table rows of the unique slave nodes, facets)
+        self._star_table = star_table          # (node table rows of the unique slave nodes, stars)
         self._pair_star_rows = pair_star_rows  # (n, ns) row of each pair's slave node in it
         self._normal_jacobian: np.ndarray | None = None
         self._nodal_normals: np.ndarray | None = None
+        self._star_x: np.ndarray | None = None  # the star nodes' positions at the evaluation
 
     @classmethod
     def build(cls, node_blocks, node_x, all_slave_facets, local_slave_facets, all_master_facets,
@@ -401,7 +402,8 @@ class Surface3Stencil(PairStencil):
             node_blocks[all_slave_facets], return_index=True, return_inverse=True)
         table_rows = all_slave_facets.reshape(-1)[representative]
         star_facets = inverse.reshape(all_slave_facets.shape)
-        star = normals_module.averaged_nodal_normals(node_x[table_rows], star_facets).star
+        stars = normals_module.NormalStars(star_facets, table_rows.size)
+        star = stars.star
         max_star = star.shape[1]
         pair_star_rows = np.searchsorted(blocks, node_blocks[slave])
         star_nodes = star[pair_star_rows]  # (n, ns, max_star) rows of the unique table, -1 pad
@@ -414,8 +416,7 @@ class Surface3Stencil(PairStencil):
         present = np.concatenate(
             [np.ones((slave.shape[0], ns + nm), dtype=bool),
              present_star.reshape(slave.shape[0], ns * max_star)], axis=1)
-        return cls(nodes, present, facet, ns, nm, max_star, (table_rows, star_facets),
-                   pair_star_rows)
+        return cls(nodes, present, facet, ns, nm, max_star, (table_rows, stars), pair_star_rows)
 
     @property
     def slave_slots(self) -> np.ndarray:
@@ -442,20 +443,22 @@ class Surface3Stencil(PairStencil):
         slave_x = node_x[self.slave_nodes]
         master_x = node_x[self.master_nodes]
         slave_normals = None
+        self._normal_jacobian = self._nodal_normals = self._star_x = None
         if self._star_table is not None:
-            table_rows, star_facets = self._star_table
-            nodal = normals_module.averaged_nodal_normals(node_x[table_rows], star_facets)
-            slave_normals = nodal.normals[self._pair_star_rows]
-            # d n_j / d x over the star, in the order of the star slots of the stencil; per
-            # unique slave node, gathered per pair only for the rows that contribute
-            self._normal_jacobian = nodal.jacobian  # (nodes, 3, s, 3)
-            self._nodal_normals = nodal.normals
-        else:
-            self._normal_jacobian = None
-            self._nodal_normals = None
+            table_rows, stars = self._star_table
+            self._star_x = node_x[table_rows]
+            self._nodal_normals = stars.normals(self._star_x)
+            slave_normals = self._nodal_normals[self._pair_star_rows]
         geometry = PairGeometry(slave_x=slave_x, master_x=master_x, slave_normals=slave_normals)
         return self.kernel.evaluate(geometry, options, crosspoint=crosspoint,
                                     slave_facet=self.slave_facets)
+
+    def _normal_jacobian_of_stars(self) -> np.ndarray:
+        """(unique slave nodes, 3, s, 3) d n_j[a] / d x[star slot s, b] at the last
+        evaluation, in the stencil's star slot order; made on the first Jacobian that asks."""
+        if self._normal_jacobian is None:
+            self._normal_jacobian = self._star_table[1].normals_and_jacobian(self._star_x)[1]
+        return self._normal_jacobian
 
     def combined_gradients(self, q: PairQuantities, rows, terms) -> np.ndarray:
         result = np.empty((len(terms), 3 * self.width, rows.size))
@@ -475,10 +478,10 @@ class Surface3Stencil(PairStencil):
         stencil's columns: the facet nodes' directly, the nodal normals' chained through
         their stars (in C, ``stencil_columns``)."""
         kernel = self._row_gradients(q, rows, terms)  # (T, rows, nv)
-        chain = bool(self.max_star) and self._normal_jacobian is not None
+        chain = bool(self.max_star) and self._star_x is not None
         J = None
         if chain:  # d n_j[a] / d x[star, b] of the rows: (rows, j, a, s b)
-            J = np.ascontiguousarray(self._normal_jacobian[self._pair_star_rows[rows]])
+            J = np.ascontiguousarray(self._normal_jacobian_of_stars()[self._pair_star_rows[rows]])
         module = compiled.load("surface3")
         ffi = module.ffi
         base = ffi.cast("double *", ffi.from_buffer(result)) + first

@@ -52,6 +52,37 @@ def test_normals_of_a_closed_octahedron_point_outward_radially():
     np.testing.assert_allclose(result.normals, x, atol=1e-15)
 
 
+@pytest.mark.parametrize("kind", ["triangle", "quadrilateral"])
+def test_stars_kept_over_moves_give_the_normals_of_a_fresh_computation(kind):
+    """A stencil builds the stars once per search and evaluates the normals (values only, or
+    with their Jacobian) at every later position: the same bits as from scratch there. The
+    sums are made in the facets' order, as one facet after another adds its corner normals
+    (checked against that loop)."""
+    x, facets = grid_surface(kind, n=5, seed=4)
+    facets = facets[np.random.default_rng(5).permutation(facets.shape[0])]
+    x = np.vstack([x, [[9.0, 9.0, 9.0]]])  # a node on no facet: zero normal, empty star
+    stars = normals.NormalStars(facets, x.shape[0])
+    rng = np.random.default_rng(6)
+    for _ in range(3):
+        moved = x + 0.02 * rng.standard_normal(x.shape)
+        fresh = normals.averaged_nodal_normals(moved, facets)
+        only, with_jacobian = stars.normals(moved), stars.normals_and_jacobian(moved)
+        assert np.array_equal(stars.star, fresh.star)
+        assert np.array_equal(only, fresh.normals)
+        assert np.array_equal(with_jacobian[0], fresh.normals)
+        assert np.array_equal(with_jacobian[1], fresh.jacobian)
+        summed = np.zeros_like(moved)
+        corner = normals.facet_corner_normals(moved, facets)
+        for f in range(facets.shape[0]):
+            for i, node in enumerate(facets[f]):
+                summed[node] += corner[f, i]
+        length = np.linalg.norm(summed, axis=1)
+        expected = np.divide(summed, length[:, None], out=np.zeros_like(summed),
+                             where=length[:, None] > 0)
+        assert np.array_equal(only, expected)
+        assert not only[-1].any() and (fresh.star[-1] < 0).all()
+
+
 def test_two_dimensional_normals_equal_the_kernel_normals():
     """On random open polylines, the averaged normals equal line2's at every facet end."""
     rng = np.random.default_rng(2)
