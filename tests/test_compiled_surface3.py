@@ -575,3 +575,23 @@ def test_a_failed_compile_says_what_it_needs(tmp_path, monkeypatch):
     assert "numpy" not in str(raised.value) and "DOLFINX_MORTAR_KERNELS" not in str(raised.value)
     assert not list(tmp_path.glob("*.so"))
     assert not [p for p in tmp_path.iterdir() if p.is_dir()]
+
+
+def test_a_pointer_holds_its_array_alive():
+    """A temporary array (a gathered chunk of coordinates) given to a kernel call lives as long
+    as the pointer made of it: the call never reads freed memory (it did: the element scores
+    read a chunk gathered in the argument list)."""
+    import weakref
+
+    ffi = compiled.load("surface3").ffi
+    array = np.arange(5.0) * 2.0
+    alive = weakref.ref(array)
+    pointer = compiled._pointer(ffi, array, "double *")
+    del array
+    assert alive() is not None
+    assert [pointer[i] for i in range(5)] == [0.0, 2.0, 4.0, 6.0, 8.0]
+    del pointer
+    assert alive() is None
+    assert compiled._pointer(ffi, None, "double *") == ffi.NULL
+    with pytest.raises(ValueError, match="a pointer type"):
+        compiled._pointer(ffi, np.zeros(2), "double")

@@ -279,9 +279,13 @@ def packed_weights(weights, num_rows: int) -> tuple[np.ndarray, np.ndarray, np.n
 
 
 def _pointer(ffi, array: np.ndarray | None, ctype: str):
+    """``array`` as a C argument of type ``ctype`` (``"double *"``...): a cdata that holds
+    the array alive, so that a temporary array given to a call outlives the call."""
     if array is None:
         return ffi.NULL
-    return ffi.cast(ctype, ffi.from_buffer(array))
+    if not ctype.endswith("*"):
+        raise ValueError(f"a pointer type, got {ctype!r}")
+    return ffi.from_buffer(ctype[:-1].strip() + "[]", array)
 
 
 _NORMAL_FIELDS = {"averaged": 0, "slave": 1, "master": 2}
