@@ -33,7 +33,7 @@ import dataclasses
 
 import numpy as np
 
-from .dual import RowSubsetDual
+from .dual import RowSubsetDual, rows_of
 from .kernels import KernelOptions, PairQuantities
 
 COVERAGE_FLOOR = 1e-12
@@ -137,36 +137,34 @@ class CoveredQuantities(PairQuantities):
 def transformed_quantities(stencil, q_std: PairQuantities, crosspoint: np.ndarray,
                            keep_scalars: bool) -> CoveredQuantities:
     """The covered-dual quantities of the standard-basis ones ``q_std``."""
-    rows = q_std.rows
-    coefficients = FacetCoefficients(q_std.D[rows], stencil.slave_facets[rows],
-                                     crosspoint[rows])
-
-    def values(array: np.ndarray) -> np.ndarray:
-        result = np.zeros_like(array)
-        result[rows] = coefficients.apply(array[rows])
-        return result
+    rows, n = q_std.rows, q_std.valid.shape[0]
+    coefficients = FacetCoefficients(q_std.D_rows, stencil.slave_facets[rows], crosspoint[rows])
 
     def no_gradient():
         raise NotImplementedError(
             "covered dual quantities have no per-pair gradients (they couple the pairs of "
             "a slave facet): use the stencil's combined_gradients")
 
-    def subset(array: np.ndarray) -> RowSubsetDual:
-        return RowSubsetDual(values(array), rows, no_gradient)
+    def subset(value_rows: np.ndarray) -> RowSubsetDual:
+        return RowSubsetDual(coefficients.apply(value_rows), rows, no_gradient, n)
 
     return CoveredQuantities(
-        D=values(q_std.D), M=values(q_std.M), Dn=subset(q_std.Dn.value),
-        Mn=subset(q_std.Mn.value), gap=subset(q_std.gap.value),
-        area=subset(q_std.area.value), valid=q_std.valid, overlap=q_std.overlap,
+        D_rows=coefficients.apply(q_std.D_rows), M_rows=coefficients.apply(q_std.M_rows),
+        Dn=subset(q_std.Dn.value_rows), Mn=subset(q_std.Mn.value_rows),
+        gap=subset(q_std.gap.value_rows), area=subset(q_std.area.value_rows),
+        valid=q_std.valid, overlap=q_std.overlap,
         num_variables=q_std.num_variables, normals_vary=q_std.normals_vary,
-        D_dual=subset(q_std.D) if keep_scalars else None,
-        M_dual=subset(q_std.M) if keep_scalars else None,
+        D_dual=subset(q_std.D_rows) if keep_scalars else None,
+        M_dual=subset(q_std.M_rows) if keep_scalars else None,
         standard=q_std, coefficients=coefficients)
 
 
-def _standard_values(q_std, name: str) -> np.ndarray:
-    return {"Dn": q_std.Dn.value, "Mn": q_std.Mn.value, "area": q_std.area.value,
-            "gap": q_std.gap.value, "D": q_std.D, "M": q_std.M}[name]
+def _standard_values(q_std, name: str, rows: np.ndarray) -> np.ndarray:
+    """The standard-basis values of output family ``name`` of the pairs ``rows``."""
+    if name in ("D", "M"):
+        by_rows = q_std.D_rows if name == "D" else q_std.M_rows
+        return rows_of(by_rows, q_std.rows, rows)
+    return getattr(q_std, name).value_of(rows)
 
 
 def translated_terms(stencil, q: CoveredQuantities, rows: np.ndarray, terms):
@@ -196,7 +194,7 @@ def translated_terms(stencil, q: CoveredQuantities, rows: np.ndarray, terms):
             w = np.broadcast_to(np.asarray(w, dtype=float), (rows.size,))
             for i in range(ns):
                 own.append((first + (i - j) * stride + offset, T[:, j, i] * w))
-            X = _standard_values(q_std, name)[rows]  # (rows, ns, ...)
+            X = _standard_values(q_std, name, rows)  # (rows, ns, ...)
             X = X[(slice(None), slice(None)) + tuple(rest)]
             y = np.einsum("nik,nk->ni", inverse, X)
             z = P[:, j, :] * w[:, None]

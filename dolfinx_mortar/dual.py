@@ -103,22 +103,37 @@ class Dual:
         return Dual(value, -self.grad * (value * inverse)[..., None])
 
 
-class RowSubsetDual(Dual):
-    """A Dual whose gradient is zero outside some rows of its leading axis.
+class RowSubsetDual:
+    """Values and gradients that are zero outside some rows of their leading axis.
 
-    Only those rows' gradients are kept (``rows``; ``grad_rows``, given as an
-    array or as a function that computes it when first needed); ``grad`` is
-    built in full on first access and kept. Most candidate pairs of a mortar
-    interface do not overlap: their rows are never stored.
+    Only those rows are kept (``rows``, sorted): their values (``value_rows``) and their
+    gradients (``grad_rows``, given as an array or as a function that computes it when
+    first needed). Most candidate pairs of a mortar interface do not overlap: their rows
+    are never stored. :attr:`value` and :attr:`grad` make the full arrays
+    (``num_pairs`` rows) on each access, for checks; assembly reads the kept rows
+    (:meth:`value_of`).
     """
 
-    __slots__ = ("rows", "_grad_rows", "_full")
+    __slots__ = ("rows", "value_rows", "num_pairs", "_grad_rows")
 
-    def __init__(self, value, rows, grad_rows):
-        self.value = np.asarray(value, dtype=np.float64)
+    def __init__(self, value_rows, rows, grad_rows, num_pairs: int):
+        self.value_rows = np.asarray(value_rows, dtype=np.float64)
         self.rows = np.asarray(rows)
+        self.num_pairs = int(num_pairs)
         self._grad_rows = grad_rows
-        self._full = None
+        if self.value_rows.shape[0] != self.rows.size:
+            raise ValueError(f"{self.value_rows.shape[0]} rows of values for "
+                             f"{self.rows.size} rows")
+
+    @classmethod
+    def of_full(cls, value, rows, grad_rows) -> RowSubsetDual:
+        """From the values of every row (zero outside ``rows``)."""
+        value = np.asarray(value, dtype=np.float64)
+        return cls(value[rows], rows, grad_rows, value.shape[0])
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return (self.num_pairs,) + self.value_rows.shape[1:]
 
     @property
     def grad_rows(self) -> np.ndarray:
@@ -126,17 +141,41 @@ class RowSubsetDual(Dual):
             self._grad_rows = np.asarray(self._grad_rows(), dtype=np.float64)
         return self._grad_rows
 
+    def value_of(self, rows: np.ndarray) -> np.ndarray:
+        """The values of ``rows`` (any rows; zero outside the kept ones)."""
+        return rows_of(self.value_rows, self.rows, rows)
+
+    @property
+    def value(self) -> np.ndarray:
+        full = np.zeros(self.shape)
+        full[self.rows] = self.value_rows
+        return full
+
     @property
     def grad(self) -> np.ndarray:
-        if self._full is None:
-            full = np.zeros(self.value.shape + (self.grad_rows.shape[-1],))
-            full[self.rows] = self.grad_rows
-            self._full = full
-        return self._full
+        grad_rows = self.grad_rows
+        full = np.zeros(self.shape + (grad_rows.shape[-1],))
+        full[self.rows] = grad_rows
+        return full
 
-    @grad.setter
-    def grad(self, grad) -> None:
-        self._full = np.asarray(grad, dtype=np.float64)
+
+def rows_of(array: np.ndarray, kept: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """The entries of ``rows`` of an array whose entries are those of the rows ``kept``
+    (zero for rows not kept): a slice where they are consecutive kept rows."""
+    if rows is kept:
+        return array
+    sorter = None if kept.size < 2 or np.all(kept[1:] > kept[:-1]) else np.argsort(kept)
+    position = np.minimum(np.searchsorted(kept, rows, sorter=sorter), max(kept.size - 1, 0))
+    if sorter is not None and kept.size:
+        position = sorter[position]
+    found = kept[position] == rows if kept.size else np.zeros(np.shape(rows), dtype=bool)
+    if found.all():
+        if sorter is None and rows.size and np.all(position[1:] == position[:-1] + 1):
+            return array[position[0]:position[-1] + 1]
+        return array[position]
+    result = np.zeros((rows.size,) + array.shape[1:])
+    result[found] = array[position[found]]
+    return result
 
 
 def sqrt(a: Dual) -> Dual:

@@ -196,12 +196,13 @@ class ContactEquations:
             return
         self._zero_gaps[k] = interface._pattern_version if interface.without_pairs else -1
         q = interface.quantities
-        for name, values, into in (("gap", q.gap.value, self.gaps),
-                                   ("area", q.area.value, self.areas)):
+        multipliers = interface.pair_multipliers[q.rows].reshape(-1).astype(PETSc.IntType)
+        for name, values, into in (("gap", q.gap.value_rows, self.gaps),
+                                   ("area", q.area.value_rows, self.areas)):
             vector = self.row_coefficients[k][name]
             vector.zeroEntries()
             vector.setValues(
-                interface.pair_multipliers.reshape(-1).astype(PETSc.IntType),
+                multipliers,
                 values.reshape(-1),
                 addv=PETSc.InsertMode.ADD_VALUES,
             )

@@ -63,6 +63,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from .dual import rows_of
 from .options import FrictionLaw
 
 STICK_BAND = 1e-6
@@ -308,7 +309,7 @@ class FramePairTangents(PairTangents):
         self.stencil = stencil = interface.stencil
         q = interface.quantities
         self.frames, self.frame_derivatives = tangent_frames(stencil.slave_normals(rows), axis)
-        self.D, self.M = q.D[rows], q.M[rows]
+        self.D, self.M = rows_of(q.D_rows, q.rows, rows), rows_of(q.M_rows, q.rows, rows)
         weights = np.concatenate([-self.D, self.M], axis=2)  # (rows, j, nodes)
         tau = self.frames.transpose(0, 2, 1, 3)  # (rows, a, j, 3)
         self.coefficients = weights[:, None, :, :, None] * tau[:, :, :, None, :]

@@ -41,7 +41,7 @@ from petsc4py import PETSc
 
 from . import covered, kernels, search, self_contact, stencils, surface
 from .deprecation import renamed_keywords
-from .dual import Dual, RowSubsetDual
+from .dual import RowSubsetDual
 from .kernels import BasisOption, IntegrationOption, KernelOptions, NormalOption, PairQuantities
 from .layout import BlockIncidence, CooMatrix
 
@@ -409,25 +409,26 @@ class MortarInterface:
         """Reference integrals, constant in u (the nodal normals too); the gap linear in the
         current positions. Every quantity is zero outside the pairs that contribute."""
         stencil = self.stencil
-        Dn, Mn = reference.Dn.value, reference.Mn.value  # (n, j, k, c)
-        gap = (np.einsum("njlc,nlc->nj", Mn, self._node_x[stencil.master_nodes])
-               - np.einsum("njkc,nkc->nj", Dn, self._node_x[stencil.slave_nodes]))
+        rows, n = reference.rows, reference.valid.shape[0]
+        Dn, Mn = reference.Dn.value_rows, reference.Mn.value_rows  # (rows, j, k, c)
+        gap = (np.einsum("njlc,nlc->nj", Mn, self._node_x[stencil.master_nodes[rows]])
+               - np.einsum("njkc,nkc->nj", Dn, self._node_x[stencil.slave_nodes[rows]]))
         nv, ns = stencil.num_variables, stencil.ns
-        rows = reference.rows
         grad = np.zeros((rows.size, ns, nv))
-        grad[:, :, stencil.slave_variables] = -Dn[rows].reshape(-1, ns, ns * self.gdim)
-        grad[:, :, stencil.master_variables] = Mn[rows].reshape(-1, ns, stencil.nm * self.gdim)
+        grad[:, :, stencil.slave_variables] = -Dn.reshape(-1, ns, ns * self.gdim)
+        grad[:, :, stencil.master_variables] = Mn.reshape(-1, ns, stencil.nm * self.gdim)
 
-        def constant(value: np.ndarray) -> Dual:
-            shape = (rows.size,) + value.shape[1:] + (nv,)
-            return RowSubsetDual(value, rows, np.broadcast_to(0.0, shape))
+        def constant(value_rows: np.ndarray) -> RowSubsetDual:
+            shape = value_rows.shape + (nv,)
+            return RowSubsetDual(value_rows, rows, np.broadcast_to(0.0, shape), n)
 
         frozen_scalars = {}
         if reference.D_dual is not None:
-            frozen_scalars = {"D_dual": constant(reference.D), "M_dual": constant(reference.M)}
+            frozen_scalars = {"D_dual": constant(reference.D_rows),
+                              "M_dual": constant(reference.M_rows)}
         return reference.replaced(Dn=constant(Dn), Mn=constant(Mn),
-                                  area=constant(reference.area.value),
-                                  gap=RowSubsetDual(gap, rows, grad), normals_vary=False,
+                                  area=constant(reference.area.value_rows),
+                                  gap=RowSubsetDual(gap, rows, grad, n), normals_vary=False,
                                   **frozen_scalars)
 
     def _exchange_plan(self, slave_x: np.ndarray, master_x: np.ndarray,
@@ -598,6 +599,9 @@ class MortarInterface:
                    all_master_facets: np.ndarray) -> None:
         """The stencils of a search's candidate ``pairs`` and what the assembly reads of
         them (their multipliers, crosspoints; a new pattern version)."""
+        # the last search's per-pair arrays go before the new ones are made
+        self.stencil = self.pair_slave_facets = self.pair_multipliers = None
+        self.pair_crosspoint = None
         stencil = self._stencil_type.build(
             self._node_blocks, self._node_x, all_slave_facets,
             self.slave.facets.astype(np.int64), all_master_facets, pairs,
@@ -773,7 +777,7 @@ class MortarInterface:
         """(rows, j, ns + nm nodes, gdim): B's entries of the pairs ``rows``, -Dn on the slave
         nodes and +Mn on the master nodes (the contact force is -B^T z)."""
         q = self._require()
-        return np.concatenate([-q.Dn.value[rows], q.Mn.value[rows]], axis=2)
+        return np.concatenate([-q.Dn.value_of(rows), q.Mn.value_of(rows)], axis=2)
 
     def combined_gradients(self, rows: np.ndarray, terms) -> np.ndarray:
         """(len(terms), width * gdim, len(rows)): per row of ``terms`` (a list of (output,
@@ -821,8 +825,8 @@ class MortarInterface:
         sizes = (self._multiplier_sizes, self._block_sizes)
         D = self._block_matrix("D", "multipliers", "slave", (1, 1), *sizes)
         M = self._block_matrix("M", "multipliers", "master", (1, 1), *sizes)
-        return (D.assemble_groups(q.D[rows].transpose(1, 2, 0), rows),
-                M.assemble_groups(q.M[rows].transpose(1, 2, 0), rows))
+        return (D.assemble_groups(q.D_rows.transpose(1, 2, 0), rows),
+                M.assemble_groups(q.M_rows.transpose(1, 2, 0), rows))
 
     def weighted_gap(self, vector: PETSc.Vec | None = None) -> PETSc.Vec:
         """The weighted gaps g~_j in the multiplier layout."""
@@ -833,7 +837,7 @@ class MortarInterface:
         vector.zeroEntries()
         vector.setValues(
             self.pair_multipliers[rows].reshape(-1).astype(PETSc.IntType),
-            q.gap.value[rows].reshape(-1),
+            q.gap.value_rows.reshape(-1),
             addv=PETSc.InsertMode.ADD_VALUES,
         )
         vector.assemble()

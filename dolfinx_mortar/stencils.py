@@ -38,7 +38,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import normals as normals_module
-from .dual import RowSubsetDual
+from .dual import RowSubsetDual, rows_of
 from .kernels import (
     NUM_PAIR_VARIABLES,
     KernelOptions,
@@ -49,6 +49,7 @@ from .kernels import (
     Surface3Kernel,
     compiled,
 )
+from .kernels.contract import IndexedPairGeometry
 
 
 def lookup(keys: np.ndarray, values: np.ndarray, queries: np.ndarray):
@@ -62,29 +63,10 @@ def lookup(keys: np.ndarray, values: np.ndarray, queries: np.ndarray):
     return values[order[position]], found
 
 
-def _rows_of(array: np.ndarray, kept: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """The entries of ``rows`` of an array whose entries are those of the rows ``kept``
-    (zero for rows not kept): a slice where they are consecutive kept rows."""
-    if rows is kept:
-        return array
-    sorter = None if kept.size < 2 or np.all(kept[1:] > kept[:-1]) else np.argsort(kept)
-    position = np.minimum(np.searchsorted(kept, rows, sorter=sorter), max(kept.size - 1, 0))
-    if sorter is not None and kept.size:
-        position = sorter[position]
-    found = kept[position] == rows if kept.size else np.zeros(rows.shape, dtype=bool)
-    if found.all():
-        if sorter is None and rows.size and np.all(position[1:] == position[:-1] + 1):
-            return array[position[0]:position[-1] + 1]
-        return array[position]
-    result = np.zeros((rows.size,) + array.shape[1:])
-    result[found] = array[position[found]]
-    return result
-
-
 def _gradient_rows(item: RowSubsetDual, rows: np.ndarray) -> np.ndarray:
     """The gradients of ``rows`` of a :class:`RowSubsetDual`, without building its full
     gradient."""
-    return _rows_of(item.grad_rows, item.rows, rows)
+    return rows_of(item.grad_rows, item.rows, rows)
 
 
 def _add_combined(result: np.ndarray, grad: np.ndarray, entries: list) -> None:
@@ -260,7 +242,7 @@ class PairStencil:
         every output's gradient into one array (in 3D they are ~1,600 numbers a pair)."""
         nv = self.num_variables
         outputs = q.outputs()
-        sizes = [int(np.prod(item.value.shape[1:])) for item in outputs]
+        sizes = [int(np.prod(item.shape[1:])) for item in outputs]
         starts = np.cumsum([0] + sizes[:-1])
         end = int(starts[-1]) + sizes[-1]
         result = np.zeros((len(terms), rows.size, nv))
@@ -405,17 +387,17 @@ class Surface3Stencil(PairStencil):
         stars = normals_module.NormalStars(star_facets, table_rows.size)
         star = stars.star
         max_star = star.shape[1]
-        pair_star_rows = np.searchsorted(blocks, node_blocks[slave])
-        star_nodes = star[pair_star_rows]  # (n, ns, max_star) rows of the unique table, -1 pad
-        present_star = star_nodes >= 0
-        star_table_nodes = np.where(present_star, table_rows[np.maximum(star_nodes, 0)], 0)
         # (int32: a pair has ~30 stencil slots, kept from one search to the next)
-        nodes = np.concatenate(
-            [slave, master, star_table_nodes.reshape(slave.shape[0], ns * max_star)], axis=1,
-            dtype=np.int32 if node_blocks.size < 2**31 else np.int64)
-        present = np.concatenate(
-            [np.ones((slave.shape[0], ns + nm), dtype=bool),
-             present_star.reshape(slave.shape[0], ns * max_star)], axis=1)
+        index_type = np.int32 if node_blocks.size < 2**31 else np.int64
+        pair_star_rows = np.searchsorted(blocks, node_blocks[slave]).astype(index_type)
+        # per unique slave node its star as node-table rows (-1 pad), then per pair
+        star_table = np.where(star >= 0, table_rows[np.maximum(star, 0)], -1).astype(index_type)
+        n = slave.shape[0]
+        nodes = np.empty((n, ns + nm + ns * max_star), dtype=index_type)
+        nodes[:, :ns], nodes[:, ns:ns + nm] = slave, master
+        nodes[:, ns + nm:] = star_table[pair_star_rows].reshape(n, ns * max_star)
+        present = nodes >= 0
+        np.maximum(nodes, 0, out=nodes)  # absent slots: node 0, never read
         return cls(nodes, present, facet, ns, nm, max_star, (table_rows, stars), pair_star_rows)
 
     @property
@@ -425,6 +407,15 @@ class Surface3Stencil(PairStencil):
     @property
     def master_slots(self) -> np.ndarray:
         return np.arange(self.ns, self.ns + self.nm)
+
+    @property
+    def slave_nodes(self) -> np.ndarray:
+        """(n, ns) node-table indices of the slave facet nodes (a view)."""
+        return self.nodes[:, :self.ns]
+
+    @property
+    def master_nodes(self) -> np.ndarray:
+        return self.nodes[:, self.ns:self.ns + self.nm]
 
     def slave_normals(self, rows: np.ndarray) -> np.ndarray:
         """(rows, ns, 3) the averaged unit nodal normals of the pairs' slave nodes at the
@@ -440,16 +431,13 @@ class Surface3Stencil(PairStencil):
 
     def evaluate(self, node_x: np.ndarray, options: KernelOptions,
                  crosspoint: np.ndarray | None = None) -> PairQuantities:
-        slave_x = node_x[self.slave_nodes]
-        master_x = node_x[self.master_nodes]
-        slave_normals = None
         self._normal_jacobian = self._nodal_normals = self._star_x = None
         if self._star_table is not None:
             table_rows, stars = self._star_table
             self._star_x = node_x[table_rows]
             self._nodal_normals = stars.normals(self._star_x)
-            slave_normals = self._nodal_normals[self._pair_star_rows]
-        geometry = PairGeometry(slave_x=slave_x, master_x=master_x, slave_normals=slave_normals)
+        geometry = IndexedPairGeometry(node_x, self.slave_nodes, self.master_nodes,
+                                       self._nodal_normals, self._pair_star_rows)
         return self.kernel.evaluate(geometry, options, crosspoint=crosspoint,
                                     slave_facet=self.slave_facets)
 

@@ -96,16 +96,22 @@ def test_group_chunks_equal_one_call():
 
 
 def test_gradient_rows_of_a_subset():
-    """The gradients of some rows of a RowSubsetDual are those of its full gradient (zero
-    for rows it does not keep), without building the full gradient."""
+    """The values and gradients of some rows of a RowSubsetDual are those of its full arrays
+    (zero for rows it does not keep), read from the kept rows."""
     rng = np.random.default_rng(4)
     kept = np.array([1, 4, 5, 6, 9, 12])
-    item = RowSubsetDual(rng.standard_normal((15, 3)), kept, rng.standard_normal((6, 3, 5)))
+    item = RowSubsetDual(rng.standard_normal((6, 3)), kept, rng.standard_normal((6, 3, 5)), 15)
     full = np.zeros((15, 3, 5))
     full[kept] = item.grad_rows
+    full_value = np.zeros((15, 3))
+    full_value[kept] = item.value_rows
+    assert np.array_equal(item.grad, full) and np.array_equal(item.value, full_value)
+    assert item.shape == (15, 3)
     for rows in (kept[1:4], kept[[0, 2, 5]], np.array([0, 4, 7, 12]), np.zeros(0, dtype=int)):
         assert np.array_equal(_gradient_rows(item, rows), full[rows])
-    assert item._full is None
+        assert np.array_equal(item.value_of(rows), full_value[rows])
+    with pytest.raises(ValueError, match="rows of values"):
+        RowSubsetDual(np.zeros((5, 3)), kept, None, 15)
 
 
 def test_matrices_stay_valid_after_a_new_search():

@@ -24,7 +24,7 @@ from test_mortar3d import bent_displacement, two_blocks
 
 from dolfinx_mortar import MortarInterface, deprecation
 from dolfinx_mortar.kernels import KernelOptions, PairGeometry, Surface3Kernel, surface3_compiled
-from dolfinx_mortar.kernels.contract import KERNELS_VARIABLE
+from dolfinx_mortar.kernels.contract import KERNELS_VARIABLE, IndexedPairGeometry
 
 from oracle import surface3_numpy, use_oracle
 
@@ -116,6 +116,41 @@ def test_far_candidates_are_screened_as_the_oracle_screens_them(ns, nm):
     got = Surface3Kernel().evaluate(geometry, KernelOptions())
     np.testing.assert_array_equal(got.rows, expected.rows)
     np.testing.assert_allclose(got.overlap, expected.overlap, rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize(("ns", "nm"), [(3, 3), (4, 4)])
+@pytest.mark.parametrize("integration", ["segment", "element"])
+def test_candidates_in_chunks_from_node_tables(monkeypatch, ns, nm, integration):
+    """The candidates' coordinates gathered from node tables a chunk at a time
+    (IndexedPairGeometry), the kernel run in chunks of 7 pairs: the same bits as one call on
+    the gathered arrays; the values kept are those of the contributing pairs only."""
+    slave, master, nodal, cross = random_facets(300, ns, nm, seed=12)
+    shift = np.random.default_rng(13).uniform(-1.0, 1.0, (300, 1, 3))
+    node_x = np.concatenate([slave.reshape(-1, 3), (master + shift).reshape(-1, 3)])
+    slave_nodes = np.arange(300 * ns).reshape(300, ns)
+    master_nodes = 300 * ns + np.arange(300 * nm).reshape(300, nm)
+    order = np.random.default_rng(14).permutation(300 * ns)  # normals in another table order
+    normals = np.empty_like(nodal.reshape(-1, 3))
+    normals[order] = nodal.reshape(-1, 3)
+    indexed = IndexedPairGeometry(node_x, slave_nodes, master_nodes, normals,
+                                  order[slave_nodes])
+    gathered = PairGeometry(node_x[slave_nodes], node_x[master_nodes], nodal)
+    options = KernelOptions(integration=integration, scalar_gradients=True)
+    whole = Surface3Kernel().evaluate(gathered, options, crosspoint=cross)
+    monkeypatch.setattr(surface3_compiled, "VALUES_CHUNK", 7)
+    monkeypatch.setattr(surface3_compiled, "EVALUATION_CHUNK", 7)
+    chunked = Surface3Kernel().evaluate(indexed, options, crosspoint=cross)
+    assert 20 < whole.rows.size < 280
+    np.testing.assert_array_equal(chunked.rows, whole.rows)
+    np.testing.assert_array_equal(chunked.valid, whole.valid)
+    np.testing.assert_array_equal(chunked.overlap, whole.overlap)
+    for name in ("D_rows", "M_rows"):
+        assert getattr(chunked, name).shape[0] == whole.rows.size
+        np.testing.assert_array_equal(getattr(chunked, name), getattr(whole, name))
+    for a, b in zip(chunked.outputs(), whole.outputs(), strict=True):
+        assert a.value_rows.shape[0] == whole.rows.size and a.shape[0] == 300
+        np.testing.assert_array_equal(a.value_rows, b.value_rows)
+        np.testing.assert_array_equal(a.grad_rows, b.grad_rows)
 
 
 @pytest.mark.parametrize(("ns", "nm"), [(3, 3), (4, 3), (4, 4)])

@@ -117,6 +117,58 @@ class PairGeometry:
     def num_pairs(self) -> int:
         return self.slave_x.shape[0]
 
+    def part(self, index) -> PairGeometry:
+        """The geometry of the pairs ``index`` (a slice or indices)."""
+        def of(array):
+            return None if array is None else array[index]
+
+        return PairGeometry(of(self.slave_x), of(self.master_x), of(self.slave_normals),
+                            of(self.neighbour_x), of(self.has_neighbour))
+
+
+@dataclasses.dataclass(frozen=True)
+class IndexedPairGeometry:
+    """The coordinates of a batch of pairs as rows of node tables (3D): a kernel gathers
+    them a part at a time (:meth:`part`), so that a search's candidates, most of which do
+    not overlap, never have their coordinates copied all at once.
+
+    Attributes:
+        node_x: (num_nodes, gdim) node coordinates.
+        slave_nodes, master_nodes: (n, ns) and (n, nm) rows of ``node_x``.
+        normals: (num_normals, gdim) unit nodal normals; normal_rows: (n, ns) the row of
+            each slave node's in it. None: no normals (:attr:`PairGeometry.slave_normals`).
+    """
+
+    node_x: np.ndarray
+    slave_nodes: np.ndarray
+    master_nodes: np.ndarray
+    normals: np.ndarray | None = None
+    normal_rows: np.ndarray | None = None
+    neighbour_x = None
+    has_neighbour = None
+
+    @property
+    def num_pairs(self) -> int:
+        return self.slave_nodes.shape[0]
+
+    def part(self, index) -> PairGeometry:
+        """The :class:`PairGeometry` of the pairs ``index`` (a slice or indices)."""
+        normals = None if self.normals is None else self.normals[self.normal_rows[index]]
+        return PairGeometry(self.node_x[self.slave_nodes[index]],
+                            self.node_x[self.master_nodes[index]], normals)
+
+    @property
+    def slave_x(self) -> np.ndarray:
+        return self.node_x[self.slave_nodes]
+
+    @property
+    def master_x(self) -> np.ndarray:
+        return self.node_x[self.master_nodes]
+
+    @property
+    def slave_normals(self) -> np.ndarray | None:
+        return None if self.normals is None else self.normals[self.normal_rows]
+
 
 class PairGradients(typing.Protocol):
     """The 2D kernel's gradients of its outputs over the contributing pairs, in the form the
@@ -160,15 +212,17 @@ class GradientsOnDemand(typing.Protocol):
 
 @dataclasses.dataclass
 class PairQuantities:
-    """The mortar contributions of a batch of pairs (arrays lead with the pair axis).
+    """The mortar contributions of a batch of candidate pairs, kept for the pairs that
+    contribute only (``rows``): most candidates of a search do not overlap.
 
     Attributes:
-        D, M: (n, ns, ns) and (n, ns, nm) values.
+        D_rows, M_rows: (r, ns, ns) and (r, ns, nm) values of the r pairs ``rows``.
         Dn, Mn: (n, ns, ns, gdim) and (n, ns, nm, gdim), slave node j, node k or l,
             component.
         gap: (n, ns) weighted gaps; area: (n, ns) int Phi_j over the overlap.
             The four are dual numbers over ``num_variables`` kernel variables, zero
-            outside the pairs that contribute (``rows``), whose gradients alone are kept.
+            outside the pairs that contribute, whose values and gradients alone are kept
+            (:class:`~dolfinx_mortar.dual.RowSubsetDual`).
         valid: (n,) the pair faces and overlaps.
         overlap: (n,) the overlap's length in the slave parameter (2D, 0 to 2) or the
             clipped area over the slave facet's area (3D).
@@ -185,8 +239,8 @@ class PairQuantities:
             the pairs a consumer asks for (:class:`GradientsOnDemand`), a chunk at a time.
     """
 
-    D: np.ndarray
-    M: np.ndarray
+    D_rows: np.ndarray
+    M_rows: np.ndarray
     Dn: RowSubsetDual
     Mn: RowSubsetDual
     gap: RowSubsetDual
@@ -204,6 +258,22 @@ class PairQuantities:
     def rows(self) -> np.ndarray:
         """The pairs outside which every output is zero (sorted)."""
         return self.gap.rows
+
+    @property
+    def D(self) -> np.ndarray:  # noqa: N802
+        """(n, ns, ns) D of every candidate, made on each access (checks; assembly reads
+        ``D_rows``)."""
+        return self._full(self.D_rows)
+
+    @property
+    def M(self) -> np.ndarray:  # noqa: N802
+        """(n, ns, nm) M of every candidate, made on each access."""
+        return self._full(self.M_rows)
+
+    def _full(self, by_rows: np.ndarray) -> np.ndarray:
+        full = np.zeros((self.valid.shape[0],) + by_rows.shape[1:])
+        full[self.rows] = by_rows
+        return full
 
     def outputs(self) -> list[RowSubsetDual]:
         """The outputs with gradients, in the stencils' numbering: Dn, Mn, area, gap, then D

@@ -602,9 +602,9 @@ static void zero_values(long p, double *D, double *M, double *Dn, double *Mn, do
     memset(area + 2 * p, 0, 2 * sizeof(double)); memset(gap + 2 * p, 0, 2 * sizeof(double));
 }
 
-/* line2_integrate with the gradients of each row together: G (num_rows, kept, 12), the
- * outputs in the stencils' numbering (Dn 0-7, Mn 8-15, area 16-17, gap 18-19, D 20-23, with
- * kept 28 also M 24-27). Returns -1 for a bad kept. */
+/* line2_integrate with the values by rows, D (num_rows, 2, 2) ..., and the gradients of each row
+ * together: G (num_rows, kept, 12), the outputs in the stencils' numbering (Dn 0-7, Mn 8-15,
+ * area 16-17, gap 18-19, D 20-23, with kept 28 also M 24-27). Returns -1 for a bad kept. */
 int line2_integrate_rows(long num_rows, const long *rows, const double *slave,
                          const double *master, const double *neighbour,
                          const unsigned char *has_neighbour, const unsigned char *crosspoint,
@@ -622,9 +622,9 @@ int line2_integrate_rows(long num_rows, const long *rows, const double *slave,
         contributes[r] = (unsigned char)integrate(
             x, has_neighbour + 2 * p, crosspoint ? crosspoint + 2 * p : NULL,
             on_master ? on_master + (long)num_points * p : NULL, normals, element, num_points,
-            points, weights, dual_basis, &o, p, r);
+            points, weights, dual_basis, &o, r, r);
         if (!contributes[r]) {
-            zero_values(p, D, M, Dn, Mn, gap, area);
+            zero_values(r, D, M, Dn, Mn, gap, area);
             put_row(&o, r, NULL, NULL);
         }
     }

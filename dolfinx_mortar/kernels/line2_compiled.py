@@ -102,7 +102,7 @@ def evaluate(geometry: PairGeometry, options: KernelOptions, num_gauss_points: i
         integration=options.integration, basis=options.basis,
         num_gauss_points=num_gauss_points, crosspoint=crosspoint, slave_facet=slave_facet)
     n, rows = screening.num_pairs, screening.rows
-    values = {name: np.zeros((n,) + shape) for name, shape in _SHAPES.items()}
+    values = {name: np.empty((rows.size,) + shape) for name, shape in _SHAPES.items()}
     kept = 28 if options.scalar_gradients else 24
     grad = np.empty((rows.size, kept, NUM_VARIABLES))
     contributes = np.ones(rows.size, dtype=np.uint8)
@@ -117,12 +117,12 @@ def evaluate(geometry: PairGeometry, options: KernelOptions, num_gauss_points: i
             raise RuntimeError(f"compiled 2D kernel failed (status {status})")
     valid, overlap = screening.finish(contributes)
     gradients = FullGradients(grad)
-    duals = {name: RowSubsetDual(values[name], rows, gradients.rows_of(name))
+    duals = {name: RowSubsetDual(values[name], rows, gradients.rows_of(name), n)
              for name in ("Dn", "Mn", "area", "gap")}
     if options.scalar_gradients:
-        duals.update({name: RowSubsetDual(values[name], rows, gradients.rows_of(name))
+        duals.update({name: RowSubsetDual(values[name], rows, gradients.rows_of(name), n)
                       for name in ("D", "M")})
     return PairQuantities(
-        D=values["D"], M=values["M"], Dn=duals["Dn"], Mn=duals["Mn"], gap=duals["gap"],
+        D_rows=values["D"], M_rows=values["M"], Dn=duals["Dn"], Mn=duals["Mn"], gap=duals["gap"],
         area=duals["area"], valid=valid, overlap=overlap, num_variables=NUM_VARIABLES,
         D_dual=duals.get("D"), M_dual=duals.get("M"), segment_gradients=gradients)

@@ -34,15 +34,17 @@ DEFAULT_GAUSS_POINTS = 7
 
 def _refuse(geometry: PairGeometry, options: KernelOptions) -> None:
     """Raise the ValueError that says why the kernel does not take these pairs or options."""
-    slave_x, master_x, normals = geometry.slave_x, geometry.master_x, geometry.slave_normals
+    none = geometry.part(slice(0, 0))  # the shapes, nothing gathered
+    slave_x, master_x, normals = none.slave_x, none.master_x, none.slave_normals
     if (slave_x.ndim != 3 or master_x.ndim != 3 or slave_x.shape[2] != 3
             or master_x.shape[2] != 3 or slave_x.shape[1] not in (3, 4)
             or master_x.shape[1] not in (3, 4)
             or (normals is not None and normals.shape != slave_x.shape)):
         raise ValueError("the 3D kernel takes (n, 3 or 4, 3) slave and master facets "
                          "(triangles or quadrilaterals) and slave normals of the slave "
-                         f"facets' shape; got {slave_x.shape}, {master_x.shape} and "
-                         f"{None if normals is None else normals.shape}")
+                         f"facets' shape; got (n, ...) = {slave_x.shape[1:]}, "
+                         f"{master_x.shape[1:]} and "
+                         f"{None if normals is None else normals.shape[1:]}")
     rule = options.num_gauss_points or DEFAULT_GAUSS_POINTS
     if options.integration == "segment":
         raise ValueError(f"3D segments take 1, 3 or 7 Gauss points per cell, got {rule}")

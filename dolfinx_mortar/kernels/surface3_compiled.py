@@ -45,6 +45,9 @@ EVALUATION_CHUNK = 2048
 """Candidate triangle pairs per kernel call at an element-based evaluation (their gradients
 live together); fewer quadrilateral pairs, as many gradient numbers
 (:func:`_pairs_per_call`)."""
+VALUES_CHUNK = 65536
+"""Candidate pairs per kernel call at a segment-based evaluation (values only: ~0.6 kB a
+triangle pair in the buffers, of which the contributing pairs' are kept)."""
 GRADIENT_CHUNK = 2048
 """Triangle pairs whose gradients a consumer gets at once (:attr:`CompiledGradients.chunk`)."""
 KEPT_GRADIENTS_BYTES = 128 * 2**20
@@ -59,13 +62,14 @@ _GRADIENTS = ("Dn_grad", "Mn_grad", "area_grad", "gap_grad", "D_grad", "M_grad")
 def covers(geometry: PairGeometry, options: KernelOptions) -> bool:
     """Whether the compiled kernel integrates these pairs with these options: every 3D pair
     of triangles or quadrilaterals with a Gauss rule the kernel takes."""
-    slave_x, master_x = geometry.slave_x, geometry.master_x
+    none = geometry.part(slice(0, 0))  # the shapes, nothing gathered
+    slave_x, master_x = none.slave_x, none.master_x
     if slave_x.ndim != 3 or master_x.ndim != 3 or slave_x.shape[2] != 3:
         return False
     ns, nm = slave_x.shape[1], master_x.shape[1]
     if ns not in (3, 4) or nm not in (3, 4) or master_x.shape[2] != 3:
         return False
-    if geometry.slave_normals is not None and geometry.slave_normals.shape != slave_x.shape:
+    if none.slave_normals is not None and none.slave_normals.shape != slave_x.shape:
         return False
     rule = options.num_gauss_points or 7
     if options.integration == "element":
@@ -228,12 +232,12 @@ class CompiledGradients:
 
     def __init__(self, rows: np.ndarray, call: _Call, slave_x, master_x, slave_normals,
                  crosspoint, on_master, kept: dict[str, np.ndarray] | None = None):
+        """``slave_x``, ``master_x``, ``slave_normals``: those of the pairs ``rows``;
+        ``crosspoint``, ``on_master``: of every pair (or None)."""
         self.rows = rows
         self.kept = kept
         self.call = call
-        self.slave_x = _contiguous(slave_x[rows])
-        self.master_x = _contiguous(master_x[rows])
-        self.slave_normals = _contiguous(slave_normals[rows])
+        self.slave_x, self.master_x, self.slave_normals = slave_x, master_x, slave_normals
         self.crosspoint = None if crosspoint is None else np.ascontiguousarray(crosspoint[rows])
         self.on_master = None if on_master is None else np.ascontiguousarray(on_master[rows])
         self.chunk = _pairs_per_call(type(self).chunk, call.num_variables)
@@ -331,21 +335,21 @@ class _KeptGradients:
         return {name: np.concatenate(parts) for name, parts in self.parts.items()}
 
 
-def _points_on_master(call: _Call, slave_x, master_x, slave_normals,
+def _points_on_master(call: _Call, n: int, arrays,
                       slave_facet: np.ndarray | None) -> np.ndarray:
     """(n, q) uint8: the Gauss points each pair gets (element-based), from the C kernel's
-    scores of every pair, in chunks."""
-    n, q = slave_x.shape[0], call.points.shape[0]
+    scores of every pair, in chunks (``arrays(index)``: the pairs' coordinates)."""
+    q = call.points.shape[0]
     score = np.empty((n, q))
     module = compiled._get()
     ffi, lib = module.ffi, module.lib
     d = "double *"
     for start in range(0, n, EVALUATION_CHUNK):
         part = slice(start, min(n, start + EVALUATION_CHUNK))
+        coordinates = arrays(part)  # (held here: the pointers do not keep them)
         status = lib.surface3_element_scores(
-            part.stop - start, call.ns, call.nm, *(compiled._pointer(ffi, array[part], d)
-                                                   for array in (slave_x, master_x,
-                                                                 slave_normals)),
+            part.stop - start, call.ns, call.nm, *(compiled._pointer(ffi, array, d)
+                                                   for array in coordinates),
             call.normals, q, compiled._pointer(ffi, call.points, d),
             compiled._pointer(ffi, score[part], d))
         if status != 0:
@@ -354,57 +358,98 @@ def _points_on_master(call: _Call, slave_x, master_x, slave_normals,
     return np.ascontiguousarray(compiled.points_on_master(score, facets), dtype=np.uint8)
 
 
+class _Screened:
+    """What an evaluation keeps of its candidates: every candidate's ``valid`` and
+    ``overlap``, the contributing ones' values (appended a chunk at a time, in the
+    candidates' order)."""
+
+    def __init__(self, n: int, call: _Call):
+        self.valid = np.zeros(n, dtype=np.uint8)
+        self.overlap = np.zeros(n)
+        self.shapes = call.shapes()
+        self._parts: dict[str, list[np.ndarray]] = {name: [] for name in _VALUES}
+
+    def keep(self, out: dict) -> None:
+        contributing = out["valid"].view(bool)
+        for name in _VALUES:
+            self._parts[name].append(out[name][contributing])
+
+    def values(self) -> dict[str, np.ndarray]:
+        return {name: np.concatenate(parts) if parts else np.zeros((0,) + self.shapes[name])
+                for name, parts in self._parts.items()}
+
+
+def _screen_values_only(call: _Call, n: int, arrays, cross) -> _Screened:
+    """Every candidate screened on plain values, a chunk at a time into the same buffers;
+    the contributing pairs' values kept (their gradients are made afterwards, or on
+    demand)."""
+    screened = _Screened(n, call)
+    size = min(VALUES_CHUNK, max(n, 1))
+    buffers = {name: np.empty((size,) + screened.shapes[name]) for name in _VALUES}
+    for start in range(0, n, size):
+        part = slice(start, min(n, start + size))
+        out = {"valid": screened.valid[part], "overlap": screened.overlap[part],
+               **{name: buffer[:part.stop - start] for name, buffer in buffers.items()}}
+        _run(call, *arrays(part), None if cross is None else cross[part], None, out,
+             gradients=())
+        screened.keep(out)
+    return screened
+
+
+def _screen_element_based(call: _Call, n: int, arrays, cross, slave_facet):
+    """The candidates given Gauss points, with their gradients (kept while they fit):
+    (:class:`_Screened`, the Gauss points of each pair, the gradients kept or None)."""
+    screened = _Screened(n, call)
+    on_master = _points_on_master(call, n, arrays, slave_facet)
+    candidates = np.flatnonzero(on_master.any(axis=1))
+    size = _pairs_per_call(EVALUATION_CHUNK, call.num_variables)
+    buffers = _Buffers(min(size, max(candidates.size, 1)), call)
+    keeping = _KeptGradients(call)
+    for start in range(0, candidates.size, buffers.size):
+        part = candidates[start:start + buffers.size]
+        out = buffers.run(*arrays(part), None if cross is None else cross[part], on_master[part])
+        screened.valid[part] = out["valid"]
+        screened.overlap[part] = out["overlap"]
+        screened.keep(out)
+        keeping.add(out)
+    return screened, on_master, keeping.arrays()
+
+
 def evaluate(geometry: PairGeometry, options: KernelOptions,
              crosspoint: np.ndarray | None = None,
              slave_facet: np.ndarray | None = None) -> PairQuantities:
     """The pairs' values by the compiled kernel (:func:`covers` must hold), their gradients
     on demand (``gradients_on_demand``; the outputs' ``grad`` also works, for every
     contributing pair at once). ``slave_facet``: as :meth:`~.contract.MortarKernel.evaluate`
-    (element-based integration)."""
-    slave_x = _contiguous(geometry.slave_x)
-    master_x = _contiguous(geometry.master_x)
-    n, ns = slave_x.shape[:2]
-    nm = master_x.shape[1]
-    slave_normals = (np.zeros_like(slave_x) if geometry.slave_normals is None
-                     else _contiguous(geometry.slave_normals))
+    (element-based integration). The coordinates are gathered a chunk of pairs at a time
+    (:meth:`~.contract.IndexedPairGeometry.part`)."""
+    n = geometry.num_pairs
+    none = geometry.part(slice(0, 0))
+    ns, nm = none.slave_x.shape[1], none.master_x.shape[1]
+
+    def arrays(index) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """slave_x, master_x, slave_normals (zeros if none) of the pairs ``index``,
+        contiguous."""
+        part = geometry.part(index)
+        slave_x = _contiguous(part.slave_x)
+        normals = part.slave_normals
+        return (slave_x, _contiguous(part.master_x),
+                np.zeros_like(slave_x) if normals is None else _contiguous(normals))
+
     call = _Call.of(ns, nm, options)
     cross = None
     if crosspoint is not None:
         cross = np.ascontiguousarray(np.asarray(crosspoint, dtype=bool).reshape(n, ns),
                                      dtype=np.uint8)
-    shapes = call.shapes()
-    values = {name: np.zeros((n,) + shapes[name]) for name in _VALUES}
-    valid = np.zeros(n, dtype=np.uint8)
-    overlap = np.zeros(n)
-    on_master = None
-    kept = None
+    on_master = kept = None
     if call.values_only:
-        # the kernel screens every candidate on plain values and writes the values in place;
-        # the contributing pairs' gradients are made afterwards, or on demand
-        _run(call, slave_x, master_x, slave_normals, cross, None,
-             {"valid": valid, "overlap": overlap, **values}, gradients=())
+        screened = _screen_values_only(call, n, arrays, cross)
     else:
-        on_master = _points_on_master(call, slave_x, master_x, slave_normals, slave_facet)
-        candidates = np.flatnonzero(on_master.any(axis=1))
-        size = _pairs_per_call(EVALUATION_CHUNK, call.num_variables)
-        buffers = _Buffers(min(size, max(candidates.size, 1)), call)
-        keeping = _KeptGradients(call)
-        for start in range(0, candidates.size, buffers.size):
-            part = candidates[start:start + buffers.size]
-            out = buffers.run(slave_x[part], master_x[part], slave_normals[part],
-                              None if cross is None else cross[part],
-                              None if on_master is None else on_master[part])
-            for name in _VALUES:
-                values[name][part] = out[name]
-            valid[part] = out["valid"]
-            overlap[part] = out["overlap"]
-            keeping.add(out)
-        del buffers
-        kept = keeping.arrays()
-    valid = valid.view(bool)
+        screened, on_master, kept = _screen_element_based(call, n, arrays, cross, slave_facet)
+    values = screened.values()
+    valid = screened.valid.view(bool)
     rows = np.flatnonzero(valid)
-    source = CompiledGradients(rows, call, slave_x, master_x, slave_normals, cross, on_master,
-                               kept)
+    source = CompiledGradients(rows, call, *arrays(rows), cross, on_master, kept)
     if call.values_only and rows.size * call.gradient_bytes <= KEPT_GRADIENTS_BYTES:
         source.keep()
     names = ("Dn", "Mn", "area", "gap") + (("D", "M") if options.scalar_gradients else ())
@@ -417,9 +462,10 @@ def evaluate(geometry: PairGeometry, options: KernelOptions,
             return cached[0][index]
         return make
 
-    duals = {name: RowSubsetDual(values[name], rows, all_gradients(i))
+    duals = {name: RowSubsetDual(values[name], rows, all_gradients(i), n)
              for i, name in enumerate(names)}
     return PairQuantities(
-        D=values["D"], M=values["M"], Dn=duals["Dn"], Mn=duals["Mn"], gap=duals["gap"],
-        area=duals["area"], valid=valid, overlap=overlap, num_variables=call.num_variables,
-        D_dual=duals.get("D"), M_dual=duals.get("M"), gradients_on_demand=source)
+        D_rows=values["D"], M_rows=values["M"], Dn=duals["Dn"], Mn=duals["Mn"],
+        gap=duals["gap"], area=duals["area"], valid=valid, overlap=screened.overlap,
+        num_variables=call.num_variables, D_dual=duals.get("D"), M_dual=duals.get("M"),
+        gradients_on_demand=source)

@@ -601,10 +601,10 @@ def _pair_quantities(X, has_neighbour, *, normals, integration, basis, num_gauss
             grads = gradients.outputs(start, stop)
             return grads.reshape((rows.size,) + shape + (NUM_PAIR_VARIABLES,))
 
-        return RowSubsetDual(result[name], rows, grad_rows)
+        return RowSubsetDual.of_full(result[name], rows, grad_rows)
 
     return PairQuantities(
-        D=result["D"], M=result["M"],
+        D_rows=result["D"][rows], M_rows=result["M"][rows],
         Dn=subset_dual("Dn", FactorizedPairGradients.DN, (2, 2, 2)),
         Mn=subset_dual("Mn", FactorizedPairGradients.MN, (2, 2, 2)),
         gap=subset_dual("gap", FactorizedPairGradients.GAP, (2,)),

@@ -424,12 +424,13 @@ def pair_quantities(
 
     def subset(name: str) -> RowSubsetDual:
         if factors is not None and name in ("Dn", "Mn", "area"):
-            return RowSubsetDual(values[name], rows, lambda: factors.expanded(name))
-        return RowSubsetDual(values[name], rows, grads[name])
+            return RowSubsetDual.of_full(values[name], rows,
+                                         lambda: factors.expanded(name))
+        return RowSubsetDual.of_full(values[name], rows, grads[name])
 
     return PairQuantities(
-        D=values["D"], M=values["M"], Dn=subset("Dn"), Mn=subset("Mn"), gap=subset("gap"),
-        area=subset("area"), valid=valid, overlap=overlap, num_variables=nvar,
+        D_rows=values["D"][rows], M_rows=values["M"][rows], Dn=subset("Dn"), Mn=subset("Mn"),
+        gap=subset("gap"), area=subset("area"), valid=valid, overlap=overlap, num_variables=nvar,
         D_dual=subset("D") if scalar_gradients else None,
         M_dual=subset("M") if scalar_gradients else None)
 
