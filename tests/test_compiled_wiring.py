@@ -120,23 +120,39 @@ def test_far_candidates_are_screened_as_the_oracle_screens_them(ns, nm):
 
 @pytest.mark.parametrize(("ns", "nm"), [(3, 3), (4, 4)])
 @pytest.mark.parametrize("integration", ["segment", "element"])
-def test_candidates_in_chunks_from_node_tables(monkeypatch, ns, nm, integration):
+@pytest.mark.parametrize("indices", ["int32 views", "int64"])
+def test_candidates_in_chunks_from_node_tables(monkeypatch, ns, nm, integration, indices):
     """The candidates' coordinates gathered from node tables a chunk at a time
-    (IndexedPairGeometry), the kernel run in chunks of 7 pairs: the same bits as one call on
-    the gathered arrays; the values kept are those of the contributing pairs only."""
+    (IndexedPairGeometry; by C from int32 column views of one table, as the stencils hold
+    them, by numpy from int64 arrays), the kernel run in chunks of 7 pairs: the same bits as
+    one call on the gathered arrays; the values kept are those of the contributing pairs
+    only."""
     slave, master, nodal, cross = random_facets(300, ns, nm, seed=12)
     shift = np.random.default_rng(13).uniform(-1.0, 1.0, (300, 1, 3))
     node_x = np.concatenate([slave.reshape(-1, 3), (master + shift).reshape(-1, 3)])
-    slave_nodes = np.arange(300 * ns).reshape(300, ns)
-    master_nodes = 300 * ns + np.arange(300 * nm).reshape(300, nm)
     order = np.random.default_rng(14).permutation(300 * ns)  # normals in another table order
     normals = np.empty_like(nodal.reshape(-1, 3))
     normals[order] = nodal.reshape(-1, 3)
-    indexed = IndexedPairGeometry(node_x, slave_nodes, master_nodes, normals,
-                                  order[slave_nodes])
-    gathered = PairGeometry(node_x[slave_nodes], node_x[master_nodes], nodal)
+    table = np.column_stack([np.arange(300 * ns).reshape(300, ns),
+                             300 * ns + np.arange(300 * nm).reshape(300, nm),
+                             order[np.arange(300 * ns).reshape(300, ns)], np.zeros(300)])
+    table = table.astype(np.int32 if indices == "int32 views" else np.int64)
+    if indices == "int64":
+        table = np.ascontiguousarray(table)
+    slave_nodes, master_nodes = table[:, :ns], table[:, ns:ns + nm]
+    normal_rows = table[:, ns + nm:2 * ns + nm]
+    indexed = IndexedPairGeometry(node_x, slave_nodes, master_nodes, normals, normal_rows)
+    gathered = surface3_compiled._gathered(indexed, slice(0, 300))
+    assert (gathered is None) == (indices == "int64")
+    if gathered is not None:
+        for a, b in zip(gathered, (slave, master + shift, nodal), strict=True):
+            np.testing.assert_array_equal(a, b)
+        with pytest.raises(IndexError, match="outside its node table"):
+            surface3_compiled._gathered(dataclasses.replace(indexed, node_x=node_x[:10]),
+                                        slice(0, 5))
     options = KernelOptions(integration=integration, scalar_gradients=True)
-    whole = Surface3Kernel().evaluate(gathered, options, crosspoint=cross)
+    whole = Surface3Kernel().evaluate(PairGeometry(slave, master + shift, nodal), options,
+                                      crosspoint=cross)
     monkeypatch.setattr(surface3_compiled, "VALUES_CHUNK", 7)
     monkeypatch.setattr(surface3_compiled, "EVALUATION_CHUNK", 7)
     chunked = Surface3Kernel().evaluate(indexed, options, crosspoint=cross)

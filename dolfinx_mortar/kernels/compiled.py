@@ -103,6 +103,8 @@ int gradients_combine(long num_rows, int nv, int size, const double *grad, int n
                       const int *weight_step, const double *weights, double *out);
 void stencil_columns(long num_rows, long row_stride, int num_terms, int nv, int direct, int ns,
                      int width3, const double *kernel, const double *J, double *out);
+int gather_rows(long num_rows, int k, const double *table, long table_rows, const int *index,
+                long index_stride, double *out);
 """,
     "line2": """
 void line2_screen(long n, const double *slave, const double *master, const double *neighbour,

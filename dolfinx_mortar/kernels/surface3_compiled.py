@@ -39,7 +39,7 @@ import numpy as np
 
 from ..dual import RowSubsetDual
 from . import compiled
-from .contract import KernelOptions, PairGeometry, PairQuantities
+from .contract import IndexedPairGeometry, KernelOptions, PairGeometry, PairQuantities
 
 EVALUATION_CHUNK = 2048
 """Candidate triangle pairs per kernel call at an element-based evaluation (their gradients
@@ -358,6 +358,36 @@ def _points_on_master(call: _Call, n: int, arrays,
     return np.ascontiguousarray(compiled.points_on_master(score, facets), dtype=np.uint8)
 
 
+def _gathered(geometry: IndexedPairGeometry, part: slice):
+    """slave_x, master_x and slave_normals (zeros if none) of the pairs ``part`` gathered by
+    C from the node tables (as :meth:`~.contract.IndexedPairGeometry.part`, without numpy's
+    fancy indexing); None for tables C does not read (not float64 rows of 3, indices not
+    int32 with contiguous columns)."""
+    ffi, lib = (module := compiled._get()).ffi, module.lib
+    tables = [(geometry.node_x, geometry.slave_nodes), (geometry.node_x, geometry.master_nodes)]
+    if geometry.normals is not None:
+        tables.append((geometry.normals, geometry.normal_rows))
+    result = []
+    for table, index in tables:
+        index = index[part]
+        if (table.dtype != np.float64 or table.ndim != 2 or table.shape[1] != 3
+                or not table.flags.c_contiguous or index.dtype != np.int32 or index.ndim != 2
+                or index.strides[1] != 4 or index.strides[0] % 4):
+            return None
+        out = np.empty(index.shape + (3,))
+        if index.shape[0]:
+            status = lib.gather_rows(
+                index.shape[0], index.shape[1], compiled._pointer(ffi, table, "double *"),
+                table.shape[0], ffi.cast("int *", index.ctypes.data), index.strides[0] // 4,
+                compiled._pointer(ffi, out, "double *"))
+            if status != 0:
+                raise IndexError("a pair's node index outside its node table")
+        result.append(out)
+    if geometry.normals is None:
+        result.append(np.zeros_like(result[0]))
+    return tuple(result)
+
+
 class _Screened:
     """What an evaluation keeps of its candidates: every candidate's ``valid`` and
     ``overlap``, the contributing ones' values (appended a chunk at a time, in the
@@ -430,6 +460,10 @@ def evaluate(geometry: PairGeometry, options: KernelOptions,
     def arrays(index) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """slave_x, master_x, slave_normals (zeros if none) of the pairs ``index``,
         contiguous."""
+        if isinstance(geometry, IndexedPairGeometry) and isinstance(index, slice):
+            gathered = _gathered(geometry, index)
+            if gathered is not None:
+                return gathered
         part = geometry.part(index)
         slave_x = _contiguous(part.slave_x)
         normals = part.slave_normals

@@ -1,5 +1,22 @@
-/* The stencils' passes over the gradients a consumer asks for (stencils.py), included at the
- * end of surface3.c: plain C over the kernel's output layout, no dual numbers. */
+/* The plain passes around the kernel, included at the end of surface3.c, no dual numbers: the
+ * pairs' coordinates gathered from the node tables, and the stencils' passes over the
+ * gradients a consumer asks for (stencils.py). */
+
+/* out (num_rows, k, 3) = table[index[r * index_stride + j]] (the rows of a node table named by
+ * k indices a pair, int32). Returns -1 for an index outside the table's table_rows rows. */
+int gather_rows(long num_rows, int k, const double *table, long table_rows, const int *index,
+                long index_stride, double *out) {
+    for (long r = 0; r < num_rows; ++r)
+        for (int j = 0; j < k; ++j) {
+            const long i = index[r * index_stride + j];
+            if (i < 0 || i >= table_rows) return -1;
+            double *o = out + 3 * (r * k + j);
+            const double *t = table + 3 * i;
+            o[0] = t[0]; o[1] = t[1]; o[2] = t[2];
+        }
+    return 0;
+}
+
 /* ======================================================================================
  * The consumers' linear combinations of output gradients (stencils.PairStencil._row_gradients):
  * out (num_terms, num_rows, nv) += weight_e[r] * grad[r, index[e], :] for each entry e into
