@@ -580,21 +580,23 @@ static int pair(long p, const double *xs, const double *xm, const double *nn, in
     }
     /* the integrals: values, what multiplies each cell area and each point value */
     double I[NI], coefW[NI][MAXV], coef[NI][3][MAXV + 1];
-    memset(I, 0, sizeof I); memset(coef, 0, sizeof coef);
+    memset(I, 0, sizeof I);
+    if (grads) memset(coef, 0, sizeof coef);
     for (int c = 0; c < V; ++c) {
         int corner[3] = {0, 1 + c, 1 + (c + 1) % V};
-        double f[6][3], sigma[NPAIRS][3];
+        double f[6][3], Tf[6][3][3], sigma[NPAIRS][3];
         for (int u = 0; u < 6; ++u)
             for (int r = 0; r < 3; ++r) f[u][r] = F[u][corner[r]];
+        /* sigma_uv[r] = f_u . T_r f_v, T_r f_v once per v */
+        for (int v = 0; v < 6; ++v)
+            for (int r = 0; r < 3; ++r)
+                for (int q = 0; q < 3; ++q)
+                    Tf[v][r][q] = (T[r][q][0] * f[v][0] + T[r][q][1] * f[v][1]) + T[r][q][2] * f[v][2];
         for (int u = 0; u < 3; ++u)
             for (int v = u; v < 6; ++v) {
                 int s = tb->pair_index[u][v];
-                for (int r = 0; r < 3; ++r) {
-                    double total = 0.0;
-                    for (int q = 0; q < 3; ++q)
-                        for (int t = 0; t < 3; ++t) total += T[r][q][t] * f[u][q] * f[v][t];
-                    sigma[s][r] = total;
-                }
+                for (int r = 0; r < 3; ++r)
+                    sigma[s][r] = (f[u][0] * Tf[v][r][0] + f[u][1] * Tf[v][r][1]) + f[u][2] * Tf[v][r][2];
             }
         double wc = W[c].v;
         for (int o = 0; o < NI; ++o) {
