@@ -389,13 +389,17 @@ class Surface3Stencil(PairStencil):
         max_star = star.shape[1]
         # (int32: a pair has ~30 stencil slots, kept from one search to the next)
         index_type = np.int32 if node_blocks.size < 2**31 else np.int64
-        pair_star_rows = np.searchsorted(blocks, node_blocks[slave]).astype(index_type)
-        # per unique slave node its star as node-table rows (-1 pad), then per pair
+        # per local slave facet, then per pair: each slave node's row in the unique table,
+        # and its star as node-table rows (-1 pad)
+        facet_star_rows = np.searchsorted(
+            blocks, node_blocks[local_slave_facets]).astype(index_type)
         star_table = np.where(star >= 0, table_rows[np.maximum(star, 0)], -1).astype(index_type)
+        facet_stars = star_table[facet_star_rows].reshape(facet_star_rows.shape[0], ns * max_star)
+        pair_star_rows = facet_star_rows[facet]
         n = slave.shape[0]
         nodes = np.empty((n, ns + nm + ns * max_star), dtype=index_type)
         nodes[:, :ns], nodes[:, ns:ns + nm] = slave, master
-        nodes[:, ns + nm:] = star_table[pair_star_rows].reshape(n, ns * max_star)
+        nodes[:, ns + nm:] = facet_stars[facet]
         present = nodes >= 0
         np.maximum(nodes, 0, out=nodes)  # absent slots: node 0, never read
         return cls(nodes, present, facet, ns, nm, max_star, (table_rows, stars), pair_star_rows)

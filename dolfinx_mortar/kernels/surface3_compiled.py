@@ -400,9 +400,9 @@ class _Screened:
         self._parts: dict[str, list[np.ndarray]] = {name: [] for name in _VALUES}
 
     def keep(self, out: dict) -> None:
-        contributing = out["valid"].view(bool)
+        contributing = np.flatnonzero(out["valid"])
         for name in _VALUES:
-            self._parts[name].append(out[name][contributing])
+            self._parts[name].append(np.take(out[name], contributing, axis=0))
 
     def values(self) -> dict[str, np.ndarray]:
         return {name: np.concatenate(parts) if parts else np.zeros((0,) + self.shapes[name])
