@@ -393,7 +393,12 @@ class Surface3Stencil(PairStencil):
         # and its star as node-table rows (-1 pad)
         facet_star_rows = np.searchsorted(
             blocks, node_blocks[local_slave_facets]).astype(index_type)
+        # a local facet in no pair may have nodes outside the table (self-contact's master
+        # side): clipped, never read
+        np.minimum(facet_star_rows, max(blocks.size - 1, 0), out=facet_star_rows)
         star_table = np.where(star >= 0, table_rows[np.maximum(star, 0)], -1).astype(index_type)
+        if blocks.size == 0:  # no slave node here: no pair either
+            star_table = np.full((1, max_star), -1, dtype=index_type)
         facet_stars = star_table[facet_star_rows].reshape(facet_star_rows.shape[0], ns * max_star)
         pair_star_rows = facet_star_rows[facet]
         n = slave.shape[0]
