@@ -358,8 +358,9 @@ def _points_on_master(call: _Call, n: int, arrays,
     return np.ascontiguousarray(compiled.points_on_master(score, facets), dtype=np.uint8)
 
 
-def _gathered(geometry: IndexedPairGeometry, part: slice):
-    """slave_x, master_x and slave_normals (zeros if none) of the pairs ``part`` gathered by
+def _gathered(geometry: IndexedPairGeometry, part):
+    """slave_x, master_x and slave_normals (zeros if none) of the pairs ``part`` (a slice or
+    indices) gathered by
     C from the node tables (as :meth:`~.contract.IndexedPairGeometry.part`, without numpy's
     fancy indexing); None for tables C does not read (not float64 rows of 3, indices not
     int32 with contiguous columns)."""
@@ -460,7 +461,7 @@ def evaluate(geometry: PairGeometry, options: KernelOptions,
     def arrays(index) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """slave_x, master_x, slave_normals (zeros if none) of the pairs ``index``,
         contiguous."""
-        if isinstance(geometry, IndexedPairGeometry) and isinstance(index, slice):
+        if isinstance(geometry, IndexedPairGeometry):
             gathered = _gathered(geometry, index)
             if gathered is not None:
                 return gathered
