@@ -114,16 +114,27 @@ class RowSubsetDual:
     (:meth:`value_of`).
     """
 
-    __slots__ = ("rows", "value_rows", "num_pairs", "_grad_rows")
+    __slots__ = ("rows", "value_rows", "num_pairs", "_grad_rows", "constant")
 
     def __init__(self, value_rows, rows, grad_rows, num_pairs: int):
         self.value_rows = np.asarray(value_rows, dtype=np.float64)
         self.rows = np.asarray(rows)
         self.num_pairs = int(num_pairs)
         self._grad_rows = grad_rows
+        self.constant = False
+        """Whether the gradients are zero (:meth:`of_constant`): consumers skip them."""
         if self.value_rows.shape[0] != self.rows.size:
             raise ValueError(f"{self.value_rows.shape[0]} rows of values for "
                              f"{self.rows.size} rows")
+
+    @classmethod
+    def of_constant(cls, value_rows, rows, num_variables: int, num_pairs: int) -> RowSubsetDual:
+        """Values that do not depend on the variables: zero gradients, none stored."""
+        value_rows = np.asarray(value_rows, dtype=np.float64)
+        result = cls(value_rows, rows, np.broadcast_to(0.0, value_rows.shape + (num_variables,)),
+                     num_pairs)
+        result.constant = True
+        return result
 
     @classmethod
     def of_full(cls, value, rows, grad_rows) -> RowSubsetDual:

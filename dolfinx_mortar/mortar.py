@@ -429,8 +429,7 @@ class MortarInterface:
         grad[:, :, stencil.master_variables] = Mn.reshape(-1, ns, stencil.nm * self.gdim)
 
         def constant(value_rows: np.ndarray) -> RowSubsetDual:
-            shape = value_rows.shape + (nv,)
-            return RowSubsetDual(value_rows, rows, np.broadcast_to(0.0, shape), n)
+            return RowSubsetDual.of_constant(value_rows, rows, nv, n)
 
         frozen_scalars = {}
         if reference.D_dual is not None:

@@ -264,6 +264,8 @@ class PairStencil:
                 if o >= end:
                     raise ValueError(f"output {o} was not kept by the kernel")
                 part = int(np.searchsorted(starts, o, side="right")) - 1
+                if outputs[part].constant:
+                    continue  # (zero gradients: the reference configuration's integrals)
                 entries.setdefault(part, []).append((p, o - int(starts[part]), weight))
         made = None  # the kernel's gradients of rows, made again
         if q.gradients_on_demand is not None and entries:

@@ -179,3 +179,34 @@ def test_crosspoints(cell, basis, sides):
     edges = corners[:, 1:] - corners[:, :1]
     lost_area = 0.5 * np.linalg.norm(np.cross(edges[:, :-1], edges[:, 1:]), axis=2).sum()
     assert abs(total_D - (1.0 - lost_area)) < 1e-12
+
+
+@pytest.mark.parametrize("basis", BASES)
+def test_reference_configuration_combines_only_the_gap_gradients(basis, monkeypatch):
+    """Reference configuration: D, M, Dn, Mn and the areas are frozen (zero gradients), so
+    their terms add nothing to a Jacobian and the kernel's gradients are never combined for
+    them; the gap's gradient is B: -Dn on the slave nodes, +Mn on the master nodes."""
+    from dolfinx_mortar import stencils
+
+    mortar = interface(penetrating_cubes("tetrahedron", 3, 4), basis=basis,
+                       configuration="reference")
+    rows = mortar.contributing_pairs()
+    q, stencil = mortar.quantities, mortar.stencil
+    assert q.Dn.constant and q.Mn.constant and q.area.constant and not q.gap.constant
+    combined = []
+    original = stencils._add_combined
+    monkeypatch.setattr(stencils, "_add_combined",
+                        lambda result, grad, entries: combined.append(grad.shape[1])
+                        or original(result, grad, entries))
+    z = np.linspace(1.0, 2.0, rows.size)
+    force = mortar.combined_gradients(rows, mortar.force_jacobian_terms(
+        np.repeat(z[:, None], stencil.ns, axis=1)))
+    assert combined == [] and not force.any()
+    gap = mortar.combined_gradients(rows, [[(stencil.GAP + j, 1.0)] for j in range(stencil.ns)])
+    assert len(combined) == 1
+    Dn, Mn = q.Dn.value_of(rows), q.Mn.value_of(rows)  # (rows, j, k, c)
+    slave = gap[:, :3 * stencil.ns].reshape(stencil.ns, stencil.ns, 3, rows.size)
+    master = gap[:, 3 * stencil.ns:3 * (stencil.ns + stencil.nm)].reshape(
+        stencil.ns, stencil.nm, 3, rows.size)
+    assert np.array_equal(slave, -Dn.transpose(1, 2, 3, 0))
+    assert np.array_equal(master, Mn.transpose(1, 2, 3, 0))
