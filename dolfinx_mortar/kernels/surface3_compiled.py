@@ -242,9 +242,15 @@ class CompiledGradients:
         self.on_master = None if on_master is None else np.ascontiguousarray(on_master[rows])
         self.chunk = _pairs_per_call(type(self).chunk, call.num_variables)
         self._buffers: _Buffers | None = None
+        self._keep_when_asked = False
 
-    def keep(self) -> None:
-        """Make the gradients of every contributing pair now and keep them."""
+    def keep(self, now: bool = True) -> None:
+        """Make the gradients of every contributing pair and keep them: now, or (``now``
+        False) when they are first asked for (the reference configuration never asks:
+        its integrals are frozen)."""
+        self._keep_when_asked = not now
+        if not now:
+            return
         names = self._names()
         made = self._made(self.rows, names)  # (views of the kernel's buffers if one chunk)
         self.kept = {name: grad if grad.base is None else grad.copy()
@@ -278,6 +284,8 @@ class CompiledGradients:
     def _made(self, rows: np.ndarray, names: tuple[str, ...]) -> list[np.ndarray | None]:
         """The gradients ``names`` of ``rows`` in the order of :meth:`_names` (None for the
         others): copied from the kept ones, or made by the kernel."""
+        if self._keep_when_asked:
+            self.keep()
         rows = np.asarray(rows)
         kept = self.rows
         position = np.minimum(np.searchsorted(kept, rows), max(kept.size - 1, 0))
@@ -486,7 +494,7 @@ def evaluate(geometry: PairGeometry, options: KernelOptions,
     rows = np.flatnonzero(valid)
     source = CompiledGradients(rows, call, *arrays(rows), cross, on_master, kept)
     if call.values_only and rows.size * call.gradient_bytes <= KEPT_GRADIENTS_BYTES:
-        source.keep()
+        source.keep(now=False)
     names = ("Dn", "Mn", "area", "gap") + (("D", "M") if options.scalar_gradients else ())
     cached: list = []
 
