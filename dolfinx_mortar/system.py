@@ -306,7 +306,13 @@ class ContactSystem:
         forces, columns = (ns + nm) * gdim, stencil.width * gdim
         values = np.zeros((forces + num_multipliers, columns + num_multipliers,
                            contributing.size))
-        values[:, :columns] = interface.combined_gradients(contributing, terms)
+        weighted = _weighted_rows(terms, contributing.size)
+        if weighted.size == contributing.size:
+            values[:, :columns] = interface.combined_gradients(contributing, terms)
+        elif weighted.size:
+            values[:, :columns, weighted] = interface.combined_gradients(
+                contributing[weighted], [[(o, w if np.ndim(w) == 0 else w[weighted])
+                                          for o, w in row] for row in terms])
         coefficients = interface.force_coefficients(contributing)  # (m, j, k, c)
         values[:forces, columns:columns + ns] = -coefficients.reshape(
             contributing.size, ns, forces).transpose(2, 1, 0)
@@ -332,6 +338,22 @@ class ContactSystem:
             for vector in vectors.values():
                 vector.destroy()
         self._coefficient_vectors = []
+
+
+def _weighted_rows(terms, n: int) -> np.ndarray:
+    """The rows (of ``n``) where some term has a nonzero weight. The combined gradients of
+    the others are zero (they are linear in the weights): the pairs whose slave nodes are
+    all inactive, with zero multipliers and zero gap and area coefficients, whose kernel
+    gradients are then never made."""
+    weighted = np.zeros(n, dtype=bool)
+    for row in terms:
+        for _, weight in row:
+            if np.ndim(weight) == 0:
+                if weight != 0.0:
+                    return np.arange(n)
+            else:
+                weighted |= np.asarray(weight) != 0.0
+    return np.flatnonzero(weighted)
 
 
 def _slip_coefficients(conditions, m: int) -> dict[str, np.ndarray]:

@@ -276,6 +276,40 @@ def test_contact_jacobian_taylor(normals, method):
     problem.destroy()
 
 
+@pytest.mark.parametrize("multipliers", ["dual", "standard"])
+def test_contact_blocks_skip_the_pairs_without_weight(monkeypatch, multipliers):
+    """Pairs whose slave nodes are all inactive (zero multipliers, zero gap and area
+    coefficients) add nothing through their gradients: the system makes none for them
+    (``system._weighted_rows``), and the matrix equals the one made with every
+    contributing pair's gradients (curved punch, Neo-Hookean, a contact zone smaller than
+    the paired surface)."""
+    from petsc4py import PETSc
+
+    from dolfinx_mortar import system
+
+    problem, apply_load = curved_punch(MPI.COMM_SELF, cell="tetrahedron", ratio=(4, 3),
+                                       material="neo-hookean", basis=multipliers)
+    solve_load_steps(problem, apply_load, 1)
+    fractions = []
+    weighted_rows = system._weighted_rows
+
+    def recorded(terms, n):
+        rows = weighted_rows(terms, n)
+        fractions.append(rows.size / n)
+        return rows
+
+    monkeypatch.setattr(system, "_weighted_rows", recorded)
+    skipping = problem.equations.assemble_system().copy()
+    assert 0.0 < fractions[0] < 1.0, fractions
+    monkeypatch.setattr(system, "_weighted_rows", lambda terms, n: np.arange(n))
+    every = problem.equations.assemble_system()
+    scale = every.norm(PETSc.NormType.INFINITY)
+    skipping.axpy(-1.0, every)
+    assert skipping.norm(PETSc.NormType.INFINITY) <= 1e-14 * scale
+    skipping.destroy()
+    problem.destroy()
+
+
 def penetrating_punch(curvature: float, **options) -> ContactProblem:
     """curved_punch (tetrahedra 4:3, Neo-Hookean, current configuration) with the punch
     moved 0.04 into the foundation and sheared by 0.01 sin / cos waves plus 1e-3 noise,
