@@ -587,7 +587,7 @@ class Friction:
         for k, interface in enumerate(self.interfaces):
             rows = interface.contributing_pairs()
             force = self.tangents(k, rows).force(self.pair_multipliers(k, rows))
-            vector.setValues(interface.pair_force_dofs[rows].reshape(-1).astype(PETSc.IntType),
+            vector.setValues(interface.pair_force_dofs_of(rows).reshape(-1).astype(PETSc.IntType),
                              force.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
             vector.assemble()
 

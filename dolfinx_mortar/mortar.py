@@ -782,6 +782,16 @@ class MortarInterface:
         return self.pair_dofs.reshape(-1, stencil.width, self.gdim)[:, slots, :].reshape(
             stencil.num_pairs, slots.size * self.gdim)
 
+    def pair_force_dofs_of(self, rows: np.ndarray) -> np.ndarray:
+        """(rows, (ns + nm) * gdim) the rows of :attr:`pair_force_dofs` of the pairs
+        ``rows``, made from their facet nodes (a residual needs the contributing pairs'
+        only)."""
+        stencil = self.stencil
+        slots = np.concatenate([stencil.slave_slots, stencil.master_slots])
+        blocks = self._node_blocks[stencil.nodes[rows][:, slots]]
+        dofs = blocks[:, :, None] * self.block_size + np.arange(self.gdim)
+        return dofs.reshape(np.size(rows), slots.size * self.gdim)
+
     def force_coefficients(self, rows: np.ndarray) -> np.ndarray:
         """(rows, j, ns + nm nodes, gdim): B's entries of the pairs ``rows``, -Dn on the slave
         nodes and +Mn on the master nodes (the contact force is -B^T z)."""
@@ -893,7 +903,7 @@ class MortarInterface:
         rows = self.contributing_pairs()
         z_pair = self.node_values(z)[self.pair_slave_nodes[rows]]
         force = -np.einsum("nj,njkc->nkc", z_pair, self.force_coefficients(rows))
-        vector.setValues(self.pair_force_dofs[rows].reshape(-1).astype(PETSc.IntType),
+        vector.setValues(self.pair_force_dofs_of(rows).reshape(-1).astype(PETSc.IntType),
                          force.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES)
         vector.assemble()
         return vector

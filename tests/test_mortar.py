@@ -249,3 +249,15 @@ def test_bad_input():
     V_prism = dolfinx.fem.functionspace(prisms, ("Lagrange", 1, (3,)))
     with pytest.raises(SurfaceError, match="prisms"):
         MortarInterface(V_prism, tags3, 1, 2)
+
+
+def test_force_dofs_of_rows_are_those_of_the_pattern():
+    """2D: the residual's force dofs of some pairs are the rows of :attr:`pair_force_dofs`."""
+    tagged = meshes.tied_blocks(ratio=(2, 5), refinement=1)
+    V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (2,)))
+    mortar = MortarInterface(V, tagged.facet_tags, tagged.markers["contact_slave"],
+                             tagged.markers["contact_master"])
+    mortar.update(dolfinx.fem.Function(V))
+    rows = mortar.contributing_pairs()[1::2]
+    assert rows.size > 2
+    np.testing.assert_array_equal(mortar.pair_force_dofs_of(rows), mortar.pair_force_dofs[rows])

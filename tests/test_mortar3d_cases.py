@@ -210,3 +210,15 @@ def test_reference_configuration_combines_only_the_gap_gradients(basis, monkeypa
         stencil.ns, stencil.nm, 3, rows.size)
     assert np.array_equal(slave, -Dn.transpose(1, 2, 3, 0))
     assert np.array_equal(master, Mn.transpose(1, 2, 3, 0))
+
+
+@pytest.mark.parametrize("basis", BASES)
+def test_force_dofs_of_rows_are_those_of_the_pattern(basis):
+    """The residual's force dofs of some pairs (made from their facet nodes) are the rows
+    of the pattern's :attr:`pair_force_dofs` (made from the whole stencil's dofs)."""
+    mortar = interface(penetrating_cubes("tetrahedron", 3, 4), basis=basis)
+    rows = mortar.contributing_pairs()[::2]
+    assert rows.size > 4
+    expected = mortar.pair_force_dofs[rows]
+    assert (expected >= 0).all()
+    np.testing.assert_array_equal(mortar.pair_force_dofs_of(rows), expected)
