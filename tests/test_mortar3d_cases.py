@@ -222,24 +222,3 @@ def test_force_dofs_of_rows_are_those_of_the_pattern(basis):
     expected = mortar.pair_force_dofs[rows]
     assert (expected >= 0).all()
     np.testing.assert_array_equal(mortar.pair_force_dofs_of(rows), expected)
-
-
-@pytest.mark.parametrize("cell", CELLS)
-def test_flat_surfaces_are_paired_within_one_margin(cell):
-    """Two parallel flat surfaces ``gap`` apart (no sweep: the first search): each 3D box
-    grows by half the margin, so they are paired (and every slave node covered, its
-    nodal gap the distance) when the gap is below the margin and not at all above it."""
-    from test_mortar3d import two_blocks
-
-    margin = 0.05
-    for gap, paired in ((0.9 * margin, True), (1.1 * margin, False)):
-        mortar = interface(two_blocks(cell, 3, 4, comm=MPI.COMM_SELF, gap=gap),
-                           search_margin=margin)
-        assert mortar.search_growth == 0.5 * margin
-        assert (mortar.statistics.pairs > 0) == paired
-        if paired:
-            D, _ = mortar.mortar_matrices()
-            area = row_sums(D)
-            gap_j = mortar.weighted_gap().getArray() / area
-            assert abs(area.sum() - 1.0) < 1e-13
-            assert np.abs(gap_j - gap).max() < 1e-13
