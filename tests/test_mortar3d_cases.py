@@ -66,7 +66,7 @@ def test_penetrating_cubes(cell, basis):
     over the master has (D 1)_j = int N_j, its whole nodal area."""
     tagged = penetrating_cubes(cell, 3, 4)
     mortar = interface(tagged, basis=basis)
-    assert 2 * mortar.search_growth >= DEPTH  # the boxes grown by the default reach across
+    assert 2 * mortar.reuse.margin >= DEPTH  # the default margin reaches across
     D, M = mortar.mortar_matrices()
     assert abs(csr_to_coo(D)[2].sum() - OVERLAP) < 1e-13
     assert abs(csr_to_coo(M)[2].sum() - OVERLAP) < 1e-13
@@ -88,14 +88,13 @@ def test_penetrating_cubes(cell, basis):
 
 
 @pytest.mark.parametrize("cell", CELLS)
-def test_penetration_deeper_than_the_boxes_growth(cell):
-    """The same cubes with 12 slave cells across: the boxes' growth (half the default
-    margin, a quarter of the mean slave edge) is below DEPTH / 2, so boxes grown by it
-    alone do not overlap before any displacement (no sweep); the boxes' reach behind each
-    facet pairs them."""
+def test_penetration_deeper_than_twice_the_default_margin(cell):
+    """The same cubes with 12 slave cells across: the default margin (half the mean slave
+    edge) is below DEPTH / 2, so boxes grown by it alone do not overlap before any
+    displacement (no sweep); the boxes' reach behind each facet pairs them."""
     tagged = penetrating_cubes(cell, 12, 12)
     mortar = interface(tagged)
-    assert 2 * mortar.search_growth < DEPTH
+    assert 2 * mortar.reuse.margin < DEPTH
     D, _ = mortar.mortar_matrices()
     total = csr_to_coo(D)[2].sum()
     assert abs(total - OVERLAP) < 1e-13
