@@ -88,12 +88,16 @@ from petsc4py import PETSc
 
 from . import diagnostics
 
-ELIMINATION_RATIO = 0.1
+ELIMINATION_RATIO = 0.03
 """With friction, a rotated multiplier whose singular value sigma is at least this
 fraction of its node's largest is eliminated through it; below, it is condensed (module
-docstring). At a 3D node at its slip bound the tangential direction across the slip has
-sigma/max = (1 - r)/sqrt(1 + mu^2), r = b/|v|: eliminating it would add a penalty of
-about r/(1 - r) c_t, at most 9 c_t here."""
+docstring). Elimination is exact; the condensation of a tangential direction is not (its
+frame is G's columns at the node only), so the fewer condensed, the fewer outer
+iterations. But at a 3D node at its slip bound the tangential direction across the slip
+has sigma/max = (1 - r)/sqrt(1 + mu^2), r = b/|v|: eliminating it adds a penalty of
+about r/(1 - r) c_t to K_c, at most about 30 c_t here; eliminating every nonzero sigma
+made the linear solves fail, even with an exact inner solve (docs/benchmarks.md, "The
+elimination ratio of the frictional condensation")."""
 
 
 class CondensedPreconditioner:
@@ -120,13 +124,19 @@ class CondensedPreconditioner:
             and the inner solver's matrix) and frees the rest as soon as it is used: the
             products (of the rows near the contact) are then built anew at every
             set-up.
+        elimination_ratio: with friction, the fraction of its node's largest singular value
+            above which a rotated multiplier is eliminated (:data:`ELIMINATION_RATIO`).
     """
 
     def __init__(self, comm: MPI.Intracomm, u_rows, z_rows, z_node_dofs, prefix: str,
                  near_nullspace: list[np.ndarray] | None = None, keep_products: bool = True,
-                 node_groups: np.ndarray | None = None):
+                 node_groups: np.ndarray | None = None,
+                 elimination_ratio: float = ELIMINATION_RATIO):
+        if not 0.0 < elimination_ratio < 1.0:
+            raise ValueError(f"elimination_ratio must lie in (0, 1), got {elimination_ratio}")
         self.comm = comm
         self.keep_products = keep_products
+        self.elimination_ratio = elimination_ratio
         self.is_u = PETSc.IS().createGeneral(np.asarray(u_rows, dtype=PETSc.IntType), comm=comm)
         self.is_z = PETSc.IS().createGeneral(np.asarray(z_rows, dtype=PETSc.IntType), comm=comm)
         self.num_u = len(u_rows)
@@ -374,7 +384,7 @@ class CondensedPreconditioner:
         # a node whose every row has its own entry (inactive, penalty: Z_j triangular and
         # invertible) is eliminated whole, as without friction
         whole = np.all(np.diagonal(blocks, axis1=1, axis2=2) != 0.0, axis=1)
-        eliminated = whole[:, None] | (sigma > ELIMINATION_RATIO * sigma[:, :1])
+        eliminated = whole[:, None] | (sigma > self.elimination_ratio * sigma[:, :1])
         self._sigma = np.zeros(self.num_z)
         self._sigma[groups] = np.where(eliminated, 0.0, sigma)
         d = np.zeros(self.num_z)

@@ -12,7 +12,8 @@ the run where the iterative one fails a linear solve. The option
 ``condensed_keep_products`` (default true) keeps the condensation's sub-matrices and
 products between Newton iterations, so that a Jacobian of the same pattern only
 recomputes values; false frees them after each set-up (less memory, every product
-built anew).
+built anew); with friction ``condensed_elimination_ratio`` is
+:data:`~dolfinx_mortar.condensation.ELIMINATION_RATIO`.
 ``petsc_options`` given to the problem override the defaults, and the user's options
 database under the problem's prefix overrides both.
 
@@ -359,7 +360,7 @@ def condensed_preconditioner(ksp: PETSc.KSP, layout, interfaces, block_size: int
     dimension's: :data:`BOOMERAMG_HEXAHEDRON_OPTIONS` on hexahedra. ``components``:
     the tangential multiplier fields per pair (d - 1 with friction, fields P + 1 ..
     of the layout, pair by pair), condensed with their node's normal multiplier."""
-    from .condensation import CondensedPreconditioner
+    from .condensation import ELIMINATION_RATIO, CondensedPreconditioner
 
     comm = layout.comm
     first = int(layout.offsets[comm.rank])
@@ -395,11 +396,14 @@ def condensed_preconditioner(ksp: PETSc.KSP, layout, interfaces, block_size: int
                 options[name] = value
                 added.append(name)
     keep_products = options.getBool(f"{prefix}condensed_keep_products", True)
+    elimination_ratio = options.getReal(f"{prefix}condensed_elimination_ratio",
+                                        ELIMINATION_RATIO)
     try:
         condenser = CondensedPreconditioner(comm, u_rows, z_rows, node_dofs,
                                             prefix=f"{prefix}condensed_",
                                             near_nullspace=near_nullspace,
                                             keep_products=keep_products,
+                                            elimination_ratio=elimination_ratio,
                                             node_groups=node_groups)
     finally:
         for name in added:
