@@ -419,7 +419,8 @@ def tangential_tractions(problem, comm) -> dict:
     slip flags, gathered on every rank. Collective."""
     state = problem.friction_state()
     traction = np.einsum("na,nai->ni", state["traction"], state["frames"])
-    keys = {"coordinates": state["coordinates"], "traction": traction,
+    recovered = np.einsum("na,nai->ni", problem.tangential_traction()[1], state["frames"])
+    keys = {"coordinates": state["coordinates"], "traction": traction, "recovered": recovered,
             "coulomb_ratio": np.linalg.norm(state["traction"], axis=1)
             / np.maximum(problem.friction.laws[0].mu * state["pressure"], 1e-300),
             "sticking": state["sticking"], "slipping": state["slipping"]}
@@ -467,15 +468,18 @@ def main_3d(args, comm: MPI.Intracomm) -> dict:
     r = np.hypot(nodes["coordinates"][:, 0], nodes["coordinates"][:, 1])
     order = np.argsort(r)
     r = r[order]
-    traction, ratio, sticking, slipping = (
-        nodes[key][order] for key in ("traction", "coulomb_ratio", "sticking", "slipping"))
+    traction, recovered, ratio, sticking, slipping = (
+        nodes[key][order]
+        for key in ("traction", "recovered", "coulomb_ratio", "sticking", "slipping"))
     h = tagged.h_contact
     stick_radius = float(r[sticking].max()) if sticking.any() else 0.0
     zone = r < 1.5 * exact["a"]
     q_exact = exact_traction_3d(r, exact)
-    # the traction's x component against |q|: Mindlin's traction is parallel to Q
-    error_rel = float(np.sqrt(np.sum((traction[zone, 0] - q_exact[zone]) ** 2)
-                              / np.sum(q_exact[zone] ** 2)))
+    # the traction's x component against |q|: Mindlin's traction is parallel to Q; the
+    # recovered traction (what problem.tangential_traction() gives) and the multipliers
+    error_rel, multiplier_error_rel = (
+        float(np.sqrt(np.sum((values[zone, 0] - q_exact[zone]) ** 2)
+                      / np.sum(q_exact[zone] ** 2))) for values in (recovered, traction))
     coordinates, pressure = problem.gathered_pressure()
     in_contact = pressure > 1e-8 * exact["p0"]
     r_pressure = np.hypot(coordinates[:, 0], coordinates[:, 1])
@@ -516,6 +520,7 @@ def main_3d(args, comm: MPI.Intracomm) -> dict:
         "max_traction_y_rel": float(np.max(np.abs(traction[zone, 1]))
                                     / (exact["mu"] * exact["p0"])),
         "l2_traction_error_rel": error_rel,
+        "l2_multiplier_traction_error_rel": multiplier_error_rel,
         "total_force": normal_force,
         "total_force_error_rel": abs(normal_force - LOAD_3D) / LOAD_3D,
         "total_tangential_force": tangential_force,
@@ -530,6 +535,7 @@ def main_3d(args, comm: MPI.Intracomm) -> dict:
         "cutbacks": sum(rec.cutbacks for rec in records),
         "wall_time_s": wall_time,
         "profile": {"r": r[zone].tolist(), "traction_x": traction[zone, 0].tolist(),
+                    "recovered_traction_x": recovered[zone, 0].tolist(),
                     "sticking": sticking[zone].astype(int).tolist()},
     }
     if comm.rank == 0:
@@ -537,7 +543,8 @@ def main_3d(args, comm: MPI.Intracomm) -> dict:
             f"Cattaneo-Mindlin 3D mu {args.mu}, Q/(mu P) {args.tangential_ratio}: stick radius "
             f"{stick_radius:.4f} (exact {exact['c']:.4f}, "
             f"{summary['stick_error_in_elements']:.2f} elements), q_max {summary['q_max']:.4f} "
-            f"(exact {summary['q_max_exact']:.4f}), L2 traction error {100 * error_rel:.2f} %, "
+            f"(exact {summary['q_max_exact']:.4f}), L2 traction error {100 * error_rel:.2f} % "
+            f"(multipliers {100 * multiplier_error_rel:.2f} %), "
             f"tangential force {tangential_force:.10g} (-Q = {-tangential_load:g}), Newton "
             f"{summary['newton_iterations']}", flush=True)
         write_summary(args.json, summary)

@@ -134,7 +134,8 @@ class ContactOptions:
         c_t: the tangential complementarity parameter (default c_n), or with ``penalty``
             the tangential penalty (default the normal one).
         pressure_recovery: whether ``contact_pressure`` gives the recovered pressure
-            (:mod:`dolfinx_mortar.recovery`) or the multipliers; None: recovered in 3D,
+            (:mod:`dolfinx_mortar.recovery`) or the multipliers, and
+            ``tangential_traction`` likewise; None: recovered in 3D,
             where the multipliers of tetrahedral meshes scatter, the multipliers in 2D,
             where the fit would only add its curvature error (docs/benchmarks.md).
         slave_side: ``auto``: in 3D, a pair whose slave side is

@@ -1,4 +1,5 @@
-"""The contact pressure a user reads: the nodal multipliers recovered on their patches.
+"""The contact pressure and friction traction a user reads: the nodal multipliers recovered
+on their patches.
 
 The dual multiplier z_j of a slave node is its contact force divided by its area
 (D_jj = int N_j). On unstructured meshes (gmsh tetrahedra above all) these nodal forces
@@ -21,6 +22,12 @@ symmetry plane extrapolates). A pressure that is linear on the patch is reproduc
 exactly (so patch tests stay exact), the fit only averages what scatters. Nodes with no such facet
 (a lone active node, the contact edge's outermost nodes) and inactive nodes keep z_j.
 The forces (``contact_forces``) always come from the multipliers themselves.
+
+The tangential multipliers of friction scatter the same way; their field is recovered
+alike (``ContactProblem.tangential_traction``): in 2D as a scalar, in 3D as the vectors
+y_j . tau_j component by component (the nodes' tangent frames differ), the fitted vector
+made tangential again and expressed in the node's frame. Coulomb's law holds for the
+multipliers node by node, not for the fit.
 
 Parallel: each rank integrates its own slave facets; the small normal equations of
 every node are summed on the node's owner (a ghosted vector, reverse scatter), so the
@@ -86,58 +93,104 @@ def recovered_pressure(interface: MortarInterface, multipliers: PETSc.Vec,
                        active: np.ndarray) -> np.ndarray:
     """The recovered pressure at ``interface``'s owned slave nodes (rows of its multiplier
     vector), from the ghosted multiplier vector ``multipliers`` and the owned nodes'
-    active flags. Collective."""
+    active flags; never below 0. Collective."""
+    return recovered_scalar(interface, multipliers, active, lower=0.0)
+
+
+def recovered_scalar(interface: MortarInterface, multipliers: PETSc.Vec, active: np.ndarray,
+                     lower: float | None = None) -> np.ndarray:
+    """A scalar nodal field recovered as the pressure is (a 2D tangential traction too):
+    the fit at the owned active nodes (at least ``lower`` if given), the field's own value
+    elsewhere. Collective."""
+    result = multipliers.getArray(readonly=True).copy()
+    fitted, value = _patch_fits(interface, interface.node_values(multipliers)[:, None], active)
+    result[fitted] = value[:, 0] if lower is None else np.maximum(value[:, 0], lower)
+    return result
+
+
+def recovered_traction(interface: MortarInterface, traction: np.ndarray,
+                       active: np.ndarray) -> np.ndarray:
+    """The recovered tangential traction at ``interface``'s owned slave nodes: ``traction``
+    (owned nodes, gdim), each node's tangential multipliers as a vector (y_j . tau_j),
+    fitted component by component as the pressure is, then made tangential again (its
+    component along the node's patch normal taken out; a fitted tangent field of a
+    curved surface has one). Nodes not fitted keep their vector. Collective."""
+    traction = np.asarray(traction, dtype=float)
+    gdim = interface.gdim
+    vector = interface.create_multiplier_vector()
+    node_values = np.empty((interface.slave.num_nodes, gdim))
+    for c in range(gdim):
+        vector.getArray()[:] = traction[:, c]
+        node_values[:, c] = interface.node_values(vector)
+    vector.destroy()
+    result = traction.copy()
+    fitted, value = _patch_fits(interface, node_values, active, with_normals=True)
+    value, normals = value[:, :gdim], value[:, gdim:]
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    value -= np.einsum("nc,nc->n", value, normals)[:, None] * normals
+    result[fitted] = value
+    return result
+
+
+def _patch_fits(interface: MortarInterface, node_values: np.ndarray, active: np.ndarray,
+                with_normals: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """The linear fits of the fields ``node_values`` (slave node table, fields) over each
+    owned active node's patch (module docstring), evaluated at the node: (which owned
+    nodes were fitted (n,) bool, their values (fitted, fields)); with ``with_normals`` the
+    patch's summed area normal follows each node's values. Collective."""
     slave = interface.slave
     gdim = interface.gdim
     m = gdim + 1
-    raw = multipliers.getArray(readonly=True).copy()
+    fields = node_values.shape[1]
 
     flags = interface.create_multiplier_vector()
     flags.getArray()[:] = active
     node_active = interface.node_values(flags) > 0.5
     flags.destroy()
-    node_z = interface.node_values(multipliers)
 
     facets = slave.facets
     used = np.all(node_active[facets], axis=1) if facets.size else np.zeros(0, dtype=bool)
     facets = facets[used]
     x = slave.reference_coordinates[facets]
     mass = _facet_mass_matrices(x)
-    z = node_z[facets]
+    values_at = node_values[facets]  # (facets, k, fields)
     normals = _area_normals(x)
 
-    width = m * m + m + gdim
+    width = m * m + m * fields + gdim
     local = np.zeros((slave.num_nodes, width))
     for a in range(facets.shape[1]):
         basis = np.concatenate([np.ones(x.shape[:2] + (1,)), x - x[:, [a]]], axis=2)
         weighted = np.einsum("fkl,fkp->flp", mass, basis)
         values = np.concatenate([
             np.einsum("flp,flq->fpq", weighted, basis).reshape(-1, m * m),
-            np.einsum("flp,fl->fp", weighted, z),
+            np.einsum("flp,flr->fpr", weighted, values_at).reshape(-1, m * fields),
             normals,
         ], axis=1)
         np.add.at(local, facets[:, a], values)
 
     sums = _sum_on_owners(interface, local, width)
     owned = sums.reshape(-1, width)
-    result = raw
-    fitted = active & (np.linalg.norm(owned[:, m * m + m:], axis=1) > 0.0)
+    patch_normals = owned[:, width - gdim:]
+    fitted = active & (np.linalg.norm(patch_normals, axis=1) > 0.0)
+    empty = np.zeros((0, fields + (gdim if with_normals else 0)))
     if not fitted.any():
-        return result
+        return np.zeros(active.shape, dtype=bool), empty
     gram = owned[fitted, : m * m].reshape(-1, m, m)
-    moments = owned[fitted, m * m: m * m + m]
-    tangents = _tangent_bases(owned[fitted, m * m + m:])
+    moments = owned[fitted, m * m: m * m + m * fields].reshape(-1, m, fields)
+    tangents = _tangent_bases(patch_normals[fitted])
     projection = np.zeros((tangents.shape[0], gdim, m))
     projection[:, 0, 0] = 1.0
     projection[:, 1:, 1:] = tangents
     gram_t = np.einsum("nip,npq,njq->nij", projection, gram, projection)
-    moments_t = np.einsum("nip,np->ni", projection, moments)
+    moments_t = np.einsum("nip,npr->nir", projection, moments)
     well_posed = np.linalg.cond(gram_t) < 1e12
-    value = np.zeros(gram_t.shape[0])
-    value[well_posed] = np.linalg.solve(gram_t[well_posed], moments_t[well_posed, :, None])[:, 0, 0]
-    rows = np.flatnonzero(fitted)
-    result[rows[well_posed]] = np.maximum(value[well_posed], 0.0)
-    return result
+    value = np.linalg.solve(gram_t[well_posed], moments_t[well_posed])[:, 0, :]
+    rows = np.flatnonzero(fitted)[well_posed]
+    if with_normals:
+        value = np.concatenate([value, patch_normals[rows]], axis=1)
+    result = np.zeros(active.shape, dtype=bool)
+    result[rows] = True
+    return result, value
 
 
 def _sum_on_owners(interface: MortarInterface, local: np.ndarray, width: int) -> np.ndarray:

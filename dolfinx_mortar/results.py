@@ -98,6 +98,35 @@ class ContactResults:
         return self.friction.state(k, self.equations.tangential_rows(k), self.active[k],
                                    self.areas[k])
 
+    def tangential_traction(self, k: int = 0, raw: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """(reference coordinates, tangential traction) of pair k's owned slave nodes, the
+        rows of :meth:`friction_state`: the traction as ``friction_state`` gives it ((n,) in
+        2D, (n, 2) in the nodes' tangent frames in 3D).
+
+        With ``pressure_recovery`` (the default in 3D) the traction is recovered on the
+        active nodes' patches as the pressure is (:func:`.recovery.recovered_traction`:
+        the linear fit of the traction field, in 3D of its vectors y_j . tau_j, evaluated
+        at the node), which averages the node to node scatter of the tangential
+        multipliers; otherwise, or with ``raw=True``, the multipliers y_j. Coulomb's law
+        holds node by node for the multipliers, not for the fit. Collective.
+        """
+        state = self.friction_state(k)
+        traction = state["traction"]
+        if not self.pressure_recovery or raw:
+            return state["coordinates"].copy(), traction.copy()
+        interface = self.interfaces[k]
+        if traction.ndim == 1:
+            vector = interface.create_multiplier_vector()
+            vector.getArray()[:] = traction
+            recovered = recovery.recovered_scalar(interface, vector, self.active[k])
+            vector.destroy()
+        else:
+            frames = state["frames"]
+            vectors = np.einsum("na,nac->nc", traction, frames)
+            recovered = np.einsum("nc,nac->na", recovery.recovered_traction(
+                interface, vectors, self.active[k]), frames)
+        return state["coordinates"].copy(), recovered
+
     def pressure_function(self, k: int = 0, function: dolfinx.fem.Function | None = None,
                           raw: bool = False):
         """A P1 scalar Function with :meth:`contact_pressure` at the slave nodes (0
@@ -111,17 +140,19 @@ class ContactResults:
                                             else "contact_pressure")
         return self._slave_node_function(k, self.contact_pressure(k, raw)[1], function)
 
-    def friction_functions(self, k: int = 0, functions: tuple | None = None) -> tuple:
-        """(tangential traction y_j, status) as P1 scalar Functions for ParaView (0 away
-        from the slave nodes; in 3D the traction's magnitude |y_j|; status 0 inactive,
-        1 slipping, 2 sticking). Collective."""
+    def friction_functions(self, k: int = 0, functions: tuple | None = None,
+                           raw: bool = False) -> tuple:
+        """(tangential traction, status) as P1 scalar Functions for ParaView (0 away
+        from the slave nodes): the traction of :meth:`tangential_traction` (recovered
+        with ``pressure_recovery``, the multipliers y_j with ``raw``; in 3D its
+        magnitude); status 0 inactive, 1 slipping, 2 sticking. Collective."""
         if functions is None:
             space = dolfinx.fem.functionspace(self.V.mesh, ("Lagrange", 1))
             functions = (dolfinx.fem.Function(space, name="tangential_traction"),
                          dolfinx.fem.Function(space, name="friction_status"))
         state = self.friction_state(k)
         status = np.where(state["sticking"], 2.0, np.where(state["slipping"], 1.0, 0.0))
-        traction = state["traction"]
+        traction = self.tangential_traction(k, raw)[1]
         if traction.ndim == 2:
             traction = np.linalg.norm(traction, axis=1)
         self._slave_node_function(k, traction, functions[0])

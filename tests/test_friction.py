@@ -200,7 +200,9 @@ def test_cattaneo_mindlin_3d_stick_radius_and_coulomb_law(tmp_path):
     the stick radius within one element of Mindlin's a (1 - Q/(mu P))^(1/3) (measured
     0.32); the friction force on the sphere -Q and the normal force P to 1e-8 (the loads
     are exact on the faceted top); the traction |y_j| = mu z_j at every slipping node to
-    1e-8 and below it at the sticking ones; no negative frictional work; the outputs."""
+    1e-8 and below it at the sticking ones; no negative frictional work; the recovered
+    traction (problem.tangential_traction) closer to Mindlin's than the multipliers
+    (L2 29.2 % against 46.5 %); the outputs."""
     summary = load_demo("cattaneo_mindlin").main(
         ["--dim", "3", "--output", str(tmp_path), "--json", str(tmp_path / "cm3d.json")],
         comm=MPI.COMM_SELF)
@@ -214,6 +216,7 @@ def test_cattaneo_mindlin_3d_stick_radius_and_coulomb_law(tmp_path):
     assert summary["coulomb_ratio_sticking_max"] < 1.0
     assert summary["min_nodal_dissipation_rel"] > -1e-8
     assert max(summary["newton_iterations"]) <= 10 and summary["cutbacks"] == 0
+    assert summary["l2_traction_error_rel"] < 0.7 * summary["l2_multiplier_traction_error_rel"]
     for name in ("cattaneo_mindlin_3d.png", "cattaneo_mindlin_3d.csv", "cm3d.json",
                  "paraview/tangential_traction.bp"):
         assert (tmp_path / name).exists(), name
@@ -233,9 +236,10 @@ def test_cattaneo_mindlin_3d_iterative_solver_equals_the_direct_one():
     assert [r["linear_solver"] for r in runs] == ["direct", "iterative"]
     assert runs[0]["newton_iterations"] == runs[1]["newton_iterations"]
     assert runs[0]["cutbacks"] == runs[1]["cutbacks"] == 0
-    q = [np.array(r["profile"]["traction_x"]) for r in runs]
     scale = runs[0]["mu"] * runs[0]["p0_exact"]
-    assert np.max(np.abs(q[0] - q[1])) < 1e-8 * scale
+    for key in ("traction_x", "recovered_traction_x"):
+        q = [np.array(r["profile"][key]) for r in runs]
+        assert np.max(np.abs(q[0] - q[1])) < 1e-8 * scale, key
     assert runs[0]["stick_radius"] == runs[1]["stick_radius"]
 
 

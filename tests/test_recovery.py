@@ -207,3 +207,54 @@ def test_recovery_is_the_default_in_3d_only(dim, cell):
     _, pressure = problem.contact_pressure()
     assert np.array_equal(pressure, values) == (dim == 2)
     problem.destroy()
+
+
+@pytest.mark.parametrize("dim, cell", [(2, "triangle"), (3, "tetrahedron"), (3, "hexahedron")])
+def test_uniform_slip_traction_is_its_own_recovery(dim, cell):
+    """The friction patch test at slip (every node slides, traction mu p along the slip):
+    the recovered tangential traction is the uniform multipliers' own, to 1e-12 (the
+    fit, in 3D of the traction vectors and their projection back onto the tangent
+    frames, keeps constants); raw=True gives the multipliers; pressure_recovery=False
+    too."""
+    from test_friction import load_demo
+
+    from dolfinx_mortar import Coulomb
+
+    patch = load_demo("friction_patch")
+    limit = 0.2 * patch.PRESSURE
+    build = patch.sheared_blocks if dim == 2 else patch.sheared_blocks_3d
+    ratio = (3, 7) if cell != "hexahedron" else (2, 3)
+    for recovery in (True, False):
+        problem = build(ratio, "upper", Coulomb(0.2), 2.0 * limit / patch.SHEAR_MODULUS, limit,
+                        cell, MPI.COMM_SELF, pressure_recovery=recovery)
+        assert problem.solve().converged
+        state = problem.friction_state()
+        assert state["slipping"].all()
+        coordinates, traction = problem.tangential_traction()
+        assert np.array_equal(coordinates, state["coordinates"])
+        assert np.abs(traction - state["traction"]).max() <= 1e-12 * limit
+        assert np.array_equal(problem.tangential_traction(raw=True)[1], state["traction"])
+        if not recovery:
+            assert np.array_equal(traction, state["traction"])
+        problem.destroy()
+
+
+def test_scattered_3d_traction_is_the_componentwise_patch_fit():
+    """Scattered tangential multipliers on the flat (irregular) 3D patch: the recovered
+    traction is the independent patch fit (as for the pressure) of each component of
+    y_j . tau_j, back in the node's frame; the nodes without a fit keep y_j."""
+    from dolfinx_mortar import recovery
+
+    problem = _problem(3, "tetrahedron", "top", MPI.COMM_SELF)
+    interface = problem.interfaces[0]
+    coordinates = interface.owned_multiplier_coordinates
+    active = coordinates[:, 0] < 0.7
+    vectors = np.stack([_scatter(coordinates), -0.5 * _scatter(coordinates[:, ::-1]),
+                        np.zeros(coordinates.shape[0])], axis=1) * active[:, None]
+    recovered = recovery.recovered_traction(interface, vectors, active)
+    for c in range(2):
+        expected = _patch_fit(problem, vectors[:, c], active)
+        assert np.abs(recovered[:, c] - expected).max() <= 1e-12
+    assert np.abs(recovered[:, 2]).max() <= 1e-14  # tangential to the plane z = const
+    assert np.array_equal(recovered[~active], vectors[~active])
+    problem.destroy()
