@@ -158,13 +158,6 @@ BOOMERAMG_3D_OPTIONS = {
     "pc_hypre_boomeramg_coarsen_type": "HMIS",
     "pc_hypre_boomeramg_interp_type": "ext+i",
     "pc_hypre_boomeramg_P_max": 4,
-    # l1-scaled hybrid Gauss-Seidel on the way down and up (the coarsest level is solved
-    # directly, as before): hypre's plain hybrid Gauss-Seidel is not guaranteed to smooth
-    # across the ranks' boundaries, and on a non-symmetric K_c it broke down (the 3D
-    # Cattaneo-Mindlin pull on 3 ranks, GMRES DIVERGED_BREAKDOWN); the l1 form converges
-    # there and kept the Hertz runs' iterations (docs/benchmarks.md, session 28)
-    "pc_hypre_boomeramg_relax_type_down": "l1scaled-SOR/Jacobi",
-    "pc_hypre_boomeramg_relax_type_up": "l1scaled-SOR/Jacobi",
 }
 
 BOOMERAMG_HEXAHEDRON_OPTIONS = {
