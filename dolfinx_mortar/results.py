@@ -111,9 +111,13 @@ class ContactResults:
         holds node by node for the multipliers, not for the fit. Collective.
         """
         state = self.friction_state(k)
+        return state["coordinates"].copy(), self._tangential_traction(k, state, raw)
+
+    def _tangential_traction(self, k: int, state: dict, raw: bool) -> np.ndarray:
+        """The traction of :meth:`tangential_traction` from pair k's ``friction_state``."""
         traction = state["traction"]
         if not self.pressure_recovery or raw:
-            return state["coordinates"].copy(), traction.copy()
+            return traction.copy()
         interface = self.interfaces[k]
         if traction.ndim == 1:
             vector = interface.create_multiplier_vector()
@@ -125,7 +129,7 @@ class ContactResults:
             vectors = np.einsum("na,nac->nc", traction, frames)
             recovered = np.einsum("nc,nac->na", recovery.recovered_traction(
                 interface, vectors, self.active[k]), frames)
-        return state["coordinates"].copy(), recovered
+        return recovered
 
     def pressure_function(self, k: int = 0, function: dolfinx.fem.Function | None = None,
                           raw: bool = False):
@@ -152,7 +156,7 @@ class ContactResults:
                          dolfinx.fem.Function(space, name="friction_status"))
         state = self.friction_state(k)
         status = np.where(state["sticking"], 2.0, np.where(state["slipping"], 1.0, 0.0))
-        traction = self.tangential_traction(k, raw)[1]
+        traction = self._tangential_traction(k, state, raw)
         if traction.ndim == 2:
             traction = np.linalg.norm(traction, axis=1)
         self._slave_node_function(k, traction, functions[0])
