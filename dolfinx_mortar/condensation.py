@@ -99,6 +99,12 @@ about r/(1 - r) c_t to K_c, at most about 30 c_t here; eliminating every nonzero
 made the linear solves fail, even with an exact inner solve (docs/benchmarks.md, "The
 elimination ratio of the frictional condensation")."""
 
+RELAXATIONS = ("symmetric-SOR/Jacobi", "l1scaled-SOR/Jacobi")
+"""BoomerAMG's smoothers (down and up) between which the inner solve switches when it
+breaks down: PETSc's default, hybrid symmetric Gauss-Seidel, and its l1-scaled form. Each
+broke down on a condensed 3D system on which the other converged, and neither is the
+faster everywhere (docs/benchmarks.md, "The inner AMG's smoother")."""
+
 
 class CondensedPreconditioner:
     """A petsc4py ``python`` PC: the condensed solve of the monolithic [u | z] system.
@@ -158,6 +164,10 @@ class CondensedPreconditioner:
         self.ksp = PETSc.KSP().create(comm)
         self.ksp.setOptionsPrefix(prefix)
         self.ksp.setFromOptions()
+        self.prefix = prefix
+        self._relaxation = self._initial_relaxation()
+        self.relaxation_switches = 0
+        """inner solves that broke down and were retried with the other smoother"""
         self._matrices: dict[str, PETSc.Mat] = {}
         self._vectors: dict[str, PETSc.Vec] = {}
         self._index_sets: dict[str, PETSc.IS] = {}
@@ -253,15 +263,15 @@ class CondensedPreconditioner:
             v["tz_a"].getArray()[:] = v["tz"].getArray(readonly=True)[self._condensed]
             self._products["E_q"].mult(v["tz_a"], v["t_rows"])
             v["rc"].getArray()[self._rows] -= v["t_rows"].getArray(readonly=True)
-        self.ksp.solve(v["rc"], v["du"])
-        self.inner_iterations.append(self.ksp.getIterationNumber())
-        reason = self.ksp.getConvergedReason()
-        if reason < 0 and reason != PETSc.KSP.ConvergedReason.DIVERGED_MAX_IT:
-            # a breakdown: a NaN makes the outer Krylov method fail (DIVERGED_NANORINF),
-            # and SNES stops before it applies the step (an iterative inner solve stopped
-            # by its iteration limit is still a preconditioner, which fgmres allows to vary)
-            self.inner_failure = (f"{diagnostics.describe_ksp_failure(self.ksp)} after "
-                                  f"{self.ksp.getIterationNumber()} iterations")
+        failure = self._inner_solve(v["rc"], v["du"])
+        if failure and self._switch_relaxation():
+            retried = self._inner_solve(v["rc"], v["du"])
+            failure = retried and (f"{failure}; with {RELAXATIONS[self._relaxation]} "
+                                   f"smoothing: {retried}")
+        if failure:
+            # a NaN makes the outer Krylov method fail (DIVERGED_NANORINF), and SNES stops
+            # before it applies the step
+            self.inner_failure = failure
             y.set(np.nan)
             return
         # dz = d^-1 (r_z - C du) on the eliminated rows, P^-1 T (r' - A' du) on the active ones
@@ -289,6 +299,54 @@ class CondensedPreconditioner:
         if self._null_space is not None:
             # fgmres preconditions from the right: its steps are the outputs
             self._null_space.remove(y)
+
+    def _inner_solve(self, rhs: PETSc.Vec, solution: PETSc.Vec) -> str:
+        """Solve K_c du = rc; why it broke down, or "" (also at its iteration limit: an
+        iterative inner solve stopped there is still a preconditioner, which fgmres
+        allows to vary)."""
+        self.ksp.solve(rhs, solution)
+        self.inner_iterations.append(self.ksp.getIterationNumber())
+        reason = self.ksp.getConvergedReason()
+        if reason >= 0 or reason == PETSc.KSP.ConvergedReason.DIVERGED_MAX_IT:
+            return ""
+        return (f"{diagnostics.describe_ksp_failure(self.ksp)} after "
+                f"{self.ksp.getIterationNumber()} iterations")
+
+    def _initial_relaxation(self) -> int | None:
+        """The position in :data:`RELAXATIONS` of the inner BoomerAMG's smoother, or
+        None if the inner preconditioner is not BoomerAMG or the user chose its smoother
+        (then a breakdown is not retried)."""
+        pc = self.ksp.getPC()
+        if pc.getType() != PETSc.PC.Type.HYPRE or pc.getHYPREType() != "boomeramg":
+            return None
+        options = PETSc.Options()
+        if any(options.hasName(f"{self.prefix}pc_hypre_boomeramg_relax_type_{which}")
+               for which in ("all", "down", "up")):
+            return None
+        return 0
+
+    def _switch_relaxation(self) -> bool:
+        """After an inner breakdown: BoomerAMG set up anew with the other smoother of
+        :data:`RELAXATIONS`, which it keeps for later set-ups; False if there is none to
+        switch to. Collective (every rank's inner solve fails together)."""
+        if self._relaxation is None:
+            return False
+        self._relaxation = 1 - self._relaxation
+        options = PETSc.Options()
+        names = [f"{self.prefix}pc_hypre_boomeramg_relax_type_{which}"
+                 for which in ("down", "up")]
+        for name in names:
+            options[name] = RELAXATIONS[self._relaxation]
+        try:
+            self.ksp.getPC().setFromOptions()
+        finally:
+            for name in names:
+                options.delValue(name)
+        # the same matrix: a new state makes the PC set hypre up again (the l1 norms)
+        self._matrices["K_inner"].stateIncrease()
+        self.ksp.setUp()
+        self.relaxation_switches += 1
+        return True
 
     def _take_null_space(self, J: PETSc.Mat) -> None:
         """J's null space (:meth:`~dolfinx_mortar.equations.ContactEquations.set_null_space`),

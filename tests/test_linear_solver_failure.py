@@ -16,10 +16,11 @@ import numpy as np
 import pytest
 from contact_warnings import warns_on_rank_zero
 from mpi4py import MPI
+from petsc4py import PETSc
 from stress.common import relative_difference
 from test_contact3d import curved_punch
 
-from dolfinx_mortar import LoadSteppingError, solve_load_steps, solvers
+from dolfinx_mortar import LoadSteppingError, condensation, solve_load_steps, solvers
 
 FAILING_OPTIONS = {
     "inner breakdown": {"condensed_ksp_type": "richardson",
@@ -94,3 +95,64 @@ def test_auto_falls_back_to_direct_where_the_iterative_solve_fails(failure, monk
     assert relative_difference(result["pressure"], direct["pressure"]) <= 1e-8
     assert relative_difference(result["force"], direct["force"]) <= 1e-8
     problem.destroy()
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("user_smoother", [False, True])
+def test_inner_breakdown_is_retried_with_the_other_amg_smoother(user_smoother):
+    """An inner solve preconditioned by BoomerAMG that breaks down is solved again, once,
+    with the other smoother of condensation.RELAXATIONS, which the AMG then keeps; both
+    failures are reported. A smoother the user chose is never switched."""
+    diverging = {"condensed_ksp_type": "richardson", "condensed_ksp_richardson_scale": 1e3}
+    if user_smoother:
+        diverging["condensed_pc_hypre_boomeramg_relax_type_all"] = "Jacobi"
+    problem, apply_load = curved_punch(MPI.COMM_WORLD, cell="tetrahedron",
+                                       linear_solver="iterative", petsc_options=diverging)
+    apply_load(0.5)
+    report = problem.solve()
+    condenser = problem.solver.condenser
+    assert not report.converged and report.iterations == 0
+    assert "broke down: KSP reason -4 DIVERGED_DTOL" in report.linear_solver_failure
+    retried = f"with {condensation.RELAXATIONS[1]} smoothing: KSP reason -4"
+    if user_smoother:
+        assert condenser.relaxation_switches == 0
+        assert retried not in report.linear_solver_failure
+        assert len(condenser.inner_iterations) == 1
+    else:
+        assert condenser.relaxation_switches == 1
+        assert retried in report.linear_solver_failure
+        assert len(condenser.inner_iterations) == 2
+        assert condenser.ksp.getPC().getHYPREType() == "boomeramg"
+    problem.destroy()
+
+
+@pytest.mark.parallel
+def test_the_switched_smoother_solves_as_before(tmp_path):
+    """After a switch of the inner AMG's smoother (as after a breakdown) the Newton steps
+    stay exact: the next load step's answer is the direct one to 1e-8."""
+    answers = []
+    for linear_solver in ("direct", "iterative"):
+        problem, apply_load = curved_punch(MPI.COMM_WORLD, cell="tetrahedron",
+                                           linear_solver=linear_solver)
+        solve_load_steps(problem, apply_load, 1)
+        if linear_solver == "iterative":
+            condenser = problem.solver.condenser
+            assert condenser._switch_relaxation() and condenser.relaxation_switches == 1
+            before = len(condenser.inner_iterations)
+            if MPI.COMM_WORLD.size == 1:
+                view = tmp_path / "inner.txt"
+                viewer = PETSc.Viewer().createASCII(str(view), comm=MPI.COMM_SELF)
+                condenser.ksp.view(viewer)
+                viewer.destroy()
+                text = view.read_text()
+                assert "Relax down          l1scaled-SOR/Jacobi" in text
+                assert "Relax up            l1scaled-SOR/Jacobi" in text
+                assert "Coarsen type        HMIS" in text  # the 3D options stay
+        apply_load(2.0)
+        report = problem.solve()
+        assert report.converged
+        answers.append(gathered(problem))
+        problem.destroy()
+    assert len(condenser.inner_iterations) > before
+    assert answers[1]["active"] == answers[0]["active"] > 0
+    assert relative_difference(answers[1]["pressure"], answers[0]["pressure"]) <= 1e-8
