@@ -92,6 +92,21 @@ def _alltoallv(
     return recv.reshape(-1, width), sources
 
 
+def _check_options(configuration: str, normals: str, integration: str, basis: str,
+                   num_gauss_points: int | None) -> None:
+    """ValueError naming the first option of :class:`MortarInterface` out of its range."""
+    for value, allowed, what in (
+        (configuration, CONFIGURATIONS, "configuration"),
+        (normals, kernels.NORMAL_OPTIONS, "normals"),
+        (integration, kernels.INTEGRATION_OPTIONS, "integration"),
+        (basis, kernels.BASIS_OPTIONS, "basis"),
+    ):
+        if value not in allowed:
+            raise ValueError(f"unknown {what} option {value!r}; expected one of {allowed}")
+    if num_gauss_points is not None and num_gauss_points < 1:
+        raise ValueError("num_gauss_points must be >= 1")
+
+
 class MortarInterface:
     """One slave/master pair of surfaces and its mortar quantities.
 
@@ -106,12 +121,15 @@ class MortarInterface:
         basis: multiplier basis, ``standard`` (default) or ``dual`` (biorthogonal over
             the covered part of each slave facet: :mod:`~dolfinx_mortar.covered`).
         num_gauss_points: per segment (or per slave facet for ``element``).
-        search_margin: boxes are grown by this much; default twice the mean
-            slave facet edge length h in 2D and h/2 in 3D, where the number of
-            candidate pairs grows with the square of the margin. In 3D the boxes
-            also reach 2 margins (default h) behind each facet, so that surfaces
-            that already penetrate each other by up to 2 h + 2 margins before any
-            displacement are paired (2D: up to 2 margins).
+        search_margin: the pairs of a search are kept until a node moves more
+            than half of it. The boxes are grown by it in 2D (facets within two
+            margins of each other are paired) and by half of it in 3D (within one
+            margin: what the reuse needs, since each side moved at most half a
+            margin; the number of candidate pairs grows with the square of the
+            growth there). Default twice the mean slave facet edge length h in 2D
+            and h/2 in 3D. In 3D the boxes also reach 2 margins (default h) behind
+            each facet, so that surfaces that already penetrate each other by up to
+            2 h + 1 margin before any displacement are paired (2D: up to 2 margins).
         configuration: ``current`` (default): everything on x = X + u, for
             large deformations; ``reference``: integrals and normals on the
             undeformed surfaces, computed once, gap linear in u (small strain,
@@ -137,14 +155,7 @@ class MortarInterface:
         search_margin: float | None = None,
         configuration: str = "current",
     ):
-        for value, allowed, what in (
-            (configuration, CONFIGURATIONS, "configuration"),
-            (normals, kernels.NORMAL_OPTIONS, "normals"),
-            (integration, kernels.INTEGRATION_OPTIONS, "integration"),
-            (basis, kernels.BASIS_OPTIONS, "basis"),
-        ):
-            if value not in allowed:
-                raise ValueError(f"unknown {what} option {value!r}; expected one of {allowed}")
+        _check_options(configuration, normals, integration, basis, num_gauss_points)
         self.V = V
         self.comm: MPI.Intracomm = V.mesh.comm
         self.normals = normals
@@ -154,8 +165,6 @@ class MortarInterface:
         self._reference_quantities: PairQuantities | None = None
         self._evaluated_x: np.ndarray | None = None
         self._evaluated_version = -1
-        if num_gauss_points is not None and num_gauss_points < 1:
-            raise ValueError("num_gauss_points must be >= 1")
         self.self_contact = slave == master
         """One surface that may touch itself (:mod:`~dolfinx_mortar.self_contact`): it is
         its own master, and each search decides which facets of each zone are slaves."""
@@ -174,6 +183,7 @@ class MortarInterface:
         if not search_margin > 0.0:
             raise ValueError(f"search_margin must be positive, got {search_margin}")
         self.reuse = search.SearchReuse(margin=float(search_margin))
+        self.search_growth = self._stencil_type.search_growth * self.reuse.margin
         self.search_depth = self._stencil_type.search_depth * self.reuse.margin
         self.statistics = MortarStatistics()
 
@@ -436,7 +446,7 @@ class MortarInterface:
         """Which owned master and slave facets each other rank needs (swept boxes
         from the ``origin`` positions, as in the search itself)."""
         comm = self.comm
-        margin = self.reuse.margin
+        growth = self.search_growth
         depth = self.search_depth
         slave_lower, slave_upper = search.facet_boxes(
             slave_x, self.slave.facets, slave_origin, depth)
@@ -457,9 +467,9 @@ class MortarInterface:
                 continue
             lower, upper = boxes[r, :gdim], boxes[r, gdim:]
             self._send_master.append(np.flatnonzero(
-                search.boxes_overlap(master_lower, master_upper, lower, upper, margin)))
+                search.boxes_overlap(master_lower, master_upper, lower, upper, growth)))
             self._send_slave.append(np.flatnonzero(
-                search.boxes_overlap(slave_lower, slave_upper, lower, upper, margin)))
+                search.boxes_overlap(slave_lower, slave_upper, lower, upper, growth)))
 
     def _receive(self, owned: surface.ContactSurface, plan: list[np.ndarray], *states: np.ndarray):
         """Global blocks (m, k) and, per state of the nodes in ``states``, the
@@ -541,11 +551,11 @@ class MortarInterface:
         faced_before = self._facing_pairs is not None and self._facing_pairs.shape[0] > 0
         if self.self_contact and not faced_before and not self_contact.may_face(
                 self._node_x, self._node_blocks, slave.facets, all_master_facets,
-                self.reuse.margin, node_origin, self.search_depth):
+                self.search_growth, node_origin, self.search_depth):
             pairs = np.zeros((0, 2), dtype=np.int64)  # far from itself here: nothing to find
         else:
             pairs = search.candidate_pairs(
-                self._node_x, slave.facets, self._node_x, all_master_facets, self.reuse.margin,
+                self._node_x, slave.facets, self._node_x, all_master_facets, self.search_growth,
                 slave_previous=node_origin, master_previous=node_origin,
                 depth=self.search_depth)
         if self.self_contact:

@@ -66,7 +66,7 @@ def test_penetrating_cubes(cell, basis):
     over the master has (D 1)_j = int N_j, its whole nodal area."""
     tagged = penetrating_cubes(cell, 3, 4)
     mortar = interface(tagged, basis=basis)
-    assert 2 * mortar.reuse.margin >= DEPTH  # the default margin reaches across
+    assert 2 * mortar.search_growth >= DEPTH  # the boxes grown by the default reach across
     D, M = mortar.mortar_matrices()
     assert abs(csr_to_coo(D)[2].sum() - OVERLAP) < 1e-13
     assert abs(csr_to_coo(M)[2].sum() - OVERLAP) < 1e-13
@@ -88,13 +88,14 @@ def test_penetrating_cubes(cell, basis):
 
 
 @pytest.mark.parametrize("cell", CELLS)
-def test_penetration_deeper_than_twice_the_default_margin(cell):
-    """The same cubes with 12 slave cells across: the default margin (half the mean slave
-    edge) is below DEPTH / 2, so boxes grown by it alone do not overlap before any
-    displacement (no sweep); the boxes' reach behind each facet pairs them."""
+def test_penetration_deeper_than_the_boxes_growth(cell):
+    """The same cubes with 12 slave cells across: the boxes' growth (half the default
+    margin, a quarter of the mean slave edge) is below DEPTH / 2, so boxes grown by it
+    alone do not overlap before any displacement (no sweep); the boxes' reach behind each
+    facet pairs them."""
     tagged = penetrating_cubes(cell, 12, 12)
     mortar = interface(tagged)
-    assert 2 * mortar.reuse.margin < DEPTH
+    assert 2 * mortar.search_growth < DEPTH
     D, _ = mortar.mortar_matrices()
     total = csr_to_coo(D)[2].sum()
     assert abs(total - OVERLAP) < 1e-13
@@ -221,3 +222,24 @@ def test_force_dofs_of_rows_are_those_of_the_pattern(basis):
     expected = mortar.pair_force_dofs[rows]
     assert (expected >= 0).all()
     np.testing.assert_array_equal(mortar.pair_force_dofs_of(rows), expected)
+
+
+@pytest.mark.parametrize("cell", CELLS)
+def test_flat_surfaces_are_paired_within_one_margin(cell):
+    """Two parallel flat surfaces ``gap`` apart (no sweep: the first search): each 3D box
+    grows by half the margin, so they are paired (and every slave node covered, its
+    nodal gap the distance) when the gap is below the margin and not at all above it."""
+    from test_mortar3d import two_blocks
+
+    margin = 0.05
+    for gap, paired in ((0.9 * margin, True), (1.1 * margin, False)):
+        mortar = interface(two_blocks(cell, 3, 4, comm=MPI.COMM_SELF, gap=gap),
+                           search_margin=margin)
+        assert mortar.search_growth == 0.5 * margin
+        assert (mortar.statistics.pairs > 0) == paired
+        if paired:
+            D, _ = mortar.mortar_matrices()
+            area = row_sums(D)
+            gap_j = mortar.weighted_gap().getArray() / area
+            assert abs(area.sum() - 1.0) < 1e-13
+            assert np.abs(gap_j - gap).max() < 1e-13
