@@ -10,8 +10,9 @@ refinement. Every run is a process of its own (``python3 demos/... --json``, und
 sweep goes on.
 
 Moduli: nu = 0.3 for both bodies, and for a ratio r the lower body gets
-E = E* (1 + 1/r) / (1 - nu^2) and the upper one r times that, with E* the demo's default
-effective modulus (both bodies E = 200). E*, hence the Hertz half-width a, p0 and the
+E = E* (1 + 1/r) (1 - nu^2) and the upper one r times that, with E* the demo's default
+effective modulus, 1/E* = (1 - nu^2)/E_upper + (1 - nu^2)/E_lower (both bodies E = 200:
+ratio 100 gives E = 10100 on 101). E*, hence the Hertz half-width a, p0 and the
 mesh (refined where the contact zone is, from a) are those of the default case for every
 ratio: the load stays the demo's, a stays inside the refined zone, and only the contrast
 changes. (The demos are scale free: the same ratio with other moduli and a load scaled
