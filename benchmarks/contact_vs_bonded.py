@@ -34,7 +34,8 @@ friction (``-- --mu 0.3``) ``auto`` chooses as without (iterative from
 issue's first yardstick, a box of about the same size; 25 hexahedra a side: 52,728 dofs),
 in the same run; ``--bonded-only`` skips the contact run; ``--bonded-repeats`` solves the
 bonded problem more than once (the first solve pays one-off costs; every solve is
-recorded, the ratio uses the last).
+recorded, and the ratio uses the median of those after the first: a bonded solve of
+5e4 dofs took 0.64 to 0.94 s within minutes on a quiet machine).
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ import json
 import math
 import os
 import pathlib
+import statistics
 import time
 
 import dolfinx
@@ -375,7 +377,8 @@ def report(result: dict) -> None:
     print(f"bonded ({bonded['cell']}, {bonded['num_dofs']} dofs): assembly "
           f"{last['assembly_s']:.3f} s, GAMG set-up {last['set_up_s']:.3f} s, CG "
           f"{last['solve_s']:.3f} s ({last['iterations']} iterations), total "
-          f"{last['total_s']:.3f} s; peak RSS per rank {bonded['peak_mib_per_rank']} MiB; "
+          f"{last['total_s']:.3f} s (median of the solves after the first: "
+          f"{bonded['median_s']:.3f} s); peak RSS per rank {bonded['peak_mib_per_rank']} MiB; "
           "edge ratio (longest / shortest edge of a cell) median {median:.2f}, 90th "
           "percentile {p90:.2f}, max {max:.2f}, above 10: {fraction_above_10:.1%}".format(
               **bonded["edge_ratio"]))
@@ -417,7 +420,7 @@ def main(argv=None) -> dict:
     parser.add_argument("--box", type=int, default=0,
                         help="also solve the bonded problem on the unit cube of BOX^3 cells "
                              "(0: not)")
-    parser.add_argument("--bonded-repeats", type=int, default=2)
+    parser.add_argument("--bonded-repeats", type=int, default=4)
     parser.add_argument("--json", type=pathlib.Path, default=None)
     parser.add_argument("demo_args", nargs=argparse.REMAINDER,
                         help="after --: options of demos/hertz_sphere.py (--mu, --steps, "
@@ -431,13 +434,15 @@ def main(argv=None) -> dict:
               "load_before": os.getloadavg()[0],
               "petsc_options_env": os.environ.get("PETSC_OPTIONS", ""),
               "bonded": bonded_solve(args, comm)}
+    timed = result["bonded"]["solves"][1:] or result["bonded"]["solves"]
+    result["bonded"]["median_s"] = statistics.median(s["total_s"] for s in timed)
     if args.box:
         result["box"] = box_solve(args, comm)
     if not args.bonded_only:
         result["contact"] = contact_run(demo_args, args, comm)
         per_newton = result["contact"]["timings"]["total"] / sum(
             result["contact"]["newton_iterations"])
-        result["ratio"] = per_newton / result["bonded"]["solves"][-1]["total_s"]
+        result["ratio"] = per_newton / result["bonded"]["median_s"]
     else:
         result["ratio"] = math.nan
     result["load_after"] = os.getloadavg()[0]
