@@ -1,42 +1,46 @@
 /* The general pair path of surface3.c, instantiated there twice: with the derivatives over the
  * pair's variables (DERIVATIVES 1: NX = 36 pair variables, NP = 16 plane coordinates) and for
- * the values only (DERIVATIVES 0: one unused derivative slot each; surface3.c renames every
- * type and function of this file for that instance). The values' operations are the same in
- * both, so are their bits. */
+ * the values only (DERIVATIVES 0: one derivative slot each, never touched by the arithmetic;
+ * surface3.c renames every type and function of this file for that instance). The values'
+ * operations are the same in both, so are their bits. */
 #if DERIVATIVES
 #define SEED(x, i) ((x).d[i] = 1.0)
+#define NXD NX
+#define NPD NP
 #else
 #define SEED(x, i) ((void)0)
+#define NXD 0
+#define NPD 0
 #endif
 
 typedef struct { double v, d[NX]; } dx;
 
 static inline dx constx(double v) { dx r; memset(&r, 0, sizeof r); r.v = v; return r; }
-static inline dx addx(dx a, dx b) { dx r; r.v = a.v + b.v; for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] + b.d[i]; return r; }
-static inline dx subx(dx a, dx b) { dx r; r.v = a.v - b.v; for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] - b.d[i]; return r; }
-static inline dx mulx(dx a, dx b) { dx r; r.v = a.v * b.v; for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] * b.v + b.d[i] * a.v; return r; }
-static inline dx scalex(dx a, double s) { dx r; r.v = a.v * s; for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] * s; return r; }
-static inline dx negx(dx a) { dx r; r.v = -a.v; for (int i = 0; i < NX; ++i) r.d[i] = -a.d[i]; return r; }
+static inline dx addx(dx a, dx b) { dx r; r.v = a.v + b.v; for (int i = 0; i < NXD; ++i) r.d[i] = a.d[i] + b.d[i]; return r; }
+static inline dx subx(dx a, dx b) { dx r; r.v = a.v - b.v; for (int i = 0; i < NXD; ++i) r.d[i] = a.d[i] - b.d[i]; return r; }
+static inline dx mulx(dx a, dx b) { dx r; r.v = a.v * b.v; for (int i = 0; i < NXD; ++i) r.d[i] = a.d[i] * b.v + b.d[i] * a.v; return r; }
+static inline dx scalex(dx a, double s) { dx r; r.v = a.v * s; for (int i = 0; i < NXD; ++i) r.d[i] = a.d[i] * s; return r; }
+static inline dx negx(dx a) { dx r; r.v = -a.v; for (int i = 0; i < NXD; ++i) r.d[i] = -a.d[i]; return r; }
 static inline dx divx(dx a, dx b) {
     dx r; double inverse = 1.0 / b.v; r.v = a.v * inverse;
-    for (int i = 0; i < NX; ++i) r.d[i] = (a.d[i] - b.d[i] * r.v) * inverse;
+    for (int i = 0; i < NXD; ++i) r.d[i] = (a.d[i] - b.d[i] * r.v) * inverse;
     return r;
 }
 static inline dx sqrtx(dx a) {
     dx r; r.v = sqrt(a.v); double f = r.v > 0.0 ? 0.5 / r.v : 0.0;
-    for (int i = 0; i < NX; ++i) r.d[i] = a.d[i] * f;
+    for (int i = 0; i < NXD; ++i) r.d[i] = a.d[i] * f;
     return r;
 }
 static inline void zerox(dx *r) { memset(r, 0, sizeof *r); }
 /* r -= a * b */
 static inline void subtract_productx(dx *r, const dx *a, const dx *b) {
     r->v = r->v - a->v * b->v;
-    for (int i = 0; i < NX; ++i) r->d[i] = r->d[i] - (a->d[i] * b->v + b->d[i] * a->v);
+    for (int i = 0; i < NXD; ++i) r->d[i] = r->d[i] - (a->d[i] * b->v + b->d[i] * a->v);
 }
 /* r += a * b */
 static inline void accumulatex(dx *r, const dx *a, const dx *b) {
     r->v += a->v * b->v;
-    for (int i = 0; i < NX; ++i) r->d[i] += a->d[i] * b->v + b->d[i] * a->v;
+    for (int i = 0; i < NXD; ++i) r->d[i] += a->d[i] * b->v + b->d[i] * a->v;
 }
 static inline dx dotx(const dx *a, const dx *b) { return addx(addx(mulx(a[0], b[0]), mulx(a[1], b[1])), mulx(a[2], b[2])); }
 static inline void crossx(const dx *a, const dx *b, dx *out) {
@@ -55,20 +59,20 @@ static inline dx cross2x(const dx *a, const dx *b) { return subx(mulx(a[0], b[1]
 typedef struct { double v, d[NP]; } dp;
 
 static inline dp constp(double v) { dp r; memset(&r, 0, sizeof r); r.v = v; return r; }
-static inline dp addp(dp a, dp b) { dp r; r.v = a.v + b.v; for (int i = 0; i < NP; ++i) r.d[i] = a.d[i] + b.d[i]; return r; }
-static inline dp subp(dp a, dp b) { dp r; r.v = a.v - b.v; for (int i = 0; i < NP; ++i) r.d[i] = a.d[i] - b.d[i]; return r; }
-static inline dp mulp(dp a, dp b) { dp r; r.v = a.v * b.v; for (int i = 0; i < NP; ++i) r.d[i] = a.d[i] * b.v + b.d[i] * a.v; return r; }
-static inline dp scalep(dp a, double s) { dp r; r.v = a.v * s; for (int i = 0; i < NP; ++i) r.d[i] = a.d[i] * s; return r; }
-static inline dp negp(dp a) { dp r; r.v = -a.v; for (int i = 0; i < NP; ++i) r.d[i] = -a.d[i]; return r; }
+static inline dp addp(dp a, dp b) { dp r; r.v = a.v + b.v; for (int i = 0; i < NPD; ++i) r.d[i] = a.d[i] + b.d[i]; return r; }
+static inline dp subp(dp a, dp b) { dp r; r.v = a.v - b.v; for (int i = 0; i < NPD; ++i) r.d[i] = a.d[i] - b.d[i]; return r; }
+static inline dp mulp(dp a, dp b) { dp r; r.v = a.v * b.v; for (int i = 0; i < NPD; ++i) r.d[i] = a.d[i] * b.v + b.d[i] * a.v; return r; }
+static inline dp scalep(dp a, double s) { dp r; r.v = a.v * s; for (int i = 0; i < NPD; ++i) r.d[i] = a.d[i] * s; return r; }
+static inline dp negp(dp a) { dp r; r.v = -a.v; for (int i = 0; i < NPD; ++i) r.d[i] = -a.d[i]; return r; }
 static inline dp divp(dp a, dp b) {
     dp r; double inverse = 1.0 / b.v; r.v = a.v * inverse;
-    for (int i = 0; i < NP; ++i) r.d[i] = (a.d[i] - b.d[i] * r.v) * inverse;
+    for (int i = 0; i < NPD; ++i) r.d[i] = (a.d[i] - b.d[i] * r.v) * inverse;
     return r;
 }
 /* r += a * b */
 static inline void accumulatep(dp *r, const dp *a, const dp *b) {
     r->v += a->v * b->v;
-    for (int i = 0; i < NP; ++i) r->d[i] += a->d[i] * b->v + b->d[i] * a->v;
+    for (int i = 0; i < NPD; ++i) r->d[i] += a->d[i] * b->v + b->d[i] * a->v;
 }
 static inline dp cross2p(const dp *a, const dp *b) { return subp(mulp(a[0], b[1]), mulp(a[1], b[0])); }
 
@@ -84,10 +88,9 @@ static void shape_duals_p(const dp *xi, int nodes, dp *N) {
     }
 }
 
-/* xi with sum_k N_k(xi) C_k = P (plane coordinates): closed form for triangles, Newton for
- * bilinear quadrilaterals; the derivatives dxi = J^-1 (dP - sum_k N_k(xi) dC_k) at the root */
+/* xi with sum_k N_k(xi) C_k = P (plane coordinates), in closed form on values */
 static void inverse_map_p(const dp (*C)[2], int nodes, const dp *P, dp *xi) {
-    double x[2] = {0.0, 0.0}, N[4], dN[4][2], J[2][2];
+    double x[2];
     if (nodes == 3) {
         double A00 = C[1][0].v - C[0][0].v, A01 = C[2][0].v - C[0][0].v;
         double A10 = C[1][1].v - C[0][1].v, A11 = C[2][1].v - C[0][1].v;
@@ -96,25 +99,15 @@ static void inverse_map_p(const dp (*C)[2], int nodes, const dp *P, dp *xi) {
         x[0] = (A11 * o0 - A01 * o1) / det;
         x[1] = (A00 * o1 - A10 * o0) / det;
     } else {
-        for (int iteration = 0; iteration < 20; ++iteration) {
-            shape_values(x[0], x[1], 4, N, dN);
-            double residual[2];
-            for (int c = 0; c < 2; ++c) {
-                residual[c] = -P[c].v;
-                for (int k = 0; k < 4; ++k) residual[c] += N[k] * C[k][c].v;
-                for (int d = 0; d < 2; ++d) {
-                    J[c][d] = 0.0;
-                    for (int k = 0; k < 4; ++k) J[c][d] += C[k][c].v * dN[k][d];
-                }
-            }
-            double det = J[0][0] * J[1][1] - J[0][1] * J[1][0];
-            double step0 = (J[1][1] * residual[0] - J[0][1] * residual[1]) / det;
-            double step1 = (J[0][0] * residual[1] - J[1][0] * residual[0]) / det;
-            x[0] -= step0; x[1] -= step1;
-            if (fabs(step0) < 1e-15 * (1.0 + fabs(x[0])) && fabs(step1) < 1e-15 * (1.0 + fabs(x[1]))) break;
-        }
+        double corners[4][2], point[2] = {P[0].v, P[1].v};
+        for (int k = 0; k < 4; ++k) { corners[k][0] = C[k][0].v; corners[k][1] = C[k][1].v; }
+        bilinear_inverse((const double (*)[2])corners, point, x);
     }
-    /* one Newton step in dual arithmetic at x: xi = x - J^-1 F(x) */
+    /* the root's derivatives by the implicit function theorem: dxi = -J^-1 dF at xi,
+     * F = sum_k N_k(xi) C_k - P */
+    for (int a = 0; a < 2; ++a) xi[a] = constp(x[a]);
+#if DERIVATIVES
+    double N[4], dN[4][2], J[2][2];
     shape_values(x[0], x[1], nodes, N, dN);
     dp F[2];
     for (int c = 0; c < 2; ++c) {
@@ -127,10 +120,9 @@ static void inverse_map_p(const dp (*C)[2], int nodes, const dp *P, dp *xi) {
     }
     double det = J[0][0] * J[1][1] - J[0][1] * J[1][0];
     double I[2][2] = {{J[1][1] / det, -J[0][1] / det}, {-J[1][0] / det, J[0][0] / det}};
-    for (int a = 0; a < 2; ++a) {
-        xi[a] = constp(x[a]);
-        xi[a] = subp(xi[a], addp(scalep(F[0], I[a][0]), scalep(F[1], I[a][1])));
-    }
+    for (int a = 0; a < 2; ++a)
+        for (int i = 0; i < NP; ++i) xi[a].d[i] = -(I[a][0] * F[0].d[i] + I[a][1] * F[1].d[i]);
+#endif
 }
 
 /* A (ns x ns) with Phi = A N biorthogonal on the whole slave facet: A = D_e M_e^-1, for
@@ -488,3 +480,5 @@ static int pair_general(long p, sizes_t z, const double *xsv, const double *xmv,
     return 1;
 }
 #undef SEED
+#undef NXD
+#undef NPD
