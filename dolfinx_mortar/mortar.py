@@ -608,13 +608,16 @@ class MortarInterface:
                    all_master_facets: np.ndarray) -> None:
         """The stencils of a search's candidate ``pairs`` and what the assembly reads of
         them (their multipliers, crosspoints; a new pattern version)."""
-        # the last search's per-pair arrays go before the new ones are made
+        # the last search's per-pair arrays go before the new ones are made; its slave
+        # surface's stars stay while they describe the same surface
+        slave_surface = None if self.stencil is None else self.stencil.slave_surface
         self.stencil = self.pair_slave_facets = self.pair_multipliers = None
         self.pair_crosspoint = None
         stencil = self._stencil_type.build(
             self._node_blocks, self._node_x, all_slave_facets,
             self.slave.facets.astype(np.int64), all_master_facets, pairs,
-            normals=self.normals, nodal_frames=self.scalar_gradients)
+            normals=self.normals, nodal_frames=self.scalar_gradients,
+            slave_surface=slave_surface)
         if self.basis == "dual":
             stencil = covered.CoveredStencil(
                 stencil, coupled=self.configuration != "reference",

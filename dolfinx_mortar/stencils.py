@@ -133,11 +133,14 @@ class PairStencil:
         self.nodes = nodes
         self.present = present
         self.slave_facets = slave_facets
+        self.slave_surface: SlaveSurfaceStars | None = None
+        """3D: the slave surface's stars, for the next search's stencil"""
 
     @classmethod
     def build(cls, node_blocks: np.ndarray, node_x: np.ndarray, all_slave_facets: np.ndarray,
               local_slave_facets: np.ndarray, all_master_facets: np.ndarray, pairs: np.ndarray,
-              *, normals: str = "averaged", nodal_frames: bool = False) -> PairStencil:
+              *, normals: str = "averaged", nodal_frames: bool = False,
+              slave_surface: SlaveSurfaceStars | None = None) -> PairStencil:
         """Stencils of ``pairs`` (local slave facet, index into ``all_master_facets``).
 
         Args:
@@ -149,6 +152,8 @@ class PairStencil:
             normals: the normal option (3D: the averaged normals' stars enter the stencil).
             nodal_frames: 3D: the stars also with the ``slave`` and ``master`` options
                 (friction's tangent frames are built on the averaged normals).
+            slave_surface: 3D, the last search's :class:`SlaveSurfaceStars`, taken over
+                while it describes the same surface.
         """
         raise NotImplementedError
 
@@ -305,7 +310,7 @@ class Line2Stencil(PairStencil):
 
     @classmethod
     def build(cls, node_blocks, node_x, all_slave_facets, local_slave_facets, all_master_facets,
-              pairs, *, normals="averaged", nodal_frames=False):
+              pairs, *, normals="averaged", nodal_frames=False, slave_surface=None):
         """The neighbours p, q are matched by global block among all slave facets known
         here (this rank's and those other ranks sent); they enter the stencil whatever
         the normal option."""
@@ -347,6 +352,27 @@ class Line2Stencil(PairStencil):
         return self._kernel_gradients(q, rows, terms)
 
 
+class SlaveSurfaceStars:
+    """The slave nodes known here, one node-table row per global block, and the stars of
+    their averaged normals (:class:`~dolfinx_mortar.normals.NormalStars`): topology of the
+    slave surface, made once and taken over by the next search's stencil while the slave
+    facets and the node table's blocks are the same."""
+
+    def __init__(self, node_blocks: np.ndarray, all_slave_facets: np.ndarray):
+        self._node_blocks, self._facets = node_blocks.copy(), all_slave_facets.copy()
+        self.blocks, representative, inverse = np.unique(
+            node_blocks[all_slave_facets], return_index=True, return_inverse=True)
+        self.table_rows = all_slave_facets.reshape(-1)[representative]
+        self.stars = normals_module.NormalStars(inverse.reshape(all_slave_facets.shape),
+                                                self.table_rows.size)
+
+    def describes(self, node_blocks: np.ndarray, all_slave_facets: np.ndarray) -> bool:
+        return (self._node_blocks.shape == node_blocks.shape
+                and self._facets.shape == all_slave_facets.shape
+                and np.array_equal(self._node_blocks, node_blocks)
+                and np.array_equal(self._facets, all_slave_facets))
+
+
 class Surface3Stencil(PairStencil):
     """3D pairs: slave facet nodes, master facet nodes, and the stars of the slave normals.
 
@@ -379,7 +405,7 @@ class Surface3Stencil(PairStencil):
 
     @classmethod
     def build(cls, node_blocks, node_x, all_slave_facets, local_slave_facets, all_master_facets,
-              pairs, *, normals="averaged", nodal_frames=False):
+              pairs, *, normals="averaged", nodal_frames=False, slave_surface=None):
         ns = local_slave_facets.shape[1]
         nm = all_master_facets.shape[1]
         facet = pairs[:, 0]
@@ -388,12 +414,10 @@ class Surface3Stencil(PairStencil):
         if normals != "averaged" and not nodal_frames:
             nodes = np.concatenate([slave, master], axis=1)
             return cls(nodes, np.ones(nodes.shape, dtype=bool), facet, ns, nm, 0, None, None)
-        # the slave nodes known here, one row per global block
-        blocks, representative, inverse = np.unique(
-            node_blocks[all_slave_facets], return_index=True, return_inverse=True)
-        table_rows = all_slave_facets.reshape(-1)[representative]
-        star_facets = inverse.reshape(all_slave_facets.shape)
-        stars = normals_module.NormalStars(star_facets, table_rows.size)
+        surface = slave_surface
+        if surface is None or not surface.describes(node_blocks, all_slave_facets):
+            surface = SlaveSurfaceStars(node_blocks, all_slave_facets)
+        blocks, table_rows, stars = surface.blocks, surface.table_rows, surface.stars
         star = stars.star
         max_star = star.shape[1]
         # (int32: a pair has ~30 stencil slots, kept from one search to the next)
@@ -416,7 +440,10 @@ class Surface3Stencil(PairStencil):
         nodes[:, ns + nm:] = facet_stars[facet]
         present = nodes >= 0
         np.maximum(nodes, 0, out=nodes)  # absent slots: node 0, never read
-        return cls(nodes, present, facet, ns, nm, max_star, (table_rows, stars), pair_star_rows)
+        stencil = cls(nodes, present, facet, ns, nm, max_star, (table_rows, stars),
+                      pair_star_rows)
+        stencil.slave_surface = surface
+        return stencil
 
     @property
     def slave_slots(self) -> np.ndarray:

@@ -238,3 +238,44 @@ def test_contact_residual_taylor(cell, normals, integration, basis):
         remainders.append(np.linalg.norm(residual(w) - r0 - h * Jdu))
     slopes = np.diff(np.log(remainders)) / np.diff(np.log(steps))
     assert np.all(np.abs(slopes - 2.0) < 0.1), (slopes, remainders)
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("basis", ["standard", "dual"])
+def test_a_new_search_takes_over_the_slave_surface_stars(basis):
+    """The averaged normals' stars are topology of the slave surface: a new search keeps them
+    (the same object), and the weighted gaps and the gap Jacobian are those of an interface
+    that searched once; stars of other facets are not taken for these."""
+    from dolfinx_mortar.stencils import SlaveSurfaceStars
+
+    tagged = two_blocks("hexahedron", 3, 4)
+    u = bent_displacement(tagged)
+    searched_again = interface(tagged, u, basis=basis)
+
+    def surface(mortar):
+        return mortar.stencil.slave_surface
+
+    kept = surface(searched_again)
+    assert kept is not None
+    u.x.array[:] *= 1.5
+    searched_again.reuse.invalidate()
+    searched_again.update(u)
+    assert surface(searched_again) is kept
+    fresh = interface(tagged, u, basis=basis)
+    assert surface(fresh) is not kept
+    np.testing.assert_array_equal(surface(fresh).stars.star, kept.stars.star)
+    np.testing.assert_allclose(searched_again.weighted_gap().array, fresh.weighted_gap().array,
+                               rtol=0, atol=1e-15)
+    G_again, G_fresh = searched_again.gap_jacobian(), fresh.gap_jacobian()
+    difference = G_again.copy()
+    difference.axpy(-1.0, G_fresh)
+    assert difference.norm() <= 1e-14 * G_fresh.norm()
+    difference.destroy()
+    node_blocks = np.arange(8)
+    square = np.array([[0, 1, 2, 3]])
+    stars = SlaveSurfaceStars(node_blocks, square)
+    assert stars.describes(node_blocks, square.copy())
+    assert not stars.describes(node_blocks, np.array([[0, 1, 2, 4]]))
+    assert not stars.describes(node_blocks[::-1].copy(), square)
+    for mortar in (searched_again, fresh):
+        mortar.destroy()

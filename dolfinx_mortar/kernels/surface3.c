@@ -830,20 +830,28 @@ static void bilinear_root(const double (*C)[2], const double *P, double *x) {
     }
 }
 
-/* The same in closed form: with q = P - a = b x0 + c x1 + d x0 x1, x0 is the root of
- * (b x d) x0^2 + (b x c - q x d) x0 - q x c = 0 that tends to the parallelogram's as b x d -> 0
- * (in the form that does not cancel), x1 = (q - b x0) . v / v . v along v = c + d x0. Newton
- * from the centre where that root is not a point of the facet. */
-static void bilinear_inverse(const double (*C)[2], const double *P, double *x) {
-    double a[2] = {0.0, 0.0}, b[2] = {0.0, 0.0}, c[2] = {0.0, 0.0}, d[2] = {0.0, 0.0};
+/* a bilinear quadrilateral's map sum_k N_k(x) C_k = a + b x0 + c x1 + d x0 x1 */
+typedef struct { double corners[4][2], a[2], b[2], c[2], d[2]; } bilinear_t;
+
+static void bilinear_coefficients(const double (*C)[2], bilinear_t *f) {
+    for (int e = 0; e < 2; ++e) f->a[e] = f->b[e] = f->c[e] = f->d[e] = 0.0;
     for (int k = 0; k < 4; ++k) {
         double s = QUAD_SIGNS[k][0], t = QUAD_SIGNS[k][1];
         for (int e = 0; e < 2; ++e) {
-            a[e] += 0.25 * C[k][e]; b[e] += 0.25 * s * C[k][e];
-            c[e] += 0.25 * t * C[k][e]; d[e] += 0.25 * s * t * C[k][e];
+            f->corners[k][e] = C[k][e];
+            f->a[e] += 0.25 * C[k][e]; f->b[e] += 0.25 * s * C[k][e];
+            f->c[e] += 0.25 * t * C[k][e]; f->d[e] += 0.25 * s * t * C[k][e];
         }
     }
-    double q[2] = {P[0] - a[0], P[1] - a[1]};
+}
+
+/* x with a + b x0 + c x1 + d x0 x1 = P in closed form: with q = P - a, x0 is the root of
+ * (b x d) x0^2 + (b x c - q x d) x0 - q x c = 0 that tends to the parallelogram's as b x d -> 0
+ * (in the form that does not cancel), x1 = (q - b x0) . v / v . v along v = c + d x0. Newton
+ * from the centre where that root is not a point of the facet. */
+static void bilinear_inverse(const bilinear_t *f, const double *P, double *x) {
+    const double *b = f->b, *c = f->c, *d = f->d;
+    double q[2] = {P[0] - f->a[0], P[1] - f->a[1]};
     double A = b[0] * d[1] - b[1] * d[0];
     double B = (b[0] * c[1] - b[1] * c[0]) - (q[0] * d[1] - q[1] * d[0]);
     double K = -(q[0] * c[1] - q[1] * c[0]);
@@ -855,7 +863,7 @@ static void bilinear_inverse(const double (*C)[2], const double *P, double *x) {
     x[1] = (r[0] * v[0] + r[1] * v[1]) / (v[0] * v[0] + v[1] * v[1]);
     if (!(fabs(x[0]) <= 1.5 && fabs(x[1]) <= 1.5)) {
         x[0] = x[1] = 0.0;
-        bilinear_root(C, P, x);
+        bilinear_root((const double (*)[2])f->corners, P, x);
     }
 }
 

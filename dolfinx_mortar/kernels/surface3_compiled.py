@@ -413,9 +413,17 @@ class _Screened:
         for name in _VALUES:
             self._parts[name].append(np.take(out[name], contributing, axis=0))
 
-    def values(self) -> dict[str, np.ndarray]:
-        return {name: np.concatenate(parts) if parts else np.zeros((0,) + self.shapes[name])
-                for name, parts in self._parts.items()}
+    def take_values(self) -> dict[str, np.ndarray]:
+        """The kept values, joined one output at a time, each output's chunks let go as it is
+        joined (so the join holds one output twice, not all of them; a second call has
+        none)."""
+        joined = {}
+        for name in _VALUES:
+            parts, self._parts[name] = self._parts[name], []
+            joined[name] = (np.concatenate(parts) if parts
+                            else np.zeros((0,) + self.shapes[name]))
+            del parts
+        return joined
 
 
 def _screen_values_only(call: _Call, n: int, arrays, cross) -> _Screened:
@@ -489,7 +497,7 @@ def evaluate(geometry: PairGeometry, options: KernelOptions,
         screened = _screen_values_only(call, n, arrays, cross)
     else:
         screened, on_master, kept = _screen_element_based(call, n, arrays, cross, slave_facet)
-    values = screened.values()
+    values = screened.take_values()
     valid = screened.valid.view(bool)
     rows = np.flatnonzero(valid)
     source = CompiledGradients(rows, call, *arrays(rows), cross, on_master, kept)

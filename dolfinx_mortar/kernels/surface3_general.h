@@ -88,8 +88,10 @@ static void shape_duals_p(const dp *xi, int nodes, dp *N) {
     }
 }
 
-/* xi with sum_k N_k(xi) C_k = P (plane coordinates), in closed form on values */
-static void inverse_map_p(const dp (*C)[2], int nodes, const dp *P, dp *xi) {
+/* xi with sum_k N_k(xi) C_k = P (plane coordinates), in closed form on values (map: the
+ * quadrilateral's coefficients, unread for triangles) */
+static void inverse_map_p(const dp (*C)[2], int nodes, const bilinear_t *map, const dp *P,
+                          dp *xi) {
     double x[2];
     if (nodes == 3) {
         double A00 = C[1][0].v - C[0][0].v, A01 = C[2][0].v - C[0][0].v;
@@ -99,9 +101,8 @@ static void inverse_map_p(const dp (*C)[2], int nodes, const dp *P, dp *xi) {
         x[0] = (A11 * o0 - A01 * o1) / det;
         x[1] = (A00 * o1 - A10 * o0) / det;
     } else {
-        double corners[4][2], point[2] = {P[0].v, P[1].v};
-        for (int k = 0; k < 4; ++k) { corners[k][0] = C[k][0].v; corners[k][1] = C[k][1].v; }
-        bilinear_inverse((const double (*)[2])corners, point, x);
+        double point[2] = {P[0].v, P[1].v};
+        bilinear_inverse(map, point, x);
     }
     /* the root's derivatives by the implicit function theorem: dxi = -J^-1 dF at xi,
      * F = sum_k N_k(xi) C_k - P */
@@ -344,6 +345,9 @@ static int pair_general(long p, sizes_t z, const double *xsv, const double *xmv,
     /* the integrals of products of N_a, N_k, N_i (slave) and Nm_l (master) over the clip
      * polygon, over the local variables: L_a = int N_a, I_ak, K_al = int N_a Nm_l, T_aki
      * (a <= k <= i), U_ail = int N_a N_i Nm_l (a <= i) */
+    bilinear_t slave_map, master_map;
+    if (ns == 4) bilinear_coefficients((const double (*)[2])S, &slave_map);
+    if (nm == 4) bilinear_coefficients((const double (*)[2])Mp, &master_map);
     dp L[4], I[4][4], K[4][4], T[4][4][4], U[4][4][4];
     memset(L, 0, sizeof L); memset(I, 0, sizeof I); memset(K, 0, sizeof K);
     memset(T, 0, sizeof T); memset(U, 0, sizeof U);
@@ -358,8 +362,8 @@ static int pair_general(long p, sizes_t z, const double *xsv, const double *xmv,
                 P[a] = addp(addp(scalep(centre[a], bary[g][0]), scalep(v0[a], bary[g][1])),
                             scalep(v1[a], bary[g][2]));
             dp W = scalep(cell_area, rule_weights[g]);
-            inverse_map_p((const dp (*)[2])Sl, ns, P, xi);
-            inverse_map_p((const dp (*)[2])Ml, nm, P, eta);
+            inverse_map_p((const dp (*)[2])Sl, ns, &slave_map, P, xi);
+            inverse_map_p((const dp (*)[2])Ml, nm, &master_map, P, eta);
             shape_duals_p(xi, ns, N);
             shape_duals_p(eta, nm, Nm);
             for (int a = 0; a < ns; ++a) {
