@@ -537,44 +537,25 @@ class MonolithicMatrix:
                 [self.diagonal_rows, np.asarray(point_entries[1], dtype=PETSc.IntType)])
         bulk_indptr, bulk_indices = bulk_pattern
         num_bulk = bulk_indptr.size - 1
-        owned = bool(np.all((group_rowmap >= first) & (group_rowmap < first + num_owned)))
         self.mat = PETSc.Mat().create(comm=comm)
         self.mat.setType(PETSc.Mat.Type.AIJ)
         self.mat.setSizes((sizes, sizes))
-        if comm.allreduce(owned, op=MPI.LAND):
-            shape = (num_owned, max(num_global, 1))
-            bulk_ptr = np.concatenate([bulk_indptr, np.full(num_owned - num_bulk, bulk_indptr[-1])])
-            pattern = scipy.sparse.csr_matrix(
-                (np.ones(bulk_indices.size), bulk_indices, bulk_ptr), shape=shape)
-            group_local = np.repeat(group_rowmap.astype(np.int64) - first, np.diff(group_indptr))
-            entry_rows = self._entry_rows.astype(np.int64)
-            extra = scipy.sparse.coo_matrix(
-                (np.ones(group_local.size + entry_rows.size),
-                 (np.concatenate([group_local, entry_rows - first]),
-                  np.concatenate([group_indices, self._entry_cols]))), shape=shape).tocsr()
-            pattern = (pattern + extra).tocsr()
-            pattern.sum_duplicates()
-            pattern.sort_indices()
-            self.mat.setPreallocationCSR((pattern.indptr.astype(PETSc.IntType),
-                                          pattern.indices.astype(PETSc.IntType)))
-        else:
-            preallocator = PETSc.Mat().create(comm=comm)
-            preallocator.setType(PETSc.Mat.Type.PREALLOCATOR)
-            preallocator.setSizes((sizes, sizes))
-            preallocator.setUp()
-            insert = PETSc.InsertMode.INSERT_VALUES
-            preallocator.setValuesIJV(
-                bulk_indptr.astype(PETSc.IntType), bulk_indices.astype(PETSc.IntType),
-                np.zeros(bulk_indices.size), addv=insert,
-                rowmap=np.arange(first, first + num_bulk, dtype=PETSc.IntType))
-            if group_indices.size:
-                preallocator.setValuesIJV(group_indptr, group_indices,
-                                          np.zeros(group_indices.size), addv=insert,
-                                          rowmap=group_rowmap)
-            self._add_diagonal(preallocator, np.zeros(self._entry_rows.size), insert)
-            preallocator.assemble()
-            preallocator.preallocatorPreallocate(self.mat, fill=True)
-            preallocator.destroy()
+        # the pattern of this rank's rows, the others' entries in them received
+        rows = np.concatenate([np.repeat(group_rowmap.astype(np.int64), np.diff(group_indptr)),
+                               self._entry_rows.astype(np.int64)])
+        cols = np.concatenate([group_indices.astype(np.int64), self._entry_cols.astype(np.int64)])
+        rows, cols = _entries_to_owners(comm, first, rows, cols)
+        shape = (num_owned, max(num_global, 1))
+        bulk_ptr = np.concatenate([bulk_indptr, np.full(num_owned - num_bulk, bulk_indptr[-1])])
+        pattern = scipy.sparse.csr_matrix(
+            (np.ones(bulk_indices.size), bulk_indices, bulk_ptr), shape=shape)
+        extra = scipy.sparse.coo_matrix((np.ones(rows.size), (rows - first, cols)),
+                                        shape=shape).tocsr()
+        pattern = (pattern + extra).tocsr()
+        pattern.sum_duplicates()
+        pattern.sort_indices()
+        self.mat.setPreallocationCSR((pattern.indptr.astype(PETSc.IntType),
+                                      pattern.indices.astype(PETSc.IntType)))
         self.mat.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
         self.mat.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True)
         lgmap = PETSc.LGMap().create(np.asarray(local_to_global, dtype=PETSc.IntType), comm=comm)
@@ -601,6 +582,31 @@ class MonolithicMatrix:
     def destroy(self) -> None:
         """Free the PETSc matrix (collective)."""
         self.mat.destroy()
+
+
+def _entries_to_owners(comm: MPI.Intracomm, first: int, rows: np.ndarray,
+                       cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The entries (global rows, cols) in this rank's rows: its own and those the other
+    ranks have there, sent to it (one exchange of counts, one of entries), so that every
+    rank preallocates its rows exactly from a CSR pattern."""
+    if comm.size == 1:
+        return rows, cols
+    starts = np.asarray(comm.allgather(first), dtype=np.int64)
+    owner = np.searchsorted(starts, rows, side="right") - 1
+    mine = owner == comm.rank
+    order = np.flatnonzero(~mine)
+    order = order[np.argsort(owner[order], kind="stable")]
+    send_counts = np.bincount(owner[order], minlength=comm.size).astype(np.int64)
+    receive_counts = np.empty(comm.size, dtype=np.int64)
+    comm.Alltoall(send_counts, receive_counts)
+    outgoing = np.ascontiguousarray(np.stack([rows[order], cols[order]], axis=1))
+    incoming = np.empty((int(receive_counts.sum()), 2), dtype=np.int64)
+    send_starts = np.concatenate([[0], np.cumsum(send_counts)[:-1]])
+    receive_starts = np.concatenate([[0], np.cumsum(receive_counts)[:-1]])
+    comm.Alltoallv([outgoing, (2 * send_counts, 2 * send_starts), MPI.INT64_T],
+                   [incoming, (2 * receive_counts, 2 * receive_starts), MPI.INT64_T])
+    return (np.concatenate([rows[mine], incoming[:, 0]]),
+            np.concatenate([cols[mine], incoming[:, 1]]))
 
 
 def _interleave(blocks: np.ndarray, size: int) -> np.ndarray:

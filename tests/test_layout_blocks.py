@@ -85,3 +85,24 @@ def test_blocks_without_groups():
     indptr, indices, _ = mat.getValuesCSR()
     assert np.array_equal(indptr, np.zeros(5)) and indices.size == 0
     matrix.destroy()
+
+
+@pytest.mark.parallel
+def test_entries_reach_the_ranks_that_own_their_rows():
+    """Each rank's entries, in rows of any rank (some ranks owning none), end up on the rank
+    that owns the row: every entry once, none elsewhere."""
+    from dolfinx_mortar.layout import _entries_to_owners
+
+    comm = MPI.COMM_WORLD
+    sizes = [7, 0, 5, 9][:comm.size] if comm.size > 1 else [7]
+    num_owned = sizes[comm.rank]
+    first = int(sum(sizes[:comm.rank]))
+    rng = np.random.default_rng(11 + comm.rank)
+    rows = rng.integers(0, sum(sizes), 40)
+    cols = rng.integers(0, 1000, 40)
+    got_rows, got_cols = _entries_to_owners(comm, first, rows, cols)
+    assert np.all((got_rows >= first) & (got_rows < first + num_owned))
+    everything = np.concatenate(comm.allgather(np.stack([rows, cols], axis=1)))
+    expected = everything[(everything[:, 0] >= first) & (everything[:, 0] < first + num_owned)]
+    got = np.stack([got_rows, got_cols], axis=1)
+    assert sorted(map(tuple, got)) == sorted(map(tuple, expected))
