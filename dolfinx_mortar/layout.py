@@ -466,17 +466,18 @@ class CooMatrix:
 
     def _lookup(self, groups: np.ndarray) -> np.ndarray:
         """(len(groups), nr, nc) 1 + positions of the groups' blocks, found in the pattern
-        (int32 unless the pattern has 2^31 blocks or more)."""
+        (int32; scipy's lookup, int64, if the pattern has 2^31 blocks or more)."""
+        from .kernels import compiled
+
         blocks = self._blocks
-        rows = blocks["rows"][groups].astype(np.int32)
-        cols = blocks["cols"][groups].astype(np.int32)
+        pattern = blocks["pattern"]
+        rows, cols = blocks["rows"][groups], blocks["cols"][groups]
         shape = (groups.size, rows.shape[1], cols.shape[1])
-        dtype = np.int32 if blocks["count"] < 2**31 - 1 else np.int64
-        if groups.size == 0:
-            return np.zeros(shape, dtype=dtype)
-        found = blocks["pattern"][np.broadcast_to(rows[:, :, None], shape).reshape(-1),
-                                  np.broadcast_to(cols[:, None, :], shape).reshape(-1)]
-        return np.asarray(found, dtype=dtype).reshape(shape)
+        if blocks["count"] < 2**31 - 1:
+            return compiled.pattern_positions(rows, cols, pattern.indptr, pattern.indices)
+        found = pattern[np.broadcast_to(rows[:, :, None], shape).reshape(-1),
+                        np.broadcast_to(cols[:, None, :], shape).reshape(-1)]
+        return np.asarray(found, dtype=np.int64).reshape(shape)
 
     def release_pattern(self) -> None:
         """Drop what only further assemblies need (the block pattern, the groups'

@@ -106,3 +106,37 @@ def test_entries_reach_the_ranks_that_own_their_rows():
     expected = everything[(everything[:, 0] >= first) & (everything[:, 0] < first + num_owned)]
     got = np.stack([got_rows, got_cols], axis=1)
     assert sorted(map(tuple, got)) == sorted(map(tuple, expected))
+
+
+def test_pattern_positions_equal_scipys_lookup():
+    """The compiled lookup of blocks in a pattern equals scipy's fancy indexing of a pattern
+    whose values are 1 + their positions: present entries, absent ones (0), an empty last row
+    and a column no row has, rows with one entry and with many."""
+    import scipy.sparse
+
+    from dolfinx_mortar.kernels import compiled
+
+    rng = np.random.default_rng(5)
+    num_rows, num_cols = 40, 60
+    dense = rng.random((num_rows, num_cols)) < 0.2
+    dense[7] = False
+    dense[8, :] = False
+    dense[8, 3] = True
+    dense[9, :] = True
+    dense[:, num_cols - 1] = False
+    pattern = scipy.sparse.csr_matrix(dense.astype(float))
+    pattern.sort_indices()
+    pattern.data = np.arange(1, pattern.nnz + 1, dtype=np.int32)
+    rows = rng.integers(0, num_rows, (25, 4)).astype(np.int32)
+    rows[0] = [7, 8, 9, num_rows - 1]
+    cols = rng.integers(0, num_cols, (25, 9)).astype(np.int32)
+    cols[0, :3] = [3, 0, num_cols - 1]
+    shape = (25, 4, 9)
+    expected = np.asarray(pattern[np.broadcast_to(rows[:, :, None], shape).reshape(-1),
+                                  np.broadcast_to(cols[:, None, :], shape).reshape(-1)])
+    got = compiled.pattern_positions(rows, cols, pattern.indptr, pattern.indices)
+    np.testing.assert_array_equal(got, expected.reshape(shape))
+    assert (got > 0).any() and (got == 0).any()
+    assert got[0, 1, 0] == pattern.indptr[8] + 1 and got[0, 0].max() == 0
+    with pytest.raises(IndexError):
+        compiled.pattern_positions(rows + num_rows, cols, pattern.indptr, pattern.indices)

@@ -2,7 +2,8 @@
 
 As FFCx compiles dolfinx's form kernels: each C source next to this file (``surface3.c``, the
 3D kernel, which includes its general pair path ``surface3_general.h`` twice and its stencil
-passes ``surface3_stencils.h``; ``line2.c``, the 2D kernel) is its own module, loaded with
+passes ``surface3_stencils.h``; ``line2.c``, the 2D kernel; ``pattern.c``, where the pairs'
+dense blocks go in a sparse pattern) is its own module, loaded with
 :func:`load` (``load("line2")``). Its source (local includes inlined), declarations, the
 compiler flags and the cffi and Python versions are hashed into the module's name; the module
 is compiled once into a cache directory and loaded from there by every later process. The
@@ -132,6 +133,10 @@ int line2_combine(long num_rows, int kept, const double *G, int num_terms,
                   const int *term_start, const int *output, const long *weight_start,
                   const int *weight_step, const double *weights, double *out);
 """,
+    "pattern": """
+int pattern_positions(long n, int nr, int nc, const int *rows, const int *cols,
+                      const long *indptr, const int *indices, int *out);
+""",
 }
 KERNELS = tuple(_CDEFS)
 NUM_VARIABLES = 27  # of a triangle pair; 3 (2 ns + nm) for ns slave and nm master nodes
@@ -248,7 +253,7 @@ def build(compile_args=COMPILE_ARGS, directory: pathlib.Path | None = None,
 
 
 def load(kernel: str = "surface3"):
-    """The compiled module of ``kernel`` (``surface3`` or ``line2``), built or loaded from the
+    """The compiled module of ``kernel`` (one of :data:`KERNELS`), built or loaded from the
     cache on this process's first use."""
     if kernel not in _modules:
         module, info = build(kernel=kernel)
@@ -445,6 +450,36 @@ def pair_quantities_compiled(slave_x, master_x, slave_normals, *, normals: str =
     if status != 0:
         raise RuntimeError(f"pair {-2 - status}: clip polygon with more than 8 vertices")
     out["valid"] = out["valid"].astype(bool)
+    return out
+
+
+def pattern_positions(rows: np.ndarray, cols: np.ndarray, indptr: np.ndarray,
+                      indices: np.ndarray) -> np.ndarray:
+    """(n, nr, nc) int32: 1 + the index into ``indices`` of column ``cols[g, j]`` in row
+    ``rows[g, i]`` of the CSR pattern (``indptr``, ``indices``, each row's columns sorted), 0
+    where the row has no such column; rows (n, nr) and cols (n, nc) are int32 and name rows
+    of the pattern. In C: each group's columns sorted once, each row walked beside them (no
+index array of every entry)."""
+    rows = np.ascontiguousarray(rows, dtype=np.intc)
+    cols = np.ascontiguousarray(cols, dtype=np.intc)
+    indptr = np.ascontiguousarray(indptr, dtype=np.int64)
+    indices = np.ascontiguousarray(indices, dtype=np.intc)
+    if rows.ndim != 2 or cols.ndim != 2 or rows.shape[0] != cols.shape[0]:
+        raise ValueError(f"rows {rows.shape} and cols {cols.shape} must be (n, nr), (n, nc)")
+    if indices.size >= 2**31 - 1:
+        raise ValueError("pattern_positions takes patterns of fewer than 2^31 entries")
+    if rows.size and (rows.min() < 0 or rows.max() >= indptr.size - 1):
+        raise IndexError("a group's row outside the pattern")
+    out = np.empty(rows.shape + (cols.shape[1],), dtype=np.intc)
+    if out.size:
+        module = load("pattern")
+        ffi = module.ffi
+        status = module.lib.pattern_positions(
+            rows.shape[0], rows.shape[1], cols.shape[1], _pointer(ffi, rows, "int *"),
+            _pointer(ffi, cols, "int *"), _pointer(ffi, indptr, "long *"),
+            _pointer(ffi, indices, "int *"), _pointer(ffi, out, "int *"))
+        if status != 0:
+            raise MemoryError("pattern_positions: no memory for a group's column order")
     return out
 
 
