@@ -401,18 +401,24 @@ class CooMatrix:
         count = self._blocks["count"]
         position = self._positions(groups)  # (nr, nc, groups)
         sums = np.zeros((br, bc, count + 1))
+        compiled_sum = position.dtype == np.intc  # (else positions beyond int32: numpy)
+        if compiled_sum:
+            from .kernels import compiled
         if not callable(values):
-            # all at once, entry (i, a, j, b) of every group after the other (np.bincount)
+            # all at once, entry (i, a, j, b) of every group after the other
             values = np.asarray(values, dtype=PETSc.ScalarType)
             expected = nr * br * nc * bc * groups.size
             if values.size != expected:
                 raise ValueError(f"expected {expected} values, got {values.size}")
             values = values.reshape(nr, br, nc, bc, groups.size)
-            where = position.reshape(-1)
-            for a in range(br):
-                for b in range(bc):
-                    weights = np.ascontiguousarray(values[:, a, :, b, :]).reshape(-1)
-                    sums[a, b] = np.bincount(where, weights=weights, minlength=count + 1)
+            if compiled_sum:
+                compiled.pattern_sum(position, values, count, sums)
+            else:
+                where = position.reshape(-1)
+                for a in range(br):
+                    for b in range(bc):
+                        weights = np.ascontiguousarray(values[:, a, :, b, :]).reshape(-1)
+                        sums[a, b] = np.bincount(where, weights=weights, minlength=count + 1)
             chunk, values = None, None
         step = max(int(chunk or groups.size), 1)
         for start in range(0, groups.size if values is not None else 0, step):
@@ -423,6 +429,9 @@ class CooMatrix:
             if part.size != expected:
                 raise ValueError(f"expected {expected} values, got {part.size}")
             part = part.reshape(nr, br, nc, bc, stop - start)
+            if compiled_sum:
+                compiled.pattern_sum(position, part, count, sums, start, group_major=True)
+                continue
             where = position[..., start:stop].transpose(2, 0, 1).reshape(-1).astype(np.intp)
             for a in range(br):
                 for b in range(bc):
@@ -449,7 +458,7 @@ class CooMatrix:
         blocks = self._blocks
         last = blocks["last"]
         if last is None:
-            result = np.ascontiguousarray(self._lookup(groups).transpose(1, 2, 0))
+            result = self._lookup(groups)
         elif np.array_equal(last[0], groups):
             return last[1]
         else:
@@ -457,15 +466,17 @@ class CooMatrix:
             where[last[0]] = np.arange(last[0].size)
             index = where[groups]
             known = index >= 0
-            result = np.empty(last[1].shape[:2] + (groups.size,), dtype=last[1].dtype)
-            result[..., known] = last[1][..., index[known]]
-            if not known.all():
-                result[..., ~known] = self._lookup(groups[~known]).transpose(1, 2, 0)
+            if known.any():
+                result = np.take(last[1], np.where(known, index, 0), axis=2)
+                if not known.all():
+                    result[..., ~known] = self._lookup(groups[~known])
+            else:
+                result = self._lookup(groups)
         blocks["last"] = (groups.copy(), result)
         return result
 
     def _lookup(self, groups: np.ndarray) -> np.ndarray:
-        """(len(groups), nr, nc) 1 + positions of the groups' blocks, found in the pattern
+        """(nr, nc, len(groups)) 1 + positions of the groups' blocks, found in the pattern
         (int32; scipy's lookup, int64, if the pattern has 2^31 blocks or more)."""
         from .kernels import compiled
 
@@ -477,7 +488,8 @@ class CooMatrix:
             return compiled.pattern_positions(rows, cols, pattern.indptr, pattern.indices)
         found = pattern[np.broadcast_to(rows[:, :, None], shape).reshape(-1),
                         np.broadcast_to(cols[:, None, :], shape).reshape(-1)]
-        return np.asarray(found, dtype=np.int64).reshape(shape)
+        return np.ascontiguousarray(np.asarray(found, dtype=np.int64).reshape(shape)
+                                    .transpose(1, 2, 0))
 
     def release_pattern(self) -> None:
         """Drop what only further assemblies need (the block pattern, the groups'

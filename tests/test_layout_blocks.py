@@ -135,8 +135,44 @@ def test_pattern_positions_equal_scipys_lookup():
     expected = np.asarray(pattern[np.broadcast_to(rows[:, :, None], shape).reshape(-1),
                                   np.broadcast_to(cols[:, None, :], shape).reshape(-1)])
     got = compiled.pattern_positions(rows, cols, pattern.indptr, pattern.indices)
-    np.testing.assert_array_equal(got, expected.reshape(shape))
+    np.testing.assert_array_equal(got, expected.reshape(shape).transpose(1, 2, 0))
     assert (got > 0).any() and (got == 0).any()
-    assert got[0, 1, 0] == pattern.indptr[8] + 1 and got[0, 0].max() == 0
+    assert got[1, 0, 0] == pattern.indptr[8] + 1 and got[0, :, 0].max() == 0
     with pytest.raises(IndexError):
         compiled.pattern_positions(rows + num_rows, cols, pattern.indptr, pattern.indices)
+
+
+@pytest.mark.parametrize("block_shape", [(1, 1), (3, 2)])
+def test_pattern_sum_adds_as_bincount_and_add_at(block_shape):
+    """The compiled sum of the groups' values into the pattern gives np.bincount's bits (all
+    groups at once, entries in (i, j, g) order) and np.add.at's (chunk by chunk, group by
+    group), dropped entries in slot 0; a position outside the pattern is refused."""
+    from dolfinx_mortar.kernels import compiled
+
+    br, bc = block_shape
+    rng = np.random.default_rng(9)
+    nr, nc, n, count = 4, 5, 30, 50
+    positions = rng.integers(0, count + 1, (nr, nc, n)).astype(np.intc)
+    shape = (nr, br, nc, bc, n)
+    values = rng.standard_normal(shape) * 10.0 ** rng.integers(-8, 8, shape)
+    expected = np.zeros((br, bc, count + 1))
+    for a in range(br):
+        for b in range(bc):
+            weights = np.ascontiguousarray(values[:, a, :, b, :]).reshape(-1)
+            expected[a, b] = np.bincount(positions.reshape(-1), weights, minlength=count + 1)
+    np.testing.assert_array_equal(compiled.pattern_sum(positions, values, count), expected)
+    chunked = np.zeros((br, bc, count + 1))
+    summed = np.zeros((br, bc, count + 1))
+    for start in range(0, n, 7):
+        stop = min(n, start + 7)
+        part = np.ascontiguousarray(values[..., start:stop])
+        where = positions[..., start:stop].transpose(2, 0, 1).reshape(-1)
+        for a in range(br):
+            for b in range(bc):
+                np.add.at(chunked[a, b], where, part[:, a, :, b, :].transpose(2, 0, 1).reshape(-1))
+        compiled.pattern_sum(positions, part, count, summed, start, group_major=True)
+    np.testing.assert_array_equal(summed, chunked)
+    assert not np.array_equal(chunked, expected)  # (the two orders round differently here)
+    positions[0, 0, 0] = count + 1
+    with pytest.raises(IndexError):
+        compiled.pattern_sum(positions, values, count)

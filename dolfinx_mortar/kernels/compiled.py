@@ -136,6 +136,8 @@ int line2_combine(long num_rows, int kept, const double *G, int num_terms,
     "pattern": """
 int pattern_positions(long n, int nr, int nc, const int *rows, const int *cols,
                       const long *indptr, const int *indices, int *out);
+void pattern_sum(long n, int nr, int br, int nc, int bc, const int *positions, long stride,
+                 const double *values, long count, int group_major, double *sums);
 """,
 }
 KERNELS = tuple(_CDEFS)
@@ -455,8 +457,9 @@ def pair_quantities_compiled(slave_x, master_x, slave_normals, *, normals: str =
 
 def pattern_positions(rows: np.ndarray, cols: np.ndarray, indptr: np.ndarray,
                       indices: np.ndarray) -> np.ndarray:
-    """(n, nr, nc) int32: 1 + the index into ``indices`` of column ``cols[g, j]`` in row
-    ``rows[g, i]`` of the CSR pattern (``indptr``, ``indices``, each row's columns sorted), 0
+    """(nr, nc, n) int32 (the order of :func:`pattern_sum`'s positions): at (i, j, g), 1 +
+    the index into ``indices`` of column ``cols[g, j]`` in row ``rows[g, i]`` of the CSR
+    pattern (``indptr``, ``indices``, each row's columns sorted), 0
     where the row has no such column; rows (n, nr) and cols (n, nc) are int32 and name rows
     of the pattern. In C: each group's columns sorted once, each row walked beside them (no
 index array of every entry)."""
@@ -470,7 +473,7 @@ index array of every entry)."""
         raise ValueError("pattern_positions takes patterns of fewer than 2^31 entries")
     if rows.size and (rows.min() < 0 or rows.max() >= indptr.size - 1):
         raise IndexError("a group's row outside the pattern")
-    out = np.empty(rows.shape + (cols.shape[1],), dtype=np.intc)
+    out = np.empty((rows.shape[1], cols.shape[1], rows.shape[0]), dtype=np.intc)
     if out.size:
         module = load("pattern")
         ffi = module.ffi
@@ -481,6 +484,37 @@ index array of every entry)."""
         if status != 0:
             raise MemoryError("pattern_positions: no memory for a group's column order")
     return out
+
+
+def pattern_sum(positions: np.ndarray, values: np.ndarray, count: int,
+                sums: np.ndarray | None = None, start: int = 0,
+                group_major: bool = False) -> np.ndarray:
+    """sums[a, b, positions[i, j, start + g]] += values[i, a, j, b, g] for the int32
+    ``positions`` (nr, nc, G) of G groups and ``values`` (nr, br, nc, bc, n) of the groups
+    start .. start + n - 1; ``sums`` (br, bc, count + 1), zeros if None, is returned (slot 0
+    takes the dropped entries). Each sum takes its entries in the order (i, j, g), or with
+    ``group_major`` (g, i, j), as np.bincount (np.add.at) over them in that order would."""
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    nr, br, nc, bc, n = values.shape
+    if (positions.dtype != np.intc or not positions.flags.c_contiguous
+            or positions.shape[:2] != (nr, nc) or not 0 <= start <= positions.shape[2] - n):
+        raise ValueError(f"positions {positions.dtype} {positions.shape} do not hold the "
+                         f"groups {start} .. {start + n - 1} of values {values.shape}")
+    if sums is None:
+        sums = np.zeros((br, bc, count + 1))
+    if sums.shape != (br, bc, count + 1) or sums.dtype != np.float64 or not sums.flags.c_contiguous:
+        raise ValueError(f"sums must be contiguous float64 {(br, bc, count + 1)}")
+    part = positions[..., start:start + n]
+    if part.size and (part.min() < 0 or part.max() > count):
+        raise IndexError("a position outside the pattern")
+    if values.size:
+        module = load("pattern")
+        ffi = module.ffi
+        first = ffi.cast("int *", positions.ctypes.data) + start
+        module.lib.pattern_sum(n, nr, br, nc, bc, first, positions.shape[2],
+                               _pointer(ffi, values, "double *"), count, int(group_major),
+                               _pointer(ffi, sums, "double *"))
+    return sums
 
 
 _LINE2_NORMALS = {"averaged": 0, "slave": 1, "master": 2}

@@ -14,10 +14,10 @@ static void sort_columns(int nc, const int *cols, int *order) {
     }
 }
 
-/* out[g, i, j] = 1 + k where indices[k] == cols[g, j] within row rows[g, i] of the CSR pattern
+/* out[i, j, g] = 1 + k where indices[k] == cols[g, j] within row rows[g, i] of the CSR pattern
  * (indptr, indices: each row's columns sorted), 0 where the row has no such column: n groups of
- * nr rows and nc columns. The group's columns are sorted once and each row is walked beside
- * them. Returns -1 if out of memory. */
+ * nr rows and nc columns (out in the order of the groups' values, pattern_sum's). The group's
+ * columns are sorted once and each row is walked beside them. Returns -1 if out of memory. */
 int pattern_positions(long n, int nr, int nc, const int *rows, const int *cols,
                       const long *indptr, const int *indices, int *out) {
     int *order = malloc(sizeof(int) * (size_t)(nc > 0 ? nc : 1));
@@ -26,15 +26,47 @@ int pattern_positions(long n, int nr, int nc, const int *rows, const int *cols,
         const int *group_cols = cols + g * nc;
         sort_columns(nc, group_cols, order);
         for (int i = 0; i < nr; ++i) {
-            int *row_out = out + (g * nr + i) * nc;
+            int *row_out = out + (long)i * nc * n + g;
             long k = indptr[rows[g * nr + i]], stop = indptr[rows[g * nr + i] + 1];
             for (int s = 0; s < nc; ++s) {
                 int j = order[s], column = group_cols[j];
                 while (k < stop && indices[k] < column) ++k;
-                row_out[j] = (k < stop && indices[k] == column) ? (int)(k + 1) : 0;
+                row_out[j * n] = (k < stop && indices[k] == column) ? (int)(k + 1) : 0;
             }
         }
     }
     free(order);
     return 0;
+}
+
+/* sums[a, b, positions[i, j, g]] += values[i, a, j, b, g] over n groups of nr x br rows and
+ * nc x bc columns, positions[i, j, g] at (i nc + j) stride + g (0: a dropped entry, summed
+ * into the unread slot 0); sums is (br, bc, count + 1). Each sum takes its entries in the
+ * order (i, j, g), or with group_major (g, i, j): that of np.bincount over the entries in
+ * either order. */
+void pattern_sum(long n, int nr, int br, int nc, int bc, const int *positions, long stride,
+                 const double *values, long count, int group_major, double *sums) {
+    const long slot = count + 1;
+    if (group_major) {
+        for (long g = 0; g < n; ++g)
+            for (int i = 0; i < nr; ++i)
+                for (int a = 0; a < br; ++a)
+                    for (int j = 0; j < nc; ++j) {
+                        const long where = positions[((long)i * nc + j) * stride + g];
+                        for (int b = 0; b < bc; ++b)
+                            sums[((long)a * bc + b) * slot + where] +=
+                                values[((((long)i * br + a) * nc + j) * bc + b) * n + g];
+                    }
+        return;
+    }
+    for (int i = 0; i < nr; ++i)
+        for (int a = 0; a < br; ++a)
+            for (int j = 0; j < nc; ++j) {
+                const int *where = positions + ((long)i * nc + j) * stride;
+                for (int b = 0; b < bc; ++b) {
+                    const double *v = values + ((((long)i * br + a) * nc + j) * bc + b) * n;
+                    double *s = sums + ((long)a * bc + b) * slot;
+                    for (long g = 0; g < n; ++g) s[where[g]] += v[g];
+                }
+            }
 }
