@@ -157,7 +157,9 @@ class ContactSystem:
                 group_values.append(values)
                 groups.append(offset + blocks[1])
             offset += self._pattern[0][k].shape[0]
-        if group_values:
+        if len(group_values) == 1:  # (one pair's blocks: no copy of them)
+            group_values, groups = group_values[0], groups[0]
+        elif group_values:
             group_values = np.concatenate(group_values, axis=2)
             groups = np.concatenate(groups)
         else:
