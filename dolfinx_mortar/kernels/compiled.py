@@ -1,8 +1,9 @@
 """Compiled mortar kernels: C source compiled at first use through cffi, cached across processes.
 
 As FFCx compiles dolfinx's form kernels: each C source next to this file (``surface3.c``, the
-3D kernel, which includes its general pair path ``surface3_general.h`` twice and its stencil
-passes ``surface3_stencils.h``; ``line2.c``, the 2D kernel; ``pattern.c``, where the pairs'
+3D kernel, which includes its general pair path ``surface3_general.h`` twice, the
+quadrilaterals' inverse maps ``surface3_bilinear.h`` and its stencil passes
+``surface3_stencils.h``; ``line2.c``, the 2D kernel; ``pattern.c``, where the pairs'
 dense blocks go in a sparse pattern) is its own module, loaded with
 :func:`load` (``load("line2")``). Its source (local includes inlined), declarations, the
 compiler flags and the cffi and Python versions are hashed into the module's name; the module
