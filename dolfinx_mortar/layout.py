@@ -483,9 +483,9 @@ class CooMatrix:
         blocks = self._blocks
         pattern = blocks["pattern"]
         rows, cols = blocks["rows"][groups], blocks["cols"][groups]
-        shape = (groups.size, rows.shape[1], cols.shape[1])
         if blocks["count"] < 2**31 - 1:
             return compiled.pattern_positions(rows, cols, pattern.indptr, pattern.indices)
+        shape = (groups.size, rows.shape[1], cols.shape[1])
         found = pattern[np.broadcast_to(rows[:, :, None], shape).reshape(-1),
                         np.broadcast_to(cols[:, None, :], shape).reshape(-1)]
         return np.ascontiguousarray(np.asarray(found, dtype=np.int64).reshape(shape)

@@ -460,10 +460,10 @@ def pattern_positions(rows: np.ndarray, cols: np.ndarray, indptr: np.ndarray,
                       indices: np.ndarray) -> np.ndarray:
     """(nr, nc, n) int32 (the order of :func:`pattern_sum`'s positions): at (i, j, g), 1 +
     the index into ``indices`` of column ``cols[g, j]`` in row ``rows[g, i]`` of the CSR
-    pattern (``indptr``, ``indices``, each row's columns sorted), 0
-    where the row has no such column; rows (n, nr) and cols (n, nc) are int32 and name rows
-    of the pattern. In C: each group's columns sorted once, each row walked beside them (no
-index array of every entry)."""
+    pattern (``indptr``, ``indices``, each row's columns sorted), 0 where the row has no such
+    column; ``rows`` (n, nr) and ``cols`` (n, nc) name rows and columns of the pattern. In C:
+    each group's columns sorted once, each row walked beside them (no index array of every
+    entry)."""
     rows = np.ascontiguousarray(rows, dtype=np.intc)
     cols = np.ascontiguousarray(cols, dtype=np.intc)
     indptr = np.ascontiguousarray(indptr, dtype=np.int64)
