@@ -39,7 +39,8 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy.spatial import cKDTree
+
+from .kernels import compiled
 
 
 def facet_boxes(
@@ -122,52 +123,6 @@ def boxes_overlap(lower_a, upper_a, lower_b, upper_b, margin: float) -> np.ndarr
     )
 
 
-def _size_classes(half: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per box: a class (boxes of one class are within a factor 2 in size) and the size
-    max_k half_k + margin that bounds the box's reach around its centre."""
-    reach = half.max(axis=1) + margin
-    return np.floor(np.log2(np.maximum(reach, np.finfo(float).tiny))).astype(np.int64), reach
-
-
-def _close_centres(slave_lower, slave_upper, master_lower, master_upper,
-                   margin: float) -> tuple[np.ndarray, np.ndarray]:
-    """(slave, master) facet indices of the boxes whose centres are close enough to
-    overlap once grown by ``margin``: k-d trees of the centres, per pair of size classes.
-
-    Overlapping boxes have |centre difference|_k <= half_s,k + half_m,k + 2 margin <= R_k in
-    each coordinate k, R_k the largest such sum of the two classes; the trees hold the
-    centres scaled by 1 / R_k and are asked for the Chebyshev distance 1. Per coordinate:
-    boxes long in one direction (a surface swept across its normal by a large step, 10^3
-    facet lengths on the benchmark's first update) do not widen the search along the
-    surface, which a ball around the centres of radius |R| did (10^8 centre pairs and 12 GB
-    for 10^5 facets).
-    """
-    slave_centre = 0.5 * (slave_lower + slave_upper)
-    master_centre = 0.5 * (master_lower + master_upper)
-    slave_half, master_half = 0.5 * (slave_upper - slave_lower), 0.5 * (master_upper - master_lower)
-    slave_class, _ = _size_classes(slave_half, margin)
-    master_class, _ = _size_classes(master_half, margin)
-    found_slave, found_master = [], []
-    master_groups = [(members, master_half[members].max(axis=0))
-                     for members in (np.flatnonzero(master_class == c)
-                                     for c in np.unique(master_class))]
-    for c in np.unique(slave_class):
-        slave_members = np.flatnonzero(slave_class == c)
-        slave_largest = slave_half[slave_members].max(axis=0)
-        for master_members, master_largest in master_groups:
-            # (1 + 1e-9: rounding of the scaled centres loses no pair; the boxes decide)
-            reach = (slave_largest + master_largest + 2.0 * margin) * (1.0 + 1e-9)
-            reach = np.maximum(reach, np.finfo(float).tiny)
-            slave_tree = cKDTree(slave_centre[slave_members] / reach)
-            master_tree = cKDTree(master_centre[master_members] / reach)
-            close = slave_tree.sparse_distance_matrix(master_tree, 1.0, p=np.inf,
-                                                      output_type="ndarray")
-            found_slave.append(slave_members[close["i"]])
-            found_master.append(master_members[close["j"]])
-    return (np.concatenate(found_slave).astype(np.int64),
-            np.concatenate(found_master).astype(np.int64))
-
-
 def candidate_pairs(
     slave_coordinates: np.ndarray,
     slave_facets: np.ndarray,
@@ -183,13 +138,13 @@ def candidate_pairs(
 
     ``slave_previous`` and ``master_previous`` (the nodes at the previous
     search) make the boxes swept, ``depth`` makes them reach behind each
-    facet (:func:`facet_boxes`). A k-d tree of box
-    centres finds the pairs whose centres are closer, coordinate by coordinate, than
-    overlapping boxes can be (:func:`_close_centres`), then the boxes themselves decide.
-    Boxes are grouped by size (within a factor 2) and each pair of groups is
-    searched with its own radius, so that the few long boxes of nodes that
-    moved far (a diverging iterate) do not widen the search of all the
-    others. Cost O(n log n) in the number of facets for boxes of similar
+    facet (:func:`facet_boxes`). The overlaps are found in C
+    (:func:`~dolfinx_mortar.kernels.compiled.search_boxes`): boxes are grouped by size
+    (within a factor 2) and each pair of groups has a grid whose cells are as wide, in each
+    coordinate, as the centres of two overlapping boxes can be apart, so that the few long
+    boxes of nodes that moved far (a diverging iterate) do not widen the search of all the
+    others, and a surface swept across its normal (long boxes in one direction) is not
+    widened along the surface. Cost O(n log n) in the number of facets for boxes of similar
     size; nothing at all is done when the two surfaces' boxes are apart.
 
     Returns:
@@ -216,22 +171,15 @@ def candidate_pairs(
         master_lower.min(axis=0), master_upper.max(axis=0), margin,
     ):
         return empty
-    slave, master = _close_centres(slave_lower, slave_upper, master_lower, master_upper, margin)
-    # boxes_overlap on the candidates, one coordinate at a time (the same comparisons)
-    keep = np.ones(slave.size, dtype=bool)
-    for k in range(slave_lower.shape[1]):
-        keep &= (slave_lower[:, k] - margin)[slave] <= (master_upper[:, k] + margin)[master]
-        keep &= (master_lower[:, k] - margin)[master] <= (slave_upper[:, k] + margin)[slave]
-    slave, master = slave[keep], master[keep]
+    pairs, _ = compiled.search_boxes(slave_lower, slave_upper, master_lower, master_upper,
+                                     margin)
     if slave_previous is not None or master_previous is not None:
         keep = _near_now_or_crossed(
-            slave_coordinates, slave_facets, slave, master_coordinates, master_facets, master,
-            margin, depth,
+            slave_coordinates, slave_facets, pairs[:, 0], master_coordinates, master_facets,
+            pairs[:, 1], margin, depth,
         )
-        slave, master = slave[keep], master[keep]
-    # sorted by (slave, master): one sort of a combined key (the pairs are distinct)
-    order = np.argsort(slave * master_facets.shape[0] + master)
-    return np.stack([slave[order], master[order]], axis=1)
+        pairs = pairs[keep]
+    return pairs
 
 
 def _near_now_or_crossed(

@@ -338,10 +338,9 @@ class Line2Stencil(PairStencil):
 
     def evaluate(self, node_x: np.ndarray, options: KernelOptions,
                  crosspoint: np.ndarray | None = None) -> PairQuantities:
-        nodes = self.nodes
-        geometry = PairGeometry(
-            slave_x=node_x[nodes[:, 1:3]], master_x=node_x[nodes[:, 4:6]],
-            neighbour_x=node_x[nodes[:, [0, 3]]], has_neighbour=self.has_neighbour)
+        slave_x, master_x, neighbour_x = compiled.line2_gather(self.nodes, node_x)
+        geometry = PairGeometry(slave_x=slave_x, master_x=master_x, neighbour_x=neighbour_x,
+                                has_neighbour=self.has_neighbour)
         return self.kernel.evaluate(geometry, options, crosspoint=crosspoint,
                                     slave_facet=self.slave_facets)
 

@@ -98,6 +98,27 @@ def test_random_pairs(normals, integration, basis, crosspoints):
     assert 200 < valid < 800
 
 
+@pytest.mark.parametrize("normals", NORMALS)
+@pytest.mark.parametrize("integration", ["segment", "element"])
+def test_runs_of_pairs_of_one_slave_facet(normals, integration):
+    """Pairs in runs that share a slave facet, as a search returns them (sorted by slave
+    facet): the kernel keeps a run's slave normals from one pair to the next, and takes them
+    anew where the facet, a neighbour or a neighbour's presence changes within a run."""
+    x, has_neighbour, crosspoint = random_pairs(20, seed=34)
+    run = 6
+    slave = np.repeat(x[:, :4], run, axis=0)
+    tangent = (x[:, 2] - x[:, 1])[:, None, :]
+    shift = np.tile(np.arange(run) - 2.5, x.shape[0])[:, None, None] * 0.3
+    master = np.repeat(x[:, 4:], run, axis=0) + shift * np.repeat(tangent, run, axis=0)
+    pairs = np.concatenate([slave, master], axis=1)
+    has = np.repeat(has_neighbour, run, axis=0)
+    has[3::run, 0] = ~has[3::run, 0]
+    pairs[4::run, 3] += 1e-3
+    valid = assert_agree(pairs, has, normals=normals, integration=integration,
+                         crosspoint=np.repeat(crosspoint, run, axis=0))
+    assert valid > 2 * x.shape[0]
+
+
 @pytest.mark.parametrize("num_gauss_points", [1, 2, 5])
 @pytest.mark.parametrize("integration", ["segment", "element"])
 def test_other_gauss_rules(integration, num_gauss_points):
@@ -356,3 +377,17 @@ def test_modules_have_their_own_names_and_locks():
     assert names["surface3"].startswith("_dolfinx_mortar_surface3_")
     with pytest.raises(ValueError, match="unknown compiled kernel"):
         compiled.module_name(kernel="quad4")
+
+
+def test_gather_reads_the_node_table_as_numpy_indexing_does():
+    rng = np.random.default_rng(35)
+    node_x = rng.normal(size=(50, 2))
+    nodes = rng.integers(0, 50, (200, 6))
+    slave, master, neighbour = compiled.line2_gather(nodes, node_x)
+    assert np.array_equal(slave, node_x[nodes[:, 1:3]])
+    assert np.array_equal(master, node_x[nodes[:, 4:6]])
+    assert np.array_equal(neighbour, node_x[nodes[:, [0, 3]]])
+    for bad in (-1, 50):
+        nodes[17, 2] = bad
+        with pytest.raises(IndexError):
+            compiled.line2_gather(nodes, node_x)

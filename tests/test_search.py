@@ -7,6 +7,7 @@ import pytest
 from mpi4py import MPI
 
 from dolfinx_mortar import kernels, search
+from dolfinx_mortar.kernels import compiled
 
 
 def brute_force_pairs(slave_x, slave_facets, master_x, master_facets, margin,
@@ -151,7 +152,7 @@ def test_swept_pairs_of_a_body_moving_away_are_dropped():
 def test_boxes_swept_across_the_surface_stay_a_narrow_search(gdim):
     """A flat slave surface of n facets swept across its normal by 10^3 facet lengths (the
     first update of benchmarks/mortar_scaling.py from the undeformed surface): the pairs
-    are the brute-force ones, and the k-d trees' centre pairs are few per facet (a ball
+    are the brute-force ones, and the box tests done are few per facet (a ball
     around the centres as wide as the sweep took ~10^3 per facet)."""
     rng = np.random.default_rng(3)
     n, margin = 400, 2e-3
@@ -182,6 +183,44 @@ def test_boxes_swept_across_the_surface_stay_a_narrow_search(gdim):
     overlap = search.boxes_overlap(slave_lower[:, None], slave_upper[:, None],
                                    master_lower[None], master_upper[None], margin)
     assert found.tolist() == np.argwhere(overlap).tolist()  # (all near now: none dropped)
-    close, _ = search._close_centres(slave_lower, slave_upper, master_lower, master_upper,
-                                     margin)
-    assert found.shape[0] <= close.size <= 3 * found.shape[0]
+    pairs, tested = compiled.search_boxes(slave_lower, slave_upper, master_lower, master_upper,
+                                          margin)
+    assert pairs.tolist() == found.tolist()
+    assert found.shape[0] <= tested <= 3 * found.shape[0]
+
+
+@pytest.mark.parametrize("dim", [1, 2, 3])
+def test_search_boxes_equal_the_box_test_of_every_pair(dim):
+    """The compiled search against the O(n^2) box test, in 1 to 3 coordinates, on boxes of
+    sizes over five decades (several size groups and grids), a few of them not finite (the
+    nodes of a diverged iterate): those pair with nothing, the others as the box test says."""
+    rng = np.random.default_rng(dim)
+    margin = 1e-3
+
+    def boxes(n):
+        lower = rng.uniform(0.0, 1.0, (n, dim))
+        upper = lower + 10.0 ** rng.uniform(-4.0, 1.0, (n, 1)) * rng.uniform(0.2, 1.0, (n, dim))
+        return lower, upper
+
+    slave_lower, slave_upper = boxes(400)
+    master_lower, master_upper = boxes(300)
+    slave_lower[7, 0], slave_upper[9, -1], master_upper[5, 0] = np.nan, np.inf, np.nan
+    master_lower[11, -1] = -np.inf
+    pairs, tested = compiled.search_boxes(slave_lower, slave_upper, master_lower, master_upper,
+                                          margin)
+    overlap = search.boxes_overlap(slave_lower[:, None], slave_upper[:, None],
+                                   master_lower[None], master_upper[None], margin)
+    finite = [np.all(np.isfinite(lower) & np.isfinite(upper), axis=1)
+              for lower, upper in ((slave_lower, slave_upper), (master_lower, master_upper))]
+    assert overlap[9].any()  # an infinite box overlaps others by the box test alone
+    overlap &= finite[0][:, None] & finite[1][None, :]
+    assert pairs.tolist() == np.argwhere(overlap).tolist()
+    assert pairs.shape[0] <= tested < overlap.size
+
+
+def test_search_boxes_of_empty_sides():
+    some = np.zeros((3, 2)), np.ones((3, 2))
+    none = np.zeros((0, 2)), np.zeros((0, 2))
+    for sides in ((*some, *none), (*none, *some), (*none, *none)):
+        pairs, tested = compiled.search_boxes(*sides, 0.1)
+        assert pairs.shape == (0, 2) and tested == 0

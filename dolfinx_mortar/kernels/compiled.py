@@ -4,13 +4,12 @@ As FFCx compiles dolfinx's form kernels: each C source next to this file (``surf
 3D kernel, which includes its general pair path ``surface3_general.h`` twice, the
 quadrilaterals' inverse maps ``surface3_bilinear.h`` and its stencil passes
 ``surface3_stencils.h``; ``line2.c``, the 2D kernel; ``pattern.c``, where the pairs'
-dense blocks go in a sparse pattern) is its own module, loaded with
-:func:`load` (``load("line2")``). Its source (local includes inlined), declarations, the
-compiler flags and the cffi and Python versions are hashed into the module's name; the module
-is compiled once into a cache directory and loaded from there by every later process. The
-cache directory is
-``$DOLFINX_MORTAR_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/dolfinx_mortar``, else
-``~/.cache/dolfinx_mortar``.
+dense blocks go in a sparse pattern; ``search.c``, the search's box overlaps) is its own
+module, loaded with :func:`load` (``load("line2")``). Its source (local includes inlined),
+declarations, the compiler flags and the cffi and Python versions are hashed into the module's
+name; the module is compiled once into a cache directory and loaded from there by every later
+process. The cache directory is ``$DOLFINX_MORTAR_CACHE_DIR`` if set, else
+``$XDG_CACHE_HOME/dolfinx_mortar``, else ``~/.cache/dolfinx_mortar``.
 
 Concurrent processes (MPI ranks starting on an empty cache) do not race: the first to take
 an exclusive ``fcntl`` lock on ``<module>.lock`` compiles into a temporary directory inside
@@ -109,6 +108,8 @@ int gather_rows(long num_rows, int k, const double *table, long table_rows, cons
                 long index_stride, double *out);
 """,
     "line2": """
+int line2_gather(long n, const long *nodes, const double *node_x, long table_rows,
+                 double *slave, double *master, double *neighbour);
 void line2_screen(long n, const double *slave, const double *master, const double *neighbour,
                   const unsigned char *has_neighbour, int normals, int element,
                   int num_points, const double *points, unsigned char *valid,
@@ -139,6 +140,13 @@ int pattern_positions(long n, int nr, int nc, const int *rows, const int *cols,
                       const long *indptr, const int *indices, int *out);
 void pattern_sum(long n, int nr, int br, int nc, int bc, const int *positions, long stride,
                  const double *values, long count, int group_major, double *sums);
+""",
+    "search": """
+int search_boxes(long ns, long nm, int dim, const double *slave_lower,
+                 const double *slave_upper, const double *master_lower,
+                 const double *master_upper, double margin, long **pairs, long *num_pairs,
+                 long *tested);
+void search_free(long *pairs);
 """,
 }
 KERNELS = tuple(_CDEFS)
@@ -516,6 +524,55 @@ def pattern_sum(positions: np.ndarray, values: np.ndarray, count: int,
                                _pointer(ffi, values, "double *"), count, int(group_major),
                                _pointer(ffi, sums, "double *"))
     return sums
+
+
+def search_boxes(slave_lower: np.ndarray, slave_upper: np.ndarray, master_lower: np.ndarray,
+                 master_upper: np.ndarray, margin: float) -> tuple[np.ndarray, int]:
+    """(pairs (n, 2) int64, box tests done): every (slave, master) pair of boxes (lower, upper:
+    (num, dim) each) that overlap once each is grown by ``margin``, sorted by slave then
+    master. A box with a corner that is not finite (the nodes of a diverged iterate) pairs
+    with nothing. In C: per pair of size groups, the masters sorted by their cell of a grid
+    as wide as two boxes of the groups, each slave tested against its cell and the
+    neighbouring ones."""
+    boxes = [np.ascontiguousarray(b, dtype=np.float64)
+             for b in (slave_lower, slave_upper, master_lower, master_upper)]
+    dim = boxes[0].shape[1]
+    if (any(b.ndim != 2 or b.shape[1] != dim for b in boxes) or not 1 <= dim <= 3
+            or boxes[0].shape != boxes[1].shape or boxes[2].shape != boxes[3].shape):
+        raise ValueError("boxes must be (n, dim) lower and upper corners, dim 1-3")
+    module = load("search")
+    ffi, lib = module.ffi, module.lib
+    pairs, count, tested = ffi.new("long **"), ffi.new("long *"), ffi.new("long *")
+    status = lib.search_boxes(boxes[0].shape[0], boxes[2].shape[0], dim,
+                              *(_pointer(ffi, b, "double *") for b in boxes), float(margin),
+                              pairs, count, tested)
+    if status != 0:
+        raise MemoryError("search_boxes: out of memory")
+    try:
+        found = np.frombuffer(ffi.buffer(pairs[0], 16 * count[0]), dtype=np.int64).copy()
+    finally:
+        lib.search_free(pairs[0])
+    return found.reshape(-1, 2), int(tested[0])
+
+
+def line2_gather(nodes: np.ndarray, node_x: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(slave, master, neighbour), each (n, 2, 2): the positions in the node table ``node_x``
+    (rows, 2) of the 2D pairs' stencil nodes ``nodes`` (n, 6: p, a, b, q, c, d; slave a b,
+    master c d, neighbours p q), in one pass."""
+    nodes = np.ascontiguousarray(nodes, dtype=np.int64)
+    node_x = np.ascontiguousarray(node_x, dtype=np.float64)
+    if nodes.ndim != 2 or nodes.shape[1] != 6 or node_x.ndim != 2 or node_x.shape[1] != 2:
+        raise ValueError(f"nodes {nodes.shape} must be (n, 6), node_x {node_x.shape} (rows, 2)")
+    out = tuple(np.empty((nodes.shape[0], 2, 2)) for _ in range(3))
+    if nodes.size:
+        module = load("line2")
+        ffi = module.ffi
+        status = module.lib.line2_gather(
+            nodes.shape[0], _pointer(ffi, nodes, "long *"), _pointer(ffi, node_x, "double *"),
+            node_x.shape[0], *(_pointer(ffi, o, "double *") for o in out))
+        if status != 0:
+            raise IndexError("a stencil node outside the node table")
+    return out
 
 
 _LINE2_NORMALS = {"averaged": 0, "slave": 1, "master": 2}

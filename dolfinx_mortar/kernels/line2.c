@@ -125,6 +125,36 @@ static void gather(const double *slave, const double *master, const double *neig
     x[8] = m[0]; x[9] = m[1]; x[10] = m[2]; x[11] = m[3];
 }
 
+/* The arrays gather reads, from the node table node_x (table_rows, 2) and the pairs' stencil
+ * nodes (n, 6: p, a, b, q, c, d): slave (a, b), master (c, d), neighbour (p, q), each (n, 2, 2).
+ * Returns -1 for a node outside the table. */
+int line2_gather(long n, const long *nodes, const double *node_x, long table_rows,
+                 double *slave, double *master, double *neighbour) {
+    static const int slot[6] = {0, 0, 1, 1, 0, 1}, side[6] = {2, 0, 0, 2, 1, 1};
+    for (long p = 0; p < n; ++p)
+        for (int j = 0; j < 6; ++j) {
+            const long i = nodes[6 * p + j];
+            if (i < 0 || i >= table_rows) return -1;
+            double *out = (side[j] == 0 ? slave : side[j] == 1 ? master : neighbour)
+                          + 4 * p + 2 * slot[j];
+            out[0] = node_x[2 * i];
+            out[1] = node_x[2 * i + 1];
+        }
+    return 0;
+}
+
+/* whether the slave facet and neighbours of x (and has) are those of the last pair (then its
+ * slave normals hold); if not, they become the last pair's */
+static int same_slave(const double *x, const unsigned char *has, double *last,
+                      unsigned char *last_has) {
+    if (has[0] == last_has[0] && has[1] == last_has[1] && memcmp(x, last, 8 * sizeof(double)) == 0)
+        return 1;
+    memcpy(last, x, 8 * sizeof(double));
+    last_has[0] = has[0];
+    last_has[1] = has[1];
+    return 0;
+}
+
 /* n pairs (slave, master, neighbour: see gather), has_neighbour (n, 2). Segment-based
  * (element == 0): valid (facing and both projections found) and screened[p] = high - low.
  * Element-based: valid (facing and no Gauss point where the master is parallel to the normal)
@@ -133,11 +163,13 @@ void line2_screen(long n, const double *slave, const double *master, const doubl
                   const unsigned char *has_neighbour, int normals,
                   int element, int num_points, const double *points, unsigned char *valid,
                   double *screened) {
+    double na[2] = {0.0, 0.0}, nb[2] = {0.0, 0.0}, last[8];
+    unsigned char last_has[2] = {2, 2};
     for (long p = 0; p < n; ++p) {
         double xp[NV];
         gather(slave, master, neighbour, p, xp);
-        double na[2], nb[2];
-        normal_values(xp, has_neighbour + 2 * p, normals, na, nb);
+        if (normals == MASTER || !same_slave(xp, has_neighbour + 2 * p, last, last_has))
+            normal_values(xp, has_neighbour + 2 * p, normals, na, nb);
         int ok = facing(xp);
         if (!element) {
             double s0[2] = {(xp[2] + xp[4]) * 0.5, (xp[3] + xp[5]) * 0.5};
@@ -265,7 +297,7 @@ static void normal_field(const double *x, const unsigned char *has, int normals,
  * xi = -2 c / (b + sign sqrt(b^2 - 4 a c)) differentiated in c, b, a, then in off = s0 - point,
  * s1, n0 = (n_a + n_b)/2 and n1 = (n_b - n_a)/2 */
 static double projection(const double *x, const double *s0, const double *s1, const double *n0,
-                         const double *n1, double grad_a[2][NV], double grad_b[2][NV],
+                         const double *n1, const double grad_a[2][NV], const double grad_b[2][NV],
                          int point_node, double *grad) {
     double offx = s0[0] - x[2 * point_node], offy = s0[1] - x[2 * point_node + 1];
     double c = offx * n0[1] - offy * n0[0];
@@ -333,12 +365,19 @@ static void put_row(const outputs_t *o, long r, const double (*grad)[NV],
  * Outputs o: Dn 0-7 (4 j + 2 k + c), Mn 8-15 (8 + 4 j + 2 l + c), area 16-17, D 18-21
  * (2 j + k), M 22-25 (2 j + l); the gaps are formed from Dn and Mn. */
 #define NO 26
+typedef struct {
+    double na[2], nb[2], grad_na[2][NV], grad_nb[2][NV], x[8];
+    unsigned char has[2];
+} normal_cache_t;
+
 static int integrate(const double *x, const unsigned char *has, const unsigned char *cross,
                      const unsigned char *on_master, int normals, int element, int num_points,
                      const double *points, const double *weights, const double *dual_basis,
-                     const outputs_t *o, long p, long r) {
-    double nav[2], nbv[2], grad_na[2][NV], grad_nb[2][NV];
-    normal_field(x, has, normals, nav, nbv, grad_na, grad_nb);
+                     const outputs_t *o, long p, long r, normal_cache_t *cache) {
+    if (normals == MASTER || !same_slave(x, has, cache->x, cache->has))
+        normal_field(x, has, normals, cache->na, cache->nb, cache->grad_na, cache->grad_nb);
+    const double *nav = cache->na, *nbv = cache->nb;
+    const double (*grad_na)[NV] = cache->grad_na, (*grad_nb)[NV] = cache->grad_nb;
     const double ax = x[2], ay = x[3], bx = x[4], by = x[5];
     const double s1[2] = {(bx - ax) * 0.5, (by - ay) * 0.5};
     const double n1[2] = {(nbv[0] - nav[0]) * 0.5, (nbv[1] - nav[1]) * 0.5};
@@ -478,7 +517,7 @@ static int integrate(const double *x, const unsigned char *has, const unsigned c
     }
     /* every output is proportional to J, and (segment) through its weights to length */
     double inverse_jacobian = 1.0 / jacobian, inverse_length = element ? 0.0 : 1.0 / length;
-    double c_normal[NO][4] = {{0.0}}, direct[NO][8] = {{0.0}};
+    double c_normal[NO][4] = {{0.0}}, direct[NO][NV] = {{0.0}};  /* direct: on a, b, c, d */
     for (int j = 0; j < 2; ++j)
         for (int k = 0; k < 2; ++k) {
             for (int c = 0; c < 2; ++c) {
@@ -488,32 +527,33 @@ static int integrate(const double *x, const unsigned char *has, const unsigned c
                 for (int e = 0; e < 4; ++e) c_normal[mn][e] = dN[k] * Z[j][c][e];
                 c_normal[mn][c] += NSm[j][k][0];
                 c_normal[mn][2 + c] += NSm[j][k][1];
-                for (int e = 0; e < 8; ++e) direct[mn][e] = dN[k] * Z[j][c][4 + e];
+                for (int e = 0; e < 4; ++e) {
+                    direct[mn][2 + e] = dN[k] * Z[j][c][4 + e];
+                    direct[mn][8 + e] = dN[k] * Z[j][c][8 + e];
+                }
             }
             int m = 22 + 2 * j + k;
             for (int e = 0; e < 4; ++e) c_normal[m][e] = dN[k] * ZM[j][e];
-            for (int e = 0; e < 8; ++e) direct[m][e] = dN[k] * ZM[j][4 + e];
+            for (int e = 0; e < 4; ++e) {
+                direct[m][2 + e] = dN[k] * ZM[j][4 + e];
+                direct[m][8 + e] = dN[k] * ZM[j][8 + e];
+            }
         }
     const double *g_na0 = grad_na[0], *g_na1 = grad_na[1], *g_nb0 = grad_nb[0], *g_nb1 = grad_nb[1];
-    /* the variables each nodal normal depends on: (p, a, b), (a, b, q); a, b; c, d */
-    int a_first = normals == AVERAGED ? 0 : (normals == SLAVE ? 2 : 8), a_last = a_first + (normals == AVERAGED ? 6 : 4);
-    int b_first = normals == AVERAGED ? 2 : a_first, b_last = b_first + (normals == AVERAGED ? 6 : 4);
     /* M's gradients (the last 4 outputs) only where kept */
     int with_m = o->G ? o->kept == 28 : o->gM != NULL;
     double grad[NO][NV];
+    /* one pass per output: the gradients of the Jacobian and of the normals are zero outside
+     * the variables they depend on (a, b; the facet's nodes and neighbours), so adding them
+     * over all 12 adds exact zeros there */
     for (int out = 0; out < (with_m ? NO : NO - 4); ++out) {
         double cl = c_low[out], cL = c_length[out] + value[out] * inverse_length;
         double cJ = value[out] * inverse_jacobian;
-        const double *cn = c_normal[out];
-        double *gradient = grad[out];
-        for (int v = 0; v < NV; ++v) gradient[v] = cl * grad_low[v] + cL * grad_length[v];
-        for (int v = 2; v < 6; ++v) gradient[v] += cJ * grad_jacobian[v];
-        for (int v = a_first; v < a_last; ++v) gradient[v] += cn[0] * g_na0[v] + cn[1] * g_na1[v];
-        for (int v = b_first; v < b_last; ++v) gradient[v] += cn[2] * g_nb0[v] + cn[3] * g_nb1[v];
-        for (int e = 0; e < 4; ++e) {
-            grad[out][2 + e] += direct[out][e];
-            grad[out][8 + e] += direct[out][4 + e];
-        }
+        const double *cn = c_normal[out], *d = direct[out];
+        for (int v = 0; v < NV; ++v)
+            grad[out][v] = cl * grad_low[v] + cL * grad_length[v] + cJ * grad_jacobian[v]
+                           + (cn[0] * g_na0[v] + cn[1] * g_na1[v])
+                           + (cn[2] * g_nb0[v] + cn[3] * g_nb1[v]) + d[v];
     }
     /* gap_j = sum_kc Mn_jkc x^m_kc - Dn_jkc x^s_kc */
     double gap[2], ggap[2][NV];
@@ -573,6 +613,7 @@ void line2_integrate(long num_rows, const long *rows, const double *slave,
                      double *gD, double *gM, double *gDn, double *gMn, double *ggap,
                      double *garea) {
     outputs_t o = {D, M, Dn, Mn, gap, area, gD, gM, gDn, gMn, ggap, garea, NULL, 0};
+    normal_cache_t cache = {.has = {2, 2}};
     for (long r = 0; r < num_rows; ++r) {
         long p = rows[r];
         double x[NV];
@@ -580,7 +621,7 @@ void line2_integrate(long num_rows, const long *rows, const double *slave,
         contributes[r] = (unsigned char)integrate(
             x, has_neighbour + 2 * p, crosspoint ? crosspoint + 2 * p : NULL,
             on_master ? on_master + (long)num_points * p : NULL, normals, element, num_points,
-            points, weights, dual_basis, &o, p, r);
+            points, weights, dual_basis, &o, p, r, &cache);
         if (!contributes[r]) {
             memset(D + 4 * p, 0, 4 * sizeof(double)); memset(M + 4 * p, 0, 4 * sizeof(double));
             memset(Dn + 8 * p, 0, 8 * sizeof(double)); memset(Mn + 8 * p, 0, 8 * sizeof(double));
@@ -615,6 +656,7 @@ int line2_integrate_rows(long num_rows, const long *rows, const double *slave,
                          double *area, int kept, double *G) {
     if (kept != 24 && kept != 28) return -1;
     outputs_t o = {D, M, Dn, Mn, gap, area, NULL, NULL, NULL, NULL, NULL, NULL, G, kept};
+    normal_cache_t cache = {.has = {2, 2}};
     for (long r = 0; r < num_rows; ++r) {
         long p = rows[r];
         double x[NV];
@@ -622,7 +664,7 @@ int line2_integrate_rows(long num_rows, const long *rows, const double *slave,
         contributes[r] = (unsigned char)integrate(
             x, has_neighbour + 2 * p, crosspoint ? crosspoint + 2 * p : NULL,
             on_master ? on_master + (long)num_points * p : NULL, normals, element, num_points,
-            points, weights, dual_basis, &o, r, r);
+            points, weights, dual_basis, &o, r, r, &cache);
         if (!contributes[r]) {
             zero_values(r, D, M, Dn, Mn, gap, area);
             put_row(&o, r, NULL, NULL);
