@@ -381,14 +381,48 @@ class CooMatrix:
         self.mat.assemble()
         return self.mat
 
-    def add_groups(self, matrix: PETSc.Mat, values, groups) -> None:
-        """Add the listed groups' values to ``matrix`` (not assembled; its pattern has ours)."""
+    def add_groups(self, matrix: PETSc.Mat, groups, parts) -> None:
+        """Add values of the listed groups to ``matrix`` (not assembled; its pattern has ours).
+
+        ``parts``: (values, which, columns) each, the values (nr, br, len(columns), bc,
+        len(which)) of the groups ``groups[which]`` on their block columns ``columns``
+        (None: all groups, all columns). A pair's block is mostly zero where its slave nodes
+        carry no multiplier, gap or area weight: only the columns that are not are given for
+        those (one lookup of the positions of all ``groups``, kept across calls)."""
         groups = np.asarray(groups, dtype=np.int64).reshape(-1)
         if groups.size == 0:
             return
         indptr, indices, rowmap = self._ijv
-        matrix.setValuesIJV(indptr, indices, self._summed_groups(values, groups),
+        matrix.setValuesIJV(indptr, indices, self._summed_parts(groups, parts),
                             addv=PETSc.InsertMode.ADD_VALUES, rowmap=rowmap)
+
+    def _summed_parts(self, groups: np.ndarray, parts) -> np.ndarray:
+        """The parts' values (:meth:`add_groups`) summed into the pattern, in the order of
+        ``_ijv``: part after part, each in the order of :meth:`_summed_groups`."""
+        nr, br, nc, bc = self._block_shape
+        count = self._blocks["count"]
+        position = self._positions(groups)
+        sums = np.zeros((br, bc, count + 1))
+        for values, which, columns in parts:
+            where = position if columns is None else position[:, np.asarray(columns)]
+            if which is not None:
+                where = np.take(where, np.asarray(which, dtype=np.int64), axis=2)
+            where = np.ascontiguousarray(where)
+            values = np.asarray(values, dtype=PETSc.ScalarType)
+            if values.size != where.size * br * bc:
+                raise ValueError(f"expected {where.size * br * bc} values, got {values.size}")
+            values = values.reshape(nr, br, where.shape[1], bc, where.shape[2])
+            if where.dtype == np.intc:
+                from .kernels import compiled
+
+                compiled.pattern_sum(where, values, count, sums)
+                continue
+            flat = where.reshape(-1)
+            for a in range(br):
+                for b in range(bc):
+                    weights = np.ascontiguousarray(values[:, a, :, b, :]).reshape(-1)
+                    sums[a, b] += np.bincount(flat, weights=weights, minlength=count + 1)
+        return self._in_order(sums)
 
     def _summed_groups(self, values, groups, chunk=None, out=None, row_starts=()) -> np.ndarray:
         """The groups' values summed into the pattern, in the order of ``_ijv``, or with
@@ -437,6 +471,12 @@ class CooMatrix:
                 for b in range(bc):
                     np.add.at(sums[a, b], where, part[:, a, :, b, :].transpose(2, 0, 1).reshape(-1))
             del part
+        return self._in_order(sums, out, row_starts)
+
+    def _in_order(self, sums: np.ndarray, out=None, row_starts=()) -> np.ndarray:
+        """The sums (br, bc, count + 1) over the block pattern (slot 0: dropped entries) as
+        the values of ``_ijv`` (or with ``row_starts``, in serial CSR order into ``out``)."""
+        br, bc, count = sums.shape[0], sums.shape[1], sums.shape[2] - 1
         summed = np.empty(br * count * bc) if out is None else out
         by_block = summed.reshape(br * count, bc)
         for a in range(br):
@@ -581,14 +621,15 @@ class MonolithicMatrix:
             matrix.setValuesIJV(np.arange(self._entry_rows.size + 1, dtype=PETSc.IntType),
                                 self._entry_cols, values, addv=mode, rowmap=self._entry_rows)
 
-    def add(self, group_values, groups, diagonal_values) -> None:
-        """Add the listed groups' blocks, (nr, nc, len(groups)), and the diagonal values
-        (followed by the point entries' values, if any).
+    def add(self, groups, parts, diagonal_values) -> None:
+        """Add the listed groups' blocks, given in ``parts`` as for
+        :meth:`CooMatrix.add_groups` (values (nr, len(columns), len(which)) each), and the
+        diagonal values (followed by the point entries' values, if any).
 
         The caller zeroes the matrix, adds the bulk form through the
         local-to-global map (:func:`compat.add_matrix_local`) and assembles.
         """
-        self.groups.add_groups(self.mat, group_values, groups)
+        self.groups.add_groups(self.mat, groups, parts)
         self._add_diagonal(self.mat, np.asarray(diagonal_values, dtype=PETSc.ScalarType),
                            PETSc.InsertMode.ADD_VALUES)
 

@@ -137,8 +137,8 @@ class ContactSystem:
         zeroing = time.perf_counter()
         self.matrix.mat.zeroEntries()
         zeroing = time.perf_counter() - zeroing
-        group_values, groups = [], []
-        offset = 0
+        parts, groups = [], []
+        offset = given = 0
         normal_conditions = [enforcement_rows(k) if present else None
                              for k, present in enumerate(self.in_layout)]
         conditions = ([tangential.conditions(k) for k in range(len(self.interfaces))]
@@ -149,22 +149,21 @@ class ContactSystem:
                 friction = (tangential, conditions[k])
             blocks = self._contact_blocks(k, multipliers[k], normal_conditions[k], friction)
             if blocks is not None:
-                values = blocks[0]
-                if values.shape[:2] != self._block_shape:
-                    padded = np.zeros(self._block_shape + values.shape[2:])
-                    padded[:values.shape[0], :values.shape[1]] = values
-                    values = padded
-                group_values.append(values)
-                groups.append(offset + blocks[1])
+                contributing, pair_parts = blocks
+                for values, which, columns in pair_parts:
+                    if values.shape[0] != self._block_shape[0]:  # (another pair's rows)
+                        padded = np.zeros((self._block_shape[0],) + values.shape[1:])
+                        padded[:values.shape[0]] = values
+                        values = padded
+                    which = given + (np.arange(contributing.size) if which is None else which)
+                    parts.append((values, which, columns))
+                groups.append(offset + contributing)
+                given += contributing.size
             offset += self._pattern[0][k].shape[0]
-        if len(group_values) == 1:  # (one pair's blocks: no copy of them)
-            group_values, groups = group_values[0], groups[0]
-        elif group_values:
-            group_values = np.concatenate(group_values, axis=2)
-            groups = np.concatenate(groups)
-        else:
-            group_values = np.zeros(self._block_shape + (0,))
-            groups = np.zeros(0, dtype=np.int64)
+        if len(groups) == 1:  # (one pair's groups: all of them in every part)
+            parts = [(values, None if which.size == groups[0].size else which, columns)
+                     for values, which, columns in parts]
+        groups = np.concatenate(groups) if groups else np.zeros(0, dtype=np.int64)
         diagonal = [np.full(self.fixed_rows.size, self.dirichlet_scale)] + [
             r[3] for r, present in zip(normal_conditions, self.in_layout, strict=True)
             if present]
@@ -179,7 +178,7 @@ class ContactSystem:
                          for b in range(m) if a != b]
         diagonal = np.concatenate(diagonal)
         matrix = self.matrix.mat
-        self.matrix.add(group_values, groups, diagonal)
+        self.matrix.add(groups, parts, diagonal)
         contact = time.perf_counter() - start - zeroing
         start = time.perf_counter()
         compat.add_matrix_local(matrix, self.J_form, self.bcs)
@@ -251,13 +250,17 @@ class ContactSystem:
         return True
 
     def _contact_blocks(self, k: int, z: PETSc.Vec, normal_condition: Rows, friction=None):
-        """Pair k's dense blocks and which candidate pairs they belong to (m,).
+        """The candidate pairs (m,) of pair k that contribute, and their dense blocks in parts
+        (values, which of them, block columns), as :meth:`MonolithicMatrix.add` takes them.
 
         d(-B^T z)/du, d(-B^T z)/dz = -B^T, d C/du (2D: 8 x 12, 8 x 2, 2 x 12); with
         friction also d(-T^T y)/du, -T^T and the tangential conditions' d C_t/du
         (:class:`~dolfinx_mortar.friction.PairTangents`). Only the
         pairs that contribute, from the kernel's gradients of those pairs (no full dual
-        numbers over every candidate pair).
+        numbers over every candidate pair). The derivatives in u are a part of their own,
+        of the pairs with a weight only (a slave node with a multiplier, a gap or an area
+        coefficient); -B^T and -T^T (and friction's direct slip derivative) are a part over
+        all contributing pairs, on their columns only.
         None before the first evaluation (no pairs yet).
         """
         interface = self.interfaces[k]
@@ -306,21 +309,31 @@ class ContactSystem:
             num_multipliers = (1 + m) * ns
         terms = force_terms + multiplier_terms
         forces, columns = (ns + nm) * gdim, stencil.width * gdim
-        values = np.zeros((forces + num_multipliers, columns + num_multipliers,
-                           contributing.size))
+        parts = []
         weighted = _weighted_rows(terms, contributing.size)
         if weighted.size == contributing.size:
-            values[:, :columns] = interface.combined_gradients(contributing, terms)
+            parts.append((interface.combined_gradients(contributing, terms), None,
+                          np.arange(columns)))
         elif weighted.size:
-            values[:, :columns, weighted] = interface.combined_gradients(
+            parts.append((interface.combined_gradients(
                 contributing[weighted], [[(o, w if np.ndim(w) == 0 else w[weighted])
-                                          for o, w in row] for row in terms])
+                                          for o, w in row] for row in terms]),
+                weighted, np.arange(columns)))
+        multiplier_columns = np.arange(columns, columns + num_multipliers)
+        force_columns = np.zeros(0, dtype=np.int64)
+        if friction is not None:
+            slots = np.concatenate([stencil.slave_slots, stencil.master_slots])
+            force_columns = (slots[:, None] * gdim + np.arange(gdim)).reshape(-1)
+        values = np.zeros((forces + num_multipliers, force_columns.size + num_multipliers,
+                           contributing.size))
         coefficients = interface.force_coefficients(contributing)  # (m, j, k, c)
-        values[:forces, columns:columns + ns] = -coefficients.reshape(
+        first = force_columns.size
+        values[:forces, first:first + ns] = -coefficients.reshape(
             contributing.size, ns, forces).transpose(2, 1, 0)
         if friction is not None:
-            _add_tangential_columns(values, tangents.coefficients, coefficient, stencil)
-        return values, contributing
+            _add_tangential_columns(values, tangents.coefficients, coefficient, ns, first)
+        parts.append((values, None, np.concatenate([force_columns, multiplier_columns])))
+        return contributing, parts
 
     def _at_nodes(self, k: int, owned: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """Per name, owned slave-node values of pair k at its node table, through the
@@ -370,26 +383,24 @@ def _slip_coefficients(conditions, m: int) -> dict[str, np.ndarray]:
     return names
 
 
-def _add_tangential_columns(values: np.ndarray, T: np.ndarray, coefficient: dict,
-                            stencil) -> None:
-    """Into the pairs' blocks ``values``: -T^T (the force rows on the tangential
-    multipliers' columns) and the slip's direct derivative -T^a_j on the facet nodes'
-    columns of the tangential rows. T (pairs, m, j, nodes, gdim)."""
-    pairs, m, ns = T.shape[0], T.shape[1], stencil.ns
-    gdim = T.shape[-1]
-    forces, columns = (ns + stencil.nm) * gdim, stencil.width * gdim
-    slots = np.concatenate([stencil.slave_slots, stencil.master_slots])
-    force_columns = (slots[:, None] * gdim + np.arange(gdim)).reshape(-1)
+def _add_tangential_columns(values: np.ndarray, T: np.ndarray, coefficient: dict, ns: int,
+                            first: int) -> None:
+    """Into the pairs' blocks ``values`` (rows: forces, then the multipliers; columns: the
+    facet nodes' displacements, ``first`` of them, then the multipliers): -T^T (the force
+    rows on the tangential multipliers' columns) and the slip's direct derivative -T^a_j on
+    the facet nodes' columns of the tangential rows. T (pairs, m, j, nodes, gdim)."""
+    pairs, m = T.shape[0], T.shape[1]
+    forces = first
     for a in range(m):
         tangent = T[:, a].reshape(pairs, ns, forces)
-        block = columns + (1 + a) * ns
+        block = first + (1 + a) * ns
         values[:forces, block:block + ns] = -tangent.transpose(2, 1, 0)
         # u~^a_j = -T^a_j du: its direct derivative -T^a_j on the facet nodes' columns
         for b in range(m):
             weight = coefficient[f"slip_{b}{a}"]  # dC^b/du~^a, (pairs, j)
             direct = -tangent * weight[:, :, None]
             row = forces + (1 + b) * ns
-            values[row:row + ns, force_columns] += direct.transpose(1, 2, 0)
+            values[row:row + ns, :first] += direct.transpose(1, 2, 0)
 
 
 def _pad(indices: np.ndarray, width: int) -> np.ndarray:
