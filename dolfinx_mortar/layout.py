@@ -404,20 +404,21 @@ class CooMatrix:
         position = self._positions(groups)
         sums = np.zeros((br, bc, count + 1))
         for values, which, columns in parts:
+            n = groups.size if which is None else len(which)
+            nk = nc if columns is None else len(columns)
+            values = np.asarray(values, dtype=PETSc.ScalarType)
+            if values.size != nr * br * nk * bc * n:
+                raise ValueError(f"expected {nr * br * nk * bc * n} values, got {values.size}")
+            values = values.reshape(nr, br, nk, bc, n)
+            if position.dtype == np.intc:
+                from .kernels import compiled
+
+                compiled.pattern_sum_part(position, values, count, sums, which, columns)
+                continue
             where = position if columns is None else position[:, np.asarray(columns)]
             if which is not None:
                 where = np.take(where, np.asarray(which, dtype=np.int64), axis=2)
-            where = np.ascontiguousarray(where)
-            values = np.asarray(values, dtype=PETSc.ScalarType)
-            if values.size != where.size * br * bc:
-                raise ValueError(f"expected {where.size * br * bc} values, got {values.size}")
-            values = values.reshape(nr, br, where.shape[1], bc, where.shape[2])
-            if where.dtype == np.intc:
-                from .kernels import compiled
-
-                compiled.pattern_sum(where, values, count, sums)
-                continue
-            flat = where.reshape(-1)
+            flat = np.ascontiguousarray(where).reshape(-1)
             for a in range(br):
                 for b in range(bc):
                     weights = np.ascontiguousarray(values[:, a, :, b, :]).reshape(-1)

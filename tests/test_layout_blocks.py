@@ -176,3 +176,33 @@ def test_pattern_sum_adds_as_bincount_and_add_at(block_shape):
     positions[0, 0, 0] = count + 1
     with pytest.raises(IndexError):
         compiled.pattern_sum(positions, values, count)
+
+
+@pytest.mark.parametrize("block_shape", [(1, 1), (2, 3)])
+def test_pattern_sum_of_a_part_equals_the_sum_of_its_copied_positions(block_shape):
+    """Some groups on some block columns, their positions read in place: the bits of
+    pattern_sum over a copy of those positions, added to what the sums held; a group or a
+    column outside the positions is refused."""
+    from dolfinx_mortar.kernels import compiled
+
+    br, bc = block_shape
+    rng = np.random.default_rng(10)
+    nr, nc, groups, count = 4, 6, 40, 60
+    positions = rng.integers(0, count + 1, (nr, nc, groups)).astype(np.intc)
+    which = rng.permutation(groups)[:25]
+    columns = np.array([5, 0, 3])
+    values = rng.standard_normal((nr, br, columns.size, bc, which.size))
+    start = rng.standard_normal((br, bc, count + 1))
+    expected = compiled.pattern_sum(np.ascontiguousarray(positions[:, columns][..., which]),
+                                    values, count, start.copy())
+    got = compiled.pattern_sum_part(positions, values, count, start.copy(), which, columns)
+    np.testing.assert_array_equal(got, expected)
+    everything = rng.standard_normal((nr, br, nc, bc, groups))
+    np.testing.assert_array_equal(
+        compiled.pattern_sum_part(positions, everything, count, np.zeros((br, bc, count + 1))),
+        compiled.pattern_sum(positions, everything, count))
+    for bad_which, bad_columns in (([0, groups], columns[:1]), ([0, 1], [nc])):
+        bad = np.zeros((nr, br, len(bad_columns), bc, 2))
+        with pytest.raises(IndexError):
+            compiled.pattern_sum_part(positions, bad, count, start.copy(), bad_which,
+                                      bad_columns)

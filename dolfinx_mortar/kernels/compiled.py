@@ -140,6 +140,9 @@ int pattern_positions(long n, int nr, int nc, const int *rows, const int *cols,
                       const long *indptr, const int *indices, int *out);
 void pattern_sum(long n, int nr, int br, int nc, int bc, const int *positions, long stride,
                  const double *values, long count, int group_major, double *sums);
+int pattern_sum_part(long n, int nr, int br, int nc, int bc, const int *positions, long stride,
+                     const long *which, int nk, const long *columns, const double *values,
+                     long count, double *sums);
 """,
     "search": """
 int search_boxes(long ns, long nm, int dim, const double *slave_lower,
@@ -523,6 +526,39 @@ def pattern_sum(positions: np.ndarray, values: np.ndarray, count: int,
         module.lib.pattern_sum(n, nr, br, nc, bc, first, positions.shape[2],
                                _pointer(ffi, values, "double *"), count, int(group_major),
                                _pointer(ffi, sums, "double *"))
+    return sums
+
+
+def pattern_sum_part(positions: np.ndarray, values: np.ndarray, count: int, sums: np.ndarray,
+                     which: np.ndarray | None = None,
+                     columns: np.ndarray | None = None) -> np.ndarray:
+    """:func:`pattern_sum` of the values (nr, br, len(columns), bc, len(which)) of the groups
+    ``which`` (None: all) on the block columns ``columns`` (None: all) of the int32
+    ``positions`` (nr, nc, G), added to ``sums`` (br, bc, count + 1) in pattern_sum's order,
+    with no copy of the positions."""
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    nr, br, nk, bc, n = values.shape
+    if (positions.dtype != np.intc or not positions.flags.c_contiguous
+            or positions.shape[0] != nr):
+        raise ValueError(f"positions {positions.dtype} {positions.shape} do not hold the "
+                         f"rows of values {values.shape}")
+    if sums.shape != (br, bc, count + 1) or sums.dtype != np.float64 or not sums.flags.c_contiguous:
+        raise ValueError(f"sums must be contiguous float64 {(br, bc, count + 1)}")
+    index = [None if a is None else np.ascontiguousarray(a, dtype=np.int64)
+             for a in (which, columns)]
+    if (n != (positions.shape[2] if index[0] is None else index[0].size)
+            or nk != (positions.shape[1] if index[1] is None else index[1].size)):
+        raise ValueError(f"values {values.shape} are not those of the groups and columns given")
+    if values.size:
+        module = load("pattern")
+        ffi = module.ffi
+        status = module.lib.pattern_sum_part(
+            n, nr, br, positions.shape[1], bc, _pointer(ffi, positions, "int *"),
+            positions.shape[2], _pointer(ffi, index[0], "long *"), nk,
+            _pointer(ffi, index[1], "long *"), _pointer(ffi, values, "double *"), count,
+            _pointer(ffi, sums, "double *"))
+        if status != 0:
+            raise IndexError("a group or column outside the positions")
     return sums
 
 

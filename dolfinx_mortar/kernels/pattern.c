@@ -70,3 +70,32 @@ void pattern_sum(long n, int nr, int br, int nc, int bc, const int *positions, l
                 }
             }
 }
+
+/* pattern_sum over a part of the groups' blocks, without a copy of their positions: values
+ * (nr, br, nk, bc, n) of the groups which[0 .. n - 1] (NULL: 0 .. n - 1) on the block columns
+ * columns[0 .. nk - 1] (NULL: 0 .. nk - 1) of positions (nr, nc, stride). The order of the
+ * additions is pattern_sum's (i, j, g). Returns -1 for a group or column outside positions. */
+int pattern_sum_part(long n, int nr, int br, int nc, int bc, const int *positions, long stride,
+                     const long *which, int nk, const long *columns, const double *values,
+                     long count, double *sums) {
+    const long slot = count + 1;
+    for (long g = 0; which && g < n; ++g)
+        if (which[g] < 0 || which[g] >= stride) return -1;
+    for (int k = 0; columns && k < nk; ++k)
+        if (columns[k] < 0 || columns[k] >= nc) return -1;
+    for (int i = 0; i < nr; ++i)
+        for (int a = 0; a < br; ++a)
+            for (int k = 0; k < nk; ++k) {
+                const long j = columns ? columns[k] : k;
+                const int *where = positions + ((long)i * nc + j) * stride;
+                for (int b = 0; b < bc; ++b) {
+                    const double *v = values + ((((long)i * br + a) * nk + k) * bc + b) * n;
+                    double *s = sums + ((long)a * bc + b) * slot;
+                    if (which)
+                        for (long g = 0; g < n; ++g) s[where[which[g]]] += v[g];
+                    else
+                        for (long g = 0; g < n; ++g) s[where[g]] += v[g];
+                }
+            }
+    return 0;
+}
