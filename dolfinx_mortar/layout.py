@@ -78,9 +78,14 @@ class BlockLayout:
         """Monolithic index of global indices of ``field`` (negative stays -1)."""
         index = np.asarray(index, dtype=np.int64)
         starts = self.field_offsets[:, field]
-        owner = np.clip(np.searchsorted(starts, index, side="right") - 1, 0, self.comm.size - 1)
-        mono = index - starts[owner] + self.offsets[owner] + self.within_rank[owner, field]
-        return np.where(index >= 0, mono, -1)
+        if self.comm.size == 1:  # a shift
+            mono = index + int(self.offsets[0] + self.within_rank[0, field] - starts[0])
+        else:
+            owner = np.searchsorted(starts, index, side="right") - 1
+            np.clip(owner, 0, self.comm.size - 1, out=owner)
+            mono = index - starts[owner] + self.offsets[owner] + self.within_rank[owner, field]
+        mono[index < 0] = -1
+        return mono
 
     def u(self, index: np.ndarray) -> np.ndarray:
         """Monolithic index of global displacement dofs."""
