@@ -206,3 +206,34 @@ def test_pattern_sum_of_a_part_equals_the_sum_of_its_copied_positions(block_shap
         with pytest.raises(IndexError):
             compiled.pattern_sum_part(positions, bad, count, start.copy(), bad_which,
                                       bad_columns)
+
+
+def test_pattern_union_equals_the_sum_of_the_sparse_patterns():
+    """The union of two CSR patterns (rows strictly increasing) is scipy's sum of the two
+    as sparse matrices, empty rows and a pattern without entries included; a row that is
+    not strictly increasing gives None (the caller merges through scipy)."""
+    import scipy.sparse
+
+    from dolfinx_mortar.kernels import compiled
+
+    rng = np.random.default_rng(11)
+    shape = (60, 200)
+    a = scipy.sparse.random(*shape, density=0.05, random_state=rng, format="csr")
+    b = scipy.sparse.random(*shape, density=0.02, random_state=rng, format="lil")
+    b[7] = 0.0
+    b = b.tocsr()
+    assert b[7].nnz == 0 and a[7].nnz > 0
+    for first, second in ((a, b), (b, a), (a, scipy.sparse.csr_matrix(shape))):
+        for m in (first, second):
+            m.sort_indices()
+        expected = (abs(first) + abs(second)).tocsr()
+        expected.sort_indices()
+        indptr, indices = compiled.pattern_union((first.indptr, first.indices),
+                                                 (second.indptr, second.indices))
+        assert indptr.tolist() == expected.indptr.tolist()
+        assert indices.tolist() == expected.indices.tolist()
+    unsorted = a.indices.copy()
+    row = int(np.argmax(np.diff(a.indptr)))
+    start = a.indptr[row]
+    unsorted[start], unsorted[start + 1] = unsorted[start + 1], unsorted[start]
+    assert compiled.pattern_union((a.indptr, unsorted), (b.indptr, b.indices)) is None

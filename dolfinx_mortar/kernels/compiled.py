@@ -143,6 +143,9 @@ void pattern_sum(long n, int nr, int br, int nc, int bc, const int *positions, l
 int pattern_sum_part(long n, int nr, int br, int nc, int bc, const int *positions, long stride,
                      const long *which, int nk, const long *columns, const double *values,
                      long count, double *sums);
+int pattern_union(long num_rows, const long *a_indptr, const int *a_indices,
+                  const long *b_indptr, const int *b_indices, long *out_indptr,
+                  int *out_indices);
 """,
     "search": """
 int search_boxes(long ns, long nm, int dim, const double *slave_lower,
@@ -560,6 +563,36 @@ def pattern_sum_part(positions: np.ndarray, values: np.ndarray, count: int, sums
         if status != 0:
             raise IndexError("a group or column outside the positions")
     return sums
+
+
+def pattern_union(a: tuple[np.ndarray, np.ndarray],
+                  b: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
+    """The union (indptr int64, indices int32) of two CSR patterns (indptr, indices) of the
+    same rows, each row's columns strictly increasing and below 2^31; None if a row is not
+    (the caller merges another way). One pass to count, one to fill."""
+    (a_indptr, a_indices), (b_indptr, b_indices) = a, b
+    if a_indptr.size != b_indptr.size:
+        raise ValueError(f"patterns of {a_indptr.size - 1} and {b_indptr.size - 1} rows")
+    for indices in (a_indices, b_indices):
+        if indices.size and (indices.min() < 0 or indices.max() >= 2**31 - 1):
+            raise ValueError("pattern_union takes columns in [0, 2^31 - 1)")
+    arrays = [np.ascontiguousarray(a_indptr, dtype=np.int64),
+              np.ascontiguousarray(a_indices, dtype=np.intc),
+              np.ascontiguousarray(b_indptr, dtype=np.int64),
+              np.ascontiguousarray(b_indices, dtype=np.intc)]
+    module = load("pattern")
+    ffi = module.ffi
+    pointers = [_pointer(ffi, array, ctype) for array, ctype in
+                zip(arrays, ("long *", "int *", "long *", "int *"), strict=True)]
+    indptr = np.empty(a_indptr.size, dtype=np.int64)
+    num_rows = a_indptr.size - 1
+    if module.lib.pattern_union(num_rows, *pointers, _pointer(ffi, indptr, "long *"),
+                                ffi.NULL) != 0:
+        return None
+    indices = np.empty(int(indptr[-1]), dtype=np.intc)
+    module.lib.pattern_union(num_rows, *pointers, _pointer(ffi, indptr, "long *"),
+                             _pointer(ffi, indices, "int *"))
+    return indptr, indices
 
 
 def search_boxes(slave_lower: np.ndarray, slave_upper: np.ndarray, master_lower: np.ndarray,

@@ -99,3 +99,37 @@ int pattern_sum_part(long n, int nr, int br, int nc, int bc, const int *position
             }
     return 0;
 }
+
+/* The union of two CSR patterns of num_rows rows (each row's columns strictly increasing):
+ * with out_indices NULL, out_indptr (num_rows + 1) gets the union's row starts; else the
+ * union's columns go to out_indices (out_indptr as the first call made it). Returns -1 if a
+ * row of either pattern is not strictly increasing. */
+int pattern_union(long num_rows, const long *a_indptr, const int *a_indices,
+                  const long *b_indptr, const int *b_indices, long *out_indptr,
+                  int *out_indices) {
+    if (!out_indices) out_indptr[0] = 0;
+    for (long r = 0; r < num_rows; ++r) {
+        long i = a_indptr[r], a_stop = a_indptr[r + 1];
+        long j = b_indptr[r], b_stop = b_indptr[r + 1];
+        long k = out_indptr[r];
+        for (long p = i + 1; p < a_stop; ++p)
+            if (a_indices[p] <= a_indices[p - 1]) return -1;
+        for (long p = j + 1; p < b_stop; ++p)
+            if (b_indices[p] <= b_indices[p - 1]) return -1;
+        while (i < a_stop || j < b_stop) {
+            int column;
+            if (j == b_stop || (i < a_stop && a_indices[i] < b_indices[j])) {
+                column = a_indices[i++];
+            } else if (i == a_stop || b_indices[j] < a_indices[i]) {
+                column = b_indices[j++];
+            } else {
+                column = a_indices[i++];
+                ++j;
+            }
+            if (out_indices) out_indices[k] = column;
+            ++k;
+        }
+        if (!out_indices) out_indptr[r + 1] = k;
+    }
+    return 0;
+}
