@@ -264,6 +264,9 @@ class ContactProblem(ContactResults):
             raise
         checks.check_free_bodies(self._warnings, pairs, self.interfaces, body_labels,
                                  free_bodies, self.equations.smallest_gap, slave_length)
+        # the bulk matrix gave its pattern and diagonal: the Newton matrix is the system's
+        self._K.destroy()
+        self._K = None
         self._warnings.building = False
 
     def _create_equations(self, options: ContactOptions, scales: enforcement.Scales,
