@@ -404,6 +404,8 @@ class CooMatrix:
     def _summed_parts(self, groups: np.ndarray, parts) -> np.ndarray:
         """The parts' values (:meth:`add_groups`) summed into the pattern, in the order of
         ``_ijv``: part after part, each in the order of :meth:`_summed_groups`."""
+        from .kernels import compiled
+
         nr, br, nc, bc = self._block_shape
         count = self._blocks["count"]
         position = self._positions(groups)
@@ -416,8 +418,6 @@ class CooMatrix:
                 raise ValueError(f"expected {nr * br * nk * bc * n} values, got {values.size}")
             values = values.reshape(nr, br, nk, bc, n)
             if position.dtype == np.intc:
-                from .kernels import compiled
-
                 compiled.pattern_sum_part(position, values, count, sums, which, columns)
                 continue
             where = position if columns is None else position[:, np.asarray(columns)]

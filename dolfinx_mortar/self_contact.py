@@ -88,7 +88,7 @@ def may_face(x: np.ndarray, blocks: np.ndarray, slave_facets: np.ndarray,
     ``origin``, reaching ``depth`` behind each facet, overlapping once grown by
     ``margin``, then only those near now or crossed) are a subset of the pairs whose boxes
     overlap, which a small surface finds here with a few array comparisons, all pairs at
-    once, instead of the search's k-d trees per size class; :func:`facing` keeps a pair of
+    once, instead of the search's grids per pair of size groups; :func:`facing` keeps a pair of
     those or none (it decides each pair alone, the same way in either set). A surface far
     from itself has candidates (each facet's own neighbours) but none that faces.
 
