@@ -175,6 +175,10 @@ class MortarInterface:
             self.master = surface.extract_surface(V, facet_tags, master, "master")
             surface.check_disjoint(self.slave, self.master, self.comm)
         self.gdim = self.slave.reference_coordinates.shape[1]
+        self.origin = self.slave.bounding_box_centre(self.comm)
+        """The point the interface's coordinates are taken from (the slave surface's
+        bounding-box centre): the gaps, D and M do not depend on it, but their rounding
+        does, as eps |x| against the displacements that make a gap."""
         self._stencil_type = stencils.STENCILS[self.gdim]
         self.num_gauss_points = (num_gauss_points
                                  or self._stencil_type.kernel.default_gauss_points[integration])
@@ -329,8 +333,8 @@ class MortarInterface:
         """
         stats = self.statistics
         start = time.perf_counter()
-        slave_x = self.slave.current_coordinates(u)
-        master_x = slave_x if self.self_contact else self.master.current_coordinates(u)
+        slave_x = self.slave.current_coordinates(u, self.origin)
+        master_x = slave_x if self.self_contact else self.master.current_coordinates(u, self.origin)
         moving = np.concatenate([slave_x, master_x])
         reference = self.configuration == "reference"
         if self.reuse.needs_search(moving, self.comm) or (
@@ -339,7 +343,7 @@ class MortarInterface:
             ns = self.slave.num_nodes
             undeformed = np.concatenate(
                 [self.slave.reference_coordinates, self.master.reference_coordinates]
-            )
+            ) - self.origin
             if reference:
                 # swept from the undeformed surfaces, whose pairs the linearized gap
                 # holds at any penetration (a soft penalty sinks far past the margin);

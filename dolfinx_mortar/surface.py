@@ -86,12 +86,29 @@ class ContactSurface:
         """(num_nodes, gdim) global PETSc indices of the displacement dofs."""
         return self.node_global_blocks[:, None] * self.block_size + np.arange(self.block_size)
 
-    def current_coordinates(self, u: dolfinx.fem.Function | None) -> np.ndarray:
-        """x = X + u at the surface nodes (ghost values of ``u`` must be up to date)."""
+    def current_coordinates(self, u: dolfinx.fem.Function | None,
+                            origin: np.ndarray | None = None) -> np.ndarray:
+        """x = X + u at the surface nodes (ghost values of ``u`` must be up to date), or
+        (X - origin) + u: relative to a point near the surface, a small u is not rounded
+        to the size of X."""
+        X = self.reference_coordinates if origin is None else self.reference_coordinates - origin
         if u is None:
-            return self.reference_coordinates.copy()
+            return X.copy() if origin is None else X
         values = u.x.array.reshape(-1, self.block_size)
-        return self.reference_coordinates + values[self.node_blocks, : self.gdim]
+        return X + values[self.node_blocks, : self.gdim]
+
+    def bounding_box_centre(self, comm: MPI.Intracomm) -> np.ndarray:
+        """The centre of the undeformed surface's bounding box over all ranks (collective;
+        the same on every rank; zero for a surface with no node)."""
+        X = self.reference_coordinates
+        lower = np.full(self.gdim, np.inf) if X.shape[0] == 0 else X.min(axis=0)
+        upper = np.full(self.gdim, -np.inf) if X.shape[0] == 0 else X.max(axis=0)
+        lower, upper = np.ascontiguousarray(lower, dtype=np.float64), upper.astype(np.float64)
+        comm.Allreduce(MPI.IN_PLACE, lower, op=MPI.MIN)
+        comm.Allreduce(MPI.IN_PLACE, upper, op=MPI.MAX)
+        if not np.all(np.isfinite(lower) & np.isfinite(upper)):
+            return np.zeros(self.gdim)
+        return 0.5 * (lower + upper)
 
 
 CELL_TYPES = {2: ("triangle", "quadrilateral"), 3: ("tetrahedron", "hexahedron")}

@@ -189,17 +189,8 @@ def test_edges_that_coincide_under_rotation(ns):
             assert_agree(slave, master, nodal, basis=basis, normals=normals_option)
 
 
-GAP_GRADIENT_ON_BENT_HEXAHEDRA = (
-    "bent 4 x 4 hexahedral interface, master normals, dual basis: gap_grad differs from numpy by "
-    "2.1e-13 of its largest entry (Dn_grad, Mn_grad by < 3e-14; 1.3e-14 of the gap gradient's "
-    "terms sum Mn_grad xm - Dn_grad xs): a slave and a master edge nearly parallel (clip "
-    "vertices at their intersection) amplify either kernel's rounding")
-
-
 @pytest.mark.parametrize("cell,sizes", [("tetrahedron", (3, 4)), ("tetrahedron", (4, 4)),
-                                        ("hexahedron", (3, 4)),
-                                        pytest.param("hexahedron", (4, 4), marks=pytest.mark.xfail(
-                                            strict=True, reason=GAP_GRADIENT_ON_BENT_HEXAHEDRA))])
+                                        ("hexahedron", (3, 4)), ("hexahedron", (4, 4))])
 def test_mesh_interface_pairs(cell, sizes, monkeypatch):
     """The candidate pairs the interface hands the numpy kernel on two tetrahedral or
     hexahedral blocks (flat: nodes on each other's edges; bent), with every normal field."""

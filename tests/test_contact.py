@@ -78,13 +78,9 @@ def test_patch_test_is_exact_with_moduli_100_to_1(moduli, slave, cell):
     summary = demo("patch_test").main(["--ratio", "3:7", "--slave", slave, "--cell-type", cell,
                                        "--E-punch", moduli[0], "--E-foundation", moduli[1]])
     assert summary["converged"]
-    # rounding: with the stiff foundation as the slave on triangles the residual stops at
-    # 4.5e-10 (8e-14 of the load; Newton cannot take it lower) and the pressure is uniform
-    # to 7.5e-11 (reference BLAS) or 1.0e-10 (OpenBLAS), serial and on 2 ranks
-    tolerance = 2e-10
-    assert summary["max_pressure_deviation_rel"] <= tolerance
-    assert summary["max_multiplier_deviation_rel"] <= tolerance
-    assert summary["max_stress_deviation_rel"] <= tolerance
+    assert summary["max_pressure_deviation_rel"] <= 1e-10
+    assert summary["max_multiplier_deviation_rel"] <= 1e-10
+    assert summary["max_stress_deviation_rel"] <= 1e-10
 
 
 @pytest.mark.parametrize("gauss_points", [2, 4, 8])

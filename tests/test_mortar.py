@@ -182,6 +182,41 @@ def test_penetrating_blocks_weighted_gap():
 
 
 @pytest.mark.parallel
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("offset", [0.0, 1024.0, 1e4 / 3])
+def test_weighted_gap_of_a_small_penetration_far_from_the_origin(dim, offset):
+    """Lower body moved up by 1e-7 on a flat interface, the whole mesh translated by
+    ``offset``: g~_j = -1e-7 * int Phi_j to 1e-12. Formed from x = X + u, each gap would carry
+    the rounding of X, eps |X| / 1e-7 = 1e-9 of it at |X| = 0.5 and 2e-6 at |X| = 1024: the
+    interface's coordinates are taken from a point on it."""
+    if dim == 2:
+        tagged = meshes.tied_blocks(ratio=(2, 5), refinement=0)
+        slave, master = tagged.markers["contact_slave"], tagged.markers["contact_master"]
+    else:
+        from test_mortar3d import two_blocks
+
+        tagged = two_blocks("tetrahedron", 3, 4, gap=0.0)
+        slave, master = tagged.markers["upper_bottom"], tagged.markers["lower_top"]
+    tagged.mesh.geometry.x[:, :dim] += offset
+    depth = 1e-7
+    V = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", 1, (dim,)))
+    u = dolfinx.fem.Function(V)
+    u.interpolate(lambda x: np.vstack([0.0 * x[0]] * (dim - 1) + [depth + 0.0 * x[0]]),
+                  tagged.cell_tags.find(tagged.markers["lower"]))
+    u.x.scatter_forward()
+    mortar = MortarInterface(V, tagged.facet_tags, slave, master)
+    mortar.update(u)
+    D, _ = mortar.mortar_matrices()
+    row_sum = D.createVecLeft()
+    D.getRowSum(row_sum)
+    gap = mortar.weighted_gap()
+    assert mortar.comm.allreduce(row_sum.getArray().size) == mortar.num_global_multipliers
+    assert mortar.comm.allreduce(np.abs(row_sum.getArray()).sum()) > 0.5
+    assert np.allclose(gap.getArray(), -depth * row_sum.getArray(), atol=0.0, rtol=1e-12)
+    mortar.destroy()
+
+
+@pytest.mark.parallel
 @pytest.mark.parametrize("first_at_rest", [True, False])
 def test_pushed_through_by_more_than_the_margin(first_at_rest):
     """Lower block moved up rigidly by five search margins in one update (from rest, or
