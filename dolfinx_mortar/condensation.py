@@ -466,8 +466,11 @@ class CondensedPreconditioner:
         slave = np.zeros(A.getSize()[0], dtype=bool)
         slave[np.concatenate(self.comm.allgather(self.z_node_dofs.reshape(-1)))] = True
         indptr, indices, _ = A.getValuesCSR()
+        lengths = np.diff(indptr)
         near = np.zeros(self.num_u, dtype=bool)
-        near[np.repeat(np.arange(self.num_u), np.diff(indptr))[slave[indices]]] = True
+        if indices.size:
+            near = np.logical_or.reduceat(slave[indices], np.minimum(indptr[:-1], indices.size - 1))
+            near &= lengths > 0
         near[np.diff(G.getValuesCSR()[0]) > 0] = True
         near[self.z_node_dofs.reshape(-1) - first] = True
         self._rows = np.flatnonzero(near)
@@ -733,7 +736,9 @@ class CondensedPreconditioner:
         """K_c without its stored zeros (the diagonal kept; A's hold J's pattern, e.g. the
         Dirichlet columns dolfinx zeroes): A's rows, with ``K_rows`` in the rows near the
         contact; as a new matrix or, while the layout holds (J's pattern, the products'
-        patterns and the zeros), as new values of ``existing``. Collective."""
+        patterns and the zeros), as new values of ``existing``. The layout is kept as masks
+        over A's and K_rows' entries and over K_c's (a byte an entry), not as positions.
+        Collective."""
         A = self._matrices["A"]
         a_csr, k_csr = A.getValuesCSR(), K_rows.getValuesCSR()
         a_values, k_values = a_csr[2], k_csr[2]
@@ -747,12 +752,13 @@ class CondensedPreconditioner:
             if a_part is None or a_moved:
                 outside = np.ones(self.num_u, dtype=bool)
                 outside[self._rows] = False
-                a_part = self._inner_a_part = self._kept_entries(
-                    a_csr, np.arange(self.num_u), outside)
-            layout = self._inner_layout = self._merged_layout(a_part, k_csr)
-        values = np.empty(layout["indices"].size)
-        values[layout["a_target"]] = a_values[a_part["source"]]
-        values[layout["k_target"]] = k_values[layout["k_source"]]
+                a_part = self._inner_a_part = self._kept_entries(a_csr, outside)
+            layout = self._inner_layout = self._merged_layout(a_part, a_csr[1], k_csr)
+        from_a = layout["from_a"]
+        values = np.empty(from_a.size)
+        values[from_a] = a_values[a_part["kept"]]
+        values[~from_a] = k_values[layout["k_kept"]]
+        del a_csr, a_values
         if not fresh:
             existing.setValuesCSR(layout["indptr"], layout["indices"], values)
             existing.assemble()
@@ -763,41 +769,50 @@ class CondensedPreconditioner:
         matrix.assemble()
         return matrix
 
-    def _kept_entries(self, csr: tuple, row_of_local: np.ndarray,
-                      taken: np.ndarray | None = None) -> dict:
-        """Of a matrix's local CSR entries (its local row i being displacement row
-        ``row_of_local[i]``) in the rows ``taken`` (a mask; all if None), the nonzero or
-        diagonal ones: their positions, rows, rank within their row and columns; the
-        dropped positions, and the kept entries per displacement row."""
+    def _kept_entries(self, csr: tuple, taken: np.ndarray | None = None) -> dict:
+        """Of a matrix's local CSR entries, its local rows being displacement rows (all of
+        them, or ``self._rows`` in order when ``taken`` is None), those in the rows
+        ``taken`` (a mask over the displacement rows) that are nonzero or diagonal: as a
+        mask over the entries, the positions of the dropped ones, and the kept entries per
+        local row."""
         indptr, indices, values = csr
         first = self._matrices["A"].getOwnershipRange()[0]
-        local_rows = np.repeat(np.arange(indptr.size - 1), np.diff(indptr))
-        rows = row_of_local[local_rows]
-        in_rows = np.ones(rows.size, dtype=bool) if taken is None else taken[local_rows]
-        kept = in_rows & ((values != 0.0) | (indices == rows + first))
-        source = np.flatnonzero(kept)
-        counts = np.bincount(rows[source], minlength=self.num_u)
-        starts = np.zeros(self.num_u + 1, dtype=np.int64)
-        np.cumsum(counts, out=starts[1:])
-        rank = np.arange(source.size) - starts[rows[source]]
-        return {"source": source, "rows": rows[source], "rank": rank,
-                "indices": indices[source], "counts": counts,
-                "dropped": np.flatnonzero(in_rows & ~kept)}
+        lengths = np.diff(indptr)
+        row_of_local = np.arange(self.num_u) if taken is not None else self._rows
+        diagonal = indices == np.repeat((row_of_local + first).astype(indices.dtype), lengths)
+        kept = (values != 0.0) | diagonal
+        del diagonal
+        if taken is not None:
+            in_rows = np.repeat(taken, lengths)
+            dropped = np.flatnonzero(in_rows & ~kept)
+            kept &= in_rows
+            del in_rows
+        else:
+            dropped = np.flatnonzero(~kept)
+        starts = np.minimum(indptr[:-1], max(kept.size - 1, 0))
+        counts = (np.add.reduceat(kept, starts, dtype=np.int64) if kept.size
+                  else np.zeros(lengths.size, dtype=np.int64))
+        counts[lengths == 0] = 0
+        return {"kept": kept, "dropped": dropped, "counts": counts}
 
-    def _merged_layout(self, a_part: dict, k_csr: tuple) -> dict:
-        """The CSR pattern of A's kept entries with those of K_rows (``k_csr``) in the rows
-        near the contact, and where the values of each go."""
-        k_part = self._kept_entries(k_csr, self._rows)
-        indptr = np.zeros(self.num_u + 1, dtype=np.int64)
-        np.cumsum(a_part["counts"] + k_part["counts"], out=indptr[1:])
-        a_target = indptr[a_part["rows"]] + a_part["rank"]
-        k_target = indptr[k_part["rows"]] + k_part["rank"]
-        indices = np.empty(indptr[-1], dtype=PETSc.IntType)
-        indices[a_target] = a_part["indices"]
-        indices[k_target] = k_part["indices"]
-        return {"indptr": indptr.astype(PETSc.IntType), "indices": indices,
-                "a_target": a_target, "k_source": k_part["source"], "k_target": k_target,
-                "k_dropped": k_part["dropped"]}
+    def _merged_layout(self, a_part: dict, a_indices: np.ndarray, k_csr: tuple) -> dict:
+        """The CSR pattern of A's kept entries (A's column indices ``a_indices``) with those
+        of K_rows (``k_csr``) in the rows
+        near the contact, and which entries come from A (each row comes whole from one of
+        them, in order)."""
+        k_part = self._kept_entries(k_csr)
+        counts = a_part["counts"].copy()
+        counts[self._rows] = k_part["counts"]
+        outside = np.ones(self.num_u, dtype=bool)
+        outside[self._rows] = False
+        indptr = np.zeros(self.num_u + 1, dtype=PETSc.IntType)
+        np.cumsum(counts, out=indptr[1:])
+        from_a = np.repeat(outside, counts)
+        indices = np.empty(from_a.size, dtype=PETSc.IntType)
+        indices[from_a] = a_indices[a_part["kept"]]
+        indices[~from_a] = k_csr[1][k_part["kept"]]
+        return {"indptr": indptr, "indices": indices, "from_a": from_a,
+                "k_kept": k_part["kept"], "k_dropped": k_part["dropped"]}
 
     def _set_near_nullspace(self, matrix: PETSc.Mat) -> None:
         if not self.near_nullspace:
