@@ -234,14 +234,18 @@ class CooMatrix:
         self.num_entries = num_groups * rows_per_group * br * cols_per_group * bc
         self._block_shape = (rows_per_group, br, cols_per_group, bc)
         row_numbers, col_numbers = row_side.numbers, col_side.numbers
-        pattern = (row_side.transposed @ col_side.csr).tocsr()
-        pattern.sort_indices()
-        block_indptr = pattern.indptr.astype(np.int64)
+        from .kernels import compiled
+
+        block_indptr, block_indices = compiled.pattern_of_groups(
+            row_side.local, col_side.local, row_side.count, col_side.count)
         per_row = np.diff(block_indptr)
         present = np.flatnonzero(per_row)
-        num_blocks = pattern.nnz
+        num_blocks = block_indices.size
+        if num_blocks >= 2**31 - 1:
+            raise ValueError(f"a block pattern of {num_blocks} blocks on one rank (at most "
+                             "2^31 - 2: their positions are int32)")
         global_rows = present if row_numbers is None else row_numbers[present]
-        global_cols = pattern.indices if col_numbers is None else col_numbers[pattern.indices]
+        global_cols = block_indices if col_numbers is None else col_numbers[block_indices]
         # the CSR form (rows sorted, each row's columns sorted), for the preallocation:
         # row (r, a) holds the columns c * bc + b of the blocks c of block row r
         self._rowmap = _interleave(global_rows, br)
@@ -252,12 +256,9 @@ class CooMatrix:
         self._indices, row_starts = _block_csr_columns(global_cols, block_indptr[present],
                                                        per_row[present], br, bc)
         self._num_unique = num_blocks * br * bc
-        # 1 + the block's position: a lookup of an absent block (a dropped one) gives 0
-        pattern.data = np.arange(1, num_blocks + 1,
-                                 dtype=np.int32 if num_blocks < 2**31 - 1 else np.int64)
         self._blocks = {
-            "pattern": pattern, "rows": row_side.local, "cols": col_side.local,
-            "count": num_blocks, "num_groups": num_groups, "last": None,
+            "indptr": block_indptr, "indices": block_indices, "rows": row_side.local,
+            "cols": col_side.local, "count": num_blocks, "num_groups": num_groups, "last": None,
         }
         self.mat = None
         self._serial = None
@@ -523,19 +524,12 @@ class CooMatrix:
 
     def _lookup(self, groups: np.ndarray) -> np.ndarray:
         """(nr, nc, len(groups)) 1 + positions of the groups' blocks, found in the pattern
-        (int32; scipy's lookup, int64, if the pattern has 2^31 blocks or more)."""
+        (int32)."""
         from .kernels import compiled
 
         blocks = self._blocks
-        pattern = blocks["pattern"]
         rows, cols = blocks["rows"][groups], blocks["cols"][groups]
-        if blocks["count"] < 2**31 - 1:
-            return compiled.pattern_positions(rows, cols, pattern.indptr, pattern.indices)
-        shape = (groups.size, rows.shape[1], cols.shape[1])
-        found = pattern[np.broadcast_to(rows[:, :, None], shape).reshape(-1),
-                        np.broadcast_to(cols[:, None, :], shape).reshape(-1)]
-        return np.ascontiguousarray(np.asarray(found, dtype=np.int64).reshape(shape)
-                                    .transpose(1, 2, 0))
+        return compiled.pattern_positions(rows, cols, blocks["indptr"], blocks["indices"])
 
     def release_pattern(self) -> None:
         """Drop what only further assemblies need (the block pattern, the groups'
@@ -689,40 +683,19 @@ def _interleave(blocks: np.ndarray, size: int) -> np.ndarray:
 
 class BlockIncidence:
     """The row (or column) blocks of the groups of a block pattern, (groups, n), -1 where a
-    group has none: their compact numbering and incidence matrices, built once and shared
-    by the matrices that have the same blocks (:meth:`CooMatrix.from_blocks` takes this or
-    the array).
+    group has none, in a compact numbering shared by the matrices that have the same blocks
+    (:meth:`CooMatrix.from_blocks` takes this or the array).
 
     ``local`` numbers the blocks among ``count`` (``numbers``: the global block of each,
     None if the global numbering is used); a missing block is ``count``, a block that no
-    group has (the pattern gets an empty last row or column, and a lookup there finds
-    nothing).
+    group has (the pattern gets an empty last row, and a lookup there finds nothing).
     """
 
-    def __init__(self, blocks, keep: bool = True):
+    def __init__(self, blocks):
         blocks = np.asarray(blocks, dtype=np.int64)
         self.numbers, local, self.count = _compact_numbering(blocks)
         index = np.int32 if self.count < 2**31 - 1 else np.int64
         self.local = np.where(local < 0, self.count, local).astype(index, copy=False)
-        self._keep = keep
-        self._csr = self._transposed = None
-
-    @property
-    def csr(self):
-        """(groups, count + 1) CSR matrix with a one where a group has a block (kept only
-        with ``keep``: it is as large as ``local``)."""
-        csr = self._csr if self._csr is not None else _incidence(self.local, self.count)
-        if self._keep:
-            self._csr = csr
-        return csr
-
-    @property
-    def transposed(self):
-        """The transpose of :attr:`csr`, in CSR form."""
-        transposed = self._transposed if self._transposed is not None else self.csr.T.tocsr()
-        if self._keep:
-            self._transposed = transposed
-        return transposed
 
 
 def _compact_numbering(blocks: np.ndarray):
@@ -737,22 +710,3 @@ def _compact_numbering(blocks: np.ndarray):
     local = np.full(blocks.shape, -1, dtype=np.int64)
     local[valid] = inverse.reshape(-1)
     return numbers, local, numbers.size
-
-
-def _incidence(blocks: np.ndarray, num_blocks: int):
-    """(groups x num_blocks + 1) CSR matrix with a one where a group has a block (blocks
-    num_blocks and above: none)."""
-    import scipy.sparse
-
-    valid = blocks < num_blocks
-    if valid.all():
-        step = max(blocks.shape[1], 1)
-        indptr = np.arange(0, blocks.size + 1, step, dtype=np.int64)[: blocks.shape[0] + 1]
-        indices = blocks.reshape(-1)
-    else:
-        indptr = np.zeros(blocks.shape[0] + 1, dtype=np.int64)
-        np.cumsum(valid.sum(axis=1), out=indptr[1:])
-        indices = blocks[valid]
-    # boolean: the products of incidences only need where they are nonzero
-    return scipy.sparse.csr_matrix((np.ones(indices.size, dtype=bool), indices, indptr),
-                                   shape=(blocks.shape[0], num_blocks + 1))

@@ -767,9 +767,7 @@ class MortarInterface:
                 "stencil": lambda: self._pair_col_blocks,
                 "force": lambda: self._pair_force_blocks,
             }[name]()
-            # the stencil's incidence (~30 blocks a pair) is remade for each matrix, the
-            # others (at most 8 a pair) are kept for the matrices that share them
-            side = BlockIncidence(blocks, keep=name != "stencil")
+            side = BlockIncidence(blocks)
             self._pair_block_sides[name] = (self._pattern_version, side)
         return side
 

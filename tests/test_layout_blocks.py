@@ -208,6 +208,40 @@ def test_pattern_sum_of_a_part_equals_the_sum_of_its_copied_positions(block_shap
                                       bad_columns)
 
 
+def test_pattern_of_groups_equals_the_product_of_the_incidences():
+    """Block row r holds block column c where a group has both: the pattern is the product
+    of the groups' row-block incidence (transposed) with their column-block incidence
+    (scipy, sorted), with repeated blocks in a group, missing ones (-1 or the count) and a
+    block no group has (an empty row), and an extra empty last row."""
+    import scipy.sparse
+
+    from dolfinx_mortar.kernels import compiled
+
+    rng = np.random.default_rng(12)
+    num_rows, num_cols, n = 40, 70, 90
+    rows = rng.integers(0, num_rows, (n, 4))
+    cols = rng.integers(0, num_cols, (n, 9))
+    rows[rows == 5] = 6  # block row 5: in no group
+    rows[::7, 1] = rows[::7, 0]  # a block twice in a group
+    rows[::5, 2], cols[::3, 4], cols[::4, 0] = -1, -1, num_cols  # missing blocks
+
+    def incidence(blocks, count):
+        valid = (blocks >= 0) & (blocks < count)
+        group = np.repeat(np.arange(n), blocks.shape[1]).reshape(blocks.shape)
+        return scipy.sparse.csr_matrix((np.ones(int(valid.sum())), (group[valid], blocks[valid])),
+                                       shape=(n, count + 1))
+
+    expected = (incidence(rows, num_rows).T @ incidence(cols, num_cols)).tocsr()
+    expected.sort_indices()
+    indptr, indices = compiled.pattern_of_groups(rows, cols, num_rows, num_cols)
+    assert indptr.tolist() == expected.indptr.tolist()
+    assert indices.tolist() == expected.indices.tolist()
+    assert indptr[6] == indptr[5] and indptr[-1] == indptr[-2] and indices.size > 0
+    empty_indptr, empty_indices = compiled.pattern_of_groups(
+        np.zeros((0, 4), dtype=int), np.zeros((0, 9), dtype=int), num_rows, num_cols)
+    assert empty_indptr.tolist() == [0] * (num_rows + 2) and empty_indices.size == 0
+
+
 def test_pattern_union_equals_the_sum_of_the_sparse_patterns():
     """The union of two CSR patterns (rows strictly increasing) is scipy's sum of the two
     as sparse matrices, empty rows and a pattern without entries included; a row that is

@@ -146,6 +146,9 @@ int pattern_sum_part(long n, int nr, int br, int nc, int bc, const int *position
 int pattern_union(long num_rows, const long *a_indptr, const int *a_indices,
                   const long *b_indptr, const int *b_indices, long *out_indptr,
                   int *out_indices);
+int pattern_of_groups(long n, int nr, int nc, const int *row_blocks, const int *col_blocks,
+                      long num_row_blocks, long num_col_blocks, long *out_indptr,
+                      int *out_indices);
 """,
     "search": """
 int search_boxes(long ns, long nm, int dim, const double *slave_lower,
@@ -592,6 +595,33 @@ def pattern_union(a: tuple[np.ndarray, np.ndarray],
     indices = np.empty(int(indptr[-1]), dtype=np.intc)
     module.lib.pattern_union(num_rows, *pointers, _pointer(ffi, indptr, "long *"),
                              _pointer(ffi, indices, "int *"))
+    return indptr, indices
+
+
+def pattern_of_groups(row_blocks: np.ndarray, col_blocks: np.ndarray, num_row_blocks: int,
+                      num_col_blocks: int) -> tuple[np.ndarray, np.ndarray]:
+    """The block pattern (indptr int64, indices int32; num_row_blocks + 1 rows, the last
+    empty, each row's columns sorted) of groups of row and column blocks ((groups, nr) and
+    (groups, nc) arrays; a block outside [0, count): none): block row r holds column c
+    where some group has both. In C: the groups of each block row by a counting sort, their
+    columns marked once a row."""
+    if max(num_row_blocks, num_col_blocks) >= 2**31 - 1:
+        raise ValueError("pattern_of_groups takes fewer than 2^31 - 1 blocks a side")
+    rows = np.ascontiguousarray(row_blocks, dtype=np.intc)
+    cols = np.ascontiguousarray(col_blocks, dtype=np.intc)
+    if rows.ndim != 2 or cols.ndim != 2 or rows.shape[0] != cols.shape[0]:
+        raise ValueError(f"groups of {rows.shape} row and {cols.shape} column blocks")
+    module = load("pattern")
+    ffi = module.ffi
+    indptr = np.empty(num_row_blocks + 2, dtype=np.int64)
+    arguments = (rows.shape[0], rows.shape[1], cols.shape[1], _pointer(ffi, rows, "int *"),
+                 _pointer(ffi, cols, "int *"), num_row_blocks, num_col_blocks,
+                 _pointer(ffi, indptr, "long *"))
+    if module.lib.pattern_of_groups(*arguments, ffi.NULL) != 0:
+        raise MemoryError("pattern_of_groups: out of memory")
+    indices = np.empty(int(indptr[-1]), dtype=np.intc)
+    if module.lib.pattern_of_groups(*arguments, _pointer(ffi, indices, "int *")) != 0:
+        raise MemoryError("pattern_of_groups: out of memory")
     return indptr, indices
 
 

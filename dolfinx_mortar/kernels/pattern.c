@@ -133,3 +133,68 @@ int pattern_union(long num_rows, const long *a_indptr, const int *a_indices,
     }
     return 0;
 }
+
+static int compare_int(const void *a, const void *b) {
+    int x = *(const int *)a, y = *(const int *)b;
+    return (x > y) - (x < y);
+}
+
+/* The block pattern of n groups of nr row blocks and nc column blocks (row_blocks,
+ * col_blocks; a value outside [0, num_row_blocks) or [0, num_col_blocks): none): block row r
+ * holds block column c if a group has both. The pattern has num_row_blocks + 1 rows, the last
+ * empty. With out_indices NULL, out_indptr (num_row_blocks + 2) gets the row starts; else
+ * each row's columns go to out_indices, sorted. Returns -1 if out of memory. */
+int pattern_of_groups(long n, int nr, int nc, const int *row_blocks, const int *col_blocks,
+                      long num_row_blocks, long num_col_blocks, long *out_indptr,
+                      int *out_indices) {
+    long *start = calloc((size_t)num_row_blocks + 1, sizeof(long));
+    long *marker = malloc(sizeof(long) * (size_t)(num_col_blocks > 0 ? num_col_blocks : 1));
+    if (!start || !marker) {
+        free(start);
+        free(marker);
+        return -1;
+    }
+    for (long e = 0; e < n * nr; ++e)
+        if (row_blocks[e] >= 0 && row_blocks[e] < num_row_blocks) ++start[row_blocks[e] + 1];
+    for (long r = 0; r < num_row_blocks; ++r) start[r + 1] += start[r];
+    long total = start[num_row_blocks];
+    long *groups = malloc(sizeof(long) * (size_t)(total > 0 ? total : 1));
+    long *cursor = malloc(sizeof(long) * (size_t)(num_row_blocks > 0 ? num_row_blocks : 1));
+    if (!groups || !cursor) {
+        free(start);
+        free(marker);
+        free(groups);
+        free(cursor);
+        return -1;
+    }
+    for (long r = 0; r < num_row_blocks; ++r) cursor[r] = start[r];
+    for (long e = 0; e < n * nr; ++e)
+        if (row_blocks[e] >= 0 && row_blocks[e] < num_row_blocks)
+            groups[cursor[row_blocks[e]]++] = e / nr;
+    for (long c = 0; c < num_col_blocks; ++c) marker[c] = -1;
+    if (!out_indices) out_indptr[0] = 0;
+    for (long r = 0; r < num_row_blocks; ++r) {
+        long k = out_indptr[r];
+        for (long p = start[r]; p < start[r + 1]; ++p) {
+            const int *cols = col_blocks + groups[p] * nc;
+            for (int j = 0; j < nc; ++j) {
+                int c = cols[j];
+                if (c < 0 || c >= num_col_blocks || marker[c] == r) continue;
+                marker[c] = r;
+                if (out_indices) out_indices[k] = c;
+                ++k;
+            }
+        }
+        if (out_indices)
+            qsort(out_indices + out_indptr[r], (size_t)(k - out_indptr[r]), sizeof(int),
+                  compare_int);
+        else
+            out_indptr[r + 1] = k;
+    }
+    if (!out_indices) out_indptr[num_row_blocks + 1] = out_indptr[num_row_blocks];
+    free(start);
+    free(marker);
+    free(groups);
+    free(cursor);
+    return 0;
+}
