@@ -797,9 +797,8 @@ class CondensedPreconditioner:
 
     def _merged_layout(self, a_part: dict, a_indices: np.ndarray, k_csr: tuple) -> dict:
         """The CSR pattern of A's kept entries (A's column indices ``a_indices``) with those
-        of K_rows (``k_csr``) in the rows
-        near the contact, and which entries come from A (each row comes whole from one of
-        them, in order)."""
+        of K_rows (``k_csr``) in the rows near the contact, and which entries come from A
+        (each row comes whole from one of them, in order)."""
         k_part = self._kept_entries(k_csr)
         counts = a_part["counts"].copy()
         counts[self._rows] = k_part["counts"]
