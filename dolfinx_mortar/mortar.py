@@ -205,7 +205,6 @@ class MortarInterface:
         self._crosspoint_blocks = np.zeros(0, dtype=np.int64)
         self._fold_blocks = np.zeros(0, dtype=np.int64)
         self._slave_side_facets: np.ndarray | None = None
-        self._pair_dofs: np.ndarray | None = None
         self.stencil: stencils.PairStencil | None = None
         self.without_pairs = False
         """No pair on any rank at the last search (one allreduce): every rank alike skips this
@@ -407,7 +406,6 @@ class MortarInterface:
         if not self.comm.allreduce(changed, op=MPI.LOR):
             return
         self._stencil_widenings = stencil.widenings
-        self._pair_dofs = None
         self._pattern_version += 1
         # the quantities do not depend on the partner slots: no new evaluation
         self._evaluated_version = self._pattern_version
@@ -637,7 +635,6 @@ class MortarInterface:
             self.pair_crosspoint = np.isin(slave_blocks, carry_none)
         else:
             self.pair_crosspoint = np.zeros(slave_blocks.shape, dtype=bool)
-        self._pair_dofs = None
         self._pattern_version += 1
         self.statistics.pairs = int(pairs.shape[0])
 
@@ -681,17 +678,15 @@ class MortarInterface:
     def pair_dofs(self) -> np.ndarray:
         """(n, width * gdim) displacement dofs of each pair's stencil nodes (-1: absent).
 
-        Built on first use after a search (only the monolithic system needs them).
+        Made at each use, not kept: only a new pattern of the monolithic matrix needs them.
         """
-        if self._pair_dofs is None:
-            blocks = self._pair_col_blocks
-            gdim = self.gdim
-            dofs = np.empty(blocks.shape + (gdim,), dtype=np.int64)
-            for component in range(gdim):  # (not a broadcast over a short last axis: slow)
-                dofs[:, :, component] = blocks * self.block_size + component
-            dofs[blocks < 0] = -1
-            self._pair_dofs = dofs.reshape(blocks.shape[0], blocks.shape[1] * gdim)
-        return self._pair_dofs
+        blocks = self._pair_col_blocks
+        gdim = self.gdim
+        dofs = np.empty(blocks.shape + (gdim,), dtype=np.int64)
+        for component in range(gdim):  # (not a broadcast over a short last axis: slow)
+            dofs[:, :, component] = blocks * self.block_size + component
+        dofs[blocks < 0] = -1
+        return dofs.reshape(blocks.shape[0], blocks.shape[1] * gdim)
 
     def _refresh_coordinates(self, slave_x: np.ndarray, master_x: np.ndarray) -> None:
         self._fill_node_table(self._node_x, slave_x, master_x)

@@ -191,7 +191,7 @@ class ContactSystem:
         (-1), they are identity rows."""
         interface = self.interfaces[k]
         if interface.quantities is None or interface.without_pairs or not self.in_layout[k]:
-            return np.zeros((0, 0), dtype=np.int64), np.zeros((0, 0), dtype=np.int64)
+            return np.zeros((0, 0), dtype=PETSc.IntType), np.zeros((0, 0), dtype=PETSc.IntType)
         layout = self.layout
         force_dofs = layout.u(interface.pair_force_dofs)
         force_dofs[np.isin(force_dofs, self._fixed_all)] = -1
@@ -199,9 +199,10 @@ class ContactSystem:
         multipliers = [pair_z]
         multipliers += [layout.z(interface.pair_multipliers, self.tangential_field(k, a))
                         for a in range(self.components)]
+        # (PETSc's integers: kept until the next search, as wide as the pairs' blocks)
         row_indices = np.concatenate([force_dofs] + multipliers, axis=1)
         column_indices = np.concatenate([layout.u(interface.pair_dofs)] + multipliers, axis=1)
-        return row_indices, column_indices
+        return row_indices.astype(PETSc.IntType), column_indices.astype(PETSc.IntType)
 
     def _update_pattern(self) -> bool:
         """(Re)build the matrix when the pairs' pattern changed; True if it was rebuilt."""
@@ -407,6 +408,6 @@ def _pad(indices: np.ndarray, width: int) -> np.ndarray:
     """(n, width) indices: ``indices`` with columns of -1 (dropped entries) appended."""
     if indices.shape[1] == width:
         return indices
-    padded = np.full((indices.shape[0], width), -1, dtype=np.int64)
+    padded = np.full((indices.shape[0], width), -1, dtype=indices.dtype)
     padded[:, :indices.shape[1]] = indices
     return padded
