@@ -84,6 +84,14 @@ class ContactNewton:
         self.solve_options = solvers.configure_snes(
             snes, self.prefix, self.petsc_options, self.condensation, self.default_atol,
             callbacks, condensation, self.linear_solver)
+        if self.condensation:
+            with solvers.inserted_options(self.prefix, self.solve_options):
+                fraction = PETSc.Options().getReal(f"{self.prefix}ksp_newton_fraction",
+                                                   solvers.KSP_NEWTON_FRACTION)
+            if fraction > 0.0:
+                atol = snes.getKSP().getTolerances()[1]
+                snes.setUpdate(solvers.NewtonLinearTolerance(
+                    equations.residual_history, fraction, atol))
 
     def fall_back_to_direct(self, condensation: bool, failure: str, warn) -> None:
         """Replace the iterative linear solver that ``auto`` chose, which failed a linear

@@ -13,7 +13,10 @@ the run where the iterative one fails a linear solve. The option
 products between Newton iterations, so that a Jacobian of the same pattern only
 recomputes values; false frees them after each set-up (less memory, every product
 built anew); with friction ``condensed_elimination_ratio`` is
-:data:`~dolfinx_mortar.condensation.ELIMINATION_RATIO`.
+:data:`~dolfinx_mortar.condensation.ELIMINATION_RATIO`. ``ksp_newton_fraction``
+(default :data:`KSP_NEWTON_FRACTION`; 0 turns it off) stops the outer linear solve of the
+condensed path where its residual is that fraction of the Newton tolerance
+(:class:`NewtonLinearTolerance`).
 ``petsc_options`` given to the problem override the defaults, and the user's options
 database under the problem's prefix overrides both.
 
@@ -169,6 +172,36 @@ BOOMERAMG_HEXAHEDRON_OPTIONS = {
     # (docs/benchmarks.md, "Contact vs bonded elasticity (issue 26)")
     "pc_hypre_boomeramg_strong_threshold": 0.7,
 }
+
+KSP_NEWTON_FRACTION = 1e-2
+"""With condensation, the outer Krylov solve also stops where its residual is this fraction
+of the Newton tolerance (:class:`NewtonLinearTolerance`)."""
+
+
+class NewtonLinearTolerance:
+    """An SNES update that sets the outer KSP's absolute tolerance, before each Newton step,
+    to ``fraction`` of the Newton tolerance max(atol, rtol ||r_0||) (``||r_0||``: the first
+    norm ``monitored`` holds), and never below ``atol``, the KSP's own.
+
+    Why: the relative tolerance (1e-12 of the step's residual) is what makes the iterative
+    Newton iterates those of a direct solve, but once the residual is far below its start
+    it asks for digits no Newton test can see: a step whose linear residual is 1e-2 of
+    the Newton tolerance leaves the next residual within 1 % of the tolerance plus the
+    quadratic term, so the Newton iterations stay the same and the iterates differ by
+    that residual through J^-1. Holds ``monitored`` (a list the SNES monitor appends to)
+    only: the SNES keeps its update callback."""
+
+    def __init__(self, monitored: list[float], fraction: float, atol: float):
+        self.monitored = monitored
+        self.fraction = fraction
+        self.atol = atol
+
+    def __call__(self, snes: PETSc.SNES, iteration: int) -> None:
+        rtol, atol, _, _ = snes.getTolerances()
+        first = self.monitored[0] if self.monitored else 0.0
+        target = max(atol, rtol * first)
+        snes.getKSP().setTolerances(atol=max(self.atol, self.fraction * target))
+
 
 GAMG_OPTIONS = {
     # selectable with petsc_options={"condensed_pc_type": "gamg"}: the near-nullspace

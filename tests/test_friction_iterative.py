@@ -262,3 +262,63 @@ def test_elimination_ratio_trades_outer_iterations_only():
         outer[ratio] = sum(summary["krylov_iterations"])
     newton = sum(direct["newton_iterations"])
     assert outer[0.5] > outer[ELIMINATION_RATIO] > outer[1e-3] == newton, outer
+
+
+@pytest.mark.parallel
+def test_outer_solve_stops_at_a_fraction_of_the_newton_tolerance():
+    """``ksp_newton_fraction``: the outer fgmres also stops where its residual is 1e-2 of
+    the Newton tolerance (solvers.NewtonLinearTolerance). Coulomb friction converges over
+    several Newton iterations, whose last steps then need fewer digits: fewer outer
+    iterations (demos/hertz_sphere.py --mu 0.3 at refinement 0, serial: 35 -> 31), the same
+    Newton iterations and multipliers to 1e-8, the last residual still under the Newton
+    tolerance. Off (0), every step is solved to 1e-12 of its own residual."""
+    from petsc4py import PETSc
+
+    from dolfinx_mortar.solvers import KSP_NEWTON_FRACTION
+
+    hertz = load_demo("hertz_sphere")
+    argv = ["--refinement", "0", "--mu", "0.3", "--linear-solver", "iterative"]
+    options = PETSc.Options()
+    summaries = {}
+    for fraction in (0.0, KSP_NEWTON_FRACTION):
+        options["dolfinx_mortar_ksp_newton_fraction"] = fraction
+        try:
+            summaries[fraction] = hertz.main(argv, comm=MPI.COMM_WORLD)
+        finally:
+            options.delValue("dolfinx_mortar_ksp_newton_fraction")
+    off, on = summaries[0.0], summaries[KSP_NEWTON_FRACTION]
+    assert on["newton_iterations"] == off["newton_iterations"]
+    reference = np.array(off["pressure_profile"]["multiplier"])
+    np.testing.assert_allclose(on["pressure_profile"]["multiplier"], reference,
+                               rtol=0, atol=1e-8 * reference.max())
+    assert sum(on["krylov_iterations"]) < sum(off["krylov_iterations"])
+    for residuals in on["residuals_per_step"]:
+        assert residuals[-1] <= 1e-10 * residuals[0]
+
+
+def test_newton_linear_tolerance_is_a_fraction_of_the_newton_tolerance():
+    """The update sets the KSP's atol to fraction * max(snes atol, snes rtol ||r_0||),
+    never below the KSP's own atol, and leaves its rtol."""
+    from petsc4py import PETSc
+
+    from dolfinx_mortar.solvers import NewtonLinearTolerance
+
+    snes = PETSc.SNES().create(MPI.COMM_SELF)
+    try:
+        snes.setTolerances(rtol=1e-10, atol=1e-20)
+        snes.getKSP().setTolerances(rtol=1e-12, atol=1e-50)
+        monitored = []
+        update = NewtonLinearTolerance(monitored, 1e-2, 1e-50)
+        update(snes, 0)  # no norm yet: the snes atol
+        assert snes.getKSP().getTolerances()[:2] == (1e-12, pytest.approx(1e-22, rel=1e-15))
+        monitored.append(3.0)
+        update(snes, 1)
+        assert snes.getKSP().getTolerances()[1] == pytest.approx(3e-12, rel=1e-15)
+        snes.setTolerances(atol=1e-9)
+        update(snes, 2)
+        assert snes.getKSP().getTolerances()[1] == pytest.approx(1e-11, rel=1e-15)
+        update = NewtonLinearTolerance(monitored, 1e-2, 1e-6)
+        update(snes, 3)
+        assert snes.getKSP().getTolerances()[1] == 1e-6
+    finally:
+        snes.destroy()
