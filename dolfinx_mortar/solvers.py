@@ -151,16 +151,18 @@ ITERATIVE_OPTIONS = {
 
 BOOMERAMG_3D_OPTIONS = {
     # added (under condensed_, unless the user set them) when the displacement has 3
-    # components: HMIS coarsening, extended+i interpolation of at most 4 entries a row.
-    # hypre's defaults (Falgout, classical) made coarse levels of 200-400 entries a row
-    # on the condensed 3D Hertz systems (operator complexity 5.6 at 13k dofs, 12 ms a
-    # V-cycle); these kept 17-20 inner steps from 13k to 85k dofs at 3.5 ms a step
-    # (13k). One level of aggressive coarsening was cheaper a step but grew from 22 to
-    # 51 steps. In 2D the defaults stay: there HMIS took 16.5 inner steps at 77k dofs
-    # against 6.9 (benchmarks/README.md, "Iterative linear solver in 3D")
+    # components: HMIS coarsening, extended+i interpolation of at most 4 entries a row,
+    # and one level of aggressive coarsening. hypre's defaults (Falgout, classical) made
+    # coarse levels of 200-400 entries a row on the condensed 3D Hertz systems; without
+    # the aggressive level the hierarchy took twice the set-up and about three times
+    # the time per V-cycle for half the inner steps, which stay flat with it from 2e5
+    # to 9e5 dofs. In 2D the defaults stay: there HMIS took 16.5 inner steps at 77k dofs
+    # against 6.9 (docs/benchmarks.md, "One level of aggressive coarsening";
+    # benchmarks/README.md, "Iterative linear solver in 3D")
     "pc_hypre_boomeramg_coarsen_type": "HMIS",
     "pc_hypre_boomeramg_interp_type": "ext+i",
     "pc_hypre_boomeramg_P_max": 4,
+    "pc_hypre_boomeramg_agg_nl": 1,
 }
 
 BOOMERAMG_HEXAHEDRON_OPTIONS = {

@@ -108,19 +108,21 @@ def inner_preconditioner_view(problem) -> str:
 
 @pytest.mark.parallel
 @pytest.mark.parametrize(("dim", "cell", "petsc_options", "coarsening", "interpolation",
-                          "p_max", "threshold"), [
-    (3, "hexahedron", {}, "HMIS", "ext\\+i", 4, "0.7"),
-    (3, "tetrahedron", {}, "HMIS", "ext\\+i", 4, "0.25"),
+                          "p_max", "threshold", "aggressive"), [
+    (3, "hexahedron", {}, "HMIS", "ext\\+i", 4, "0.7", 1),
+    (3, "tetrahedron", {}, "HMIS", "ext\\+i", 4, "0.25", 1),
     (3, "hexahedron", {"condensed_pc_hypre_boomeramg_coarsen_type": "PMIS",
-                       "condensed_pc_hypre_boomeramg_strong_threshold": 0.5},
-     "PMIS", "ext\\+i", 4, "0.5"),
+                       "condensed_pc_hypre_boomeramg_strong_threshold": 0.5,
+                       "condensed_pc_hypre_boomeramg_agg_nl": 0},
+     "PMIS", "ext\\+i", 4, "0.5", 0),
     # PETSc 3.25 (sid) prints "not yet set" where it leaves hypre its own default
-    (2, "triangle", {}, "(Falgout|not yet set)", "(classical|not yet set)", 0, "0.25"),
+    (2, "triangle", {}, "(Falgout|not yet set)", "(classical|not yet set)", 0, "0.25", 0),
 ])
 def test_boomeramg_options_follow_the_dimension(dim, cell, petsc_options, coarsening,
-                                                interpolation, p_max, threshold):
-    """HMIS, ext+i, P_max 4 in 3D; the strong threshold 0.7 on hexahedra only (issue 26);
-    the user's options win; hypre's defaults in 2D."""
+                                                interpolation, p_max, threshold, aggressive):
+    """HMIS, ext+i, P_max 4 and one level of aggressive coarsening in 3D; the strong
+    threshold 0.7 on hexahedra only (issue 26); the user's options win; hypre's defaults
+    in 2D (no aggressive level: PETSc prints its count only when there is one)."""
     if dim == 3:
         problem, _ = curved_punch(MPI.COMM_WORLD, cell=cell, linear_solver="iterative",
                                   petsc_options=petsc_options)
@@ -132,6 +134,8 @@ def test_boomeramg_options_follow_the_dimension(dim, cell, petsc_options, coarse
     assert re.search(f"Interpolation type +{interpolation}\\n", text), text
     assert re.search(f"max elements per row {p_max}\\n", text), text
     assert re.search(f"Threshold for strong coupling {threshold}\\n", text), text
+    levels = re.search(r"Number of levels of aggressive coarsening (\d+)\n", text)
+    assert (int(levels.group(1)) if levels else 0) == aggressive, text
     names = [name for name in PETSc.Options().getAll() if "boomeramg" in name]
     assert names == []
     problem.destroy()
