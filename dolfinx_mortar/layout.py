@@ -17,6 +17,9 @@ the block patterns that several matrices share.
 
 from __future__ import annotations
 
+import functools
+import typing
+
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
@@ -394,7 +397,8 @@ class CooMatrix:
         len(which)) of the groups ``groups[which]`` on their block columns ``columns``
         (None: all groups, all columns). A pair's block is mostly zero where its slave nodes
         carry no multiplier, gap or area weight: only the columns that are not are given for
-        those (one lookup of the positions of all ``groups``, kept across calls)."""
+        those (one lookup of the positions of all ``groups``, kept across calls). ``values``
+        may be :class:`ChunkedValues`: then no part's values are held whole."""
         groups = np.asarray(groups, dtype=np.int64).reshape(-1)
         if groups.size == 0:
             return
@@ -411,7 +415,20 @@ class CooMatrix:
         count = self._blocks["count"]
         position = self._positions(groups)
         sums = np.zeros((br, bc, count + 1))
+        chunks = []
         for values, which, columns in parts:
+            if not isinstance(values, ChunkedValues):
+                chunks.append((values, which, columns))
+                continue
+            n = groups.size if which is None else len(which)
+            step = max(int(values.chunk or n), 1)
+            for start in range(0, n, step):
+                stop = min(n, start + step)
+                part = np.arange(start, stop) if which is None else np.asarray(which)[start:stop]
+                chunks.append((functools.partial(values, start, stop), part, columns))
+        for values, which, columns in chunks:
+            if callable(values):
+                values = values()  # (one chunk's values, summed and dropped before the next)
             n = groups.size if which is None else len(which)
             nk = nc if columns is None else len(columns)
             values = np.asarray(values, dtype=PETSc.ScalarType)
@@ -543,6 +560,19 @@ class CooMatrix:
         if self.mat is not None:
             self.mat.destroy()
             self.mat = None
+
+
+class ChunkedValues:
+    """A part's values for :meth:`CooMatrix.add_groups` made on demand: ``values(start,
+    stop)`` gives those of ``which[start:stop]``, asked for ``chunk`` groups at a time (all
+    at once if None), so that only one chunk's values are alive at a time."""
+
+    def __init__(self, values: typing.Callable[[int, int], np.ndarray], chunk: int | None):
+        self.values = values
+        self.chunk = chunk
+
+    def __call__(self, start: int, stop: int) -> np.ndarray:
+        return self.values(start, stop)
 
 
 class MonolithicMatrix:

@@ -127,7 +127,9 @@ class PairStencil:
     search_depth: float
     """How far behind each facet (into its body) its search box reaches, in margins."""
     assembly_chunk: int | None
-    """Pairs whose gradient blocks are formed at once in an assembly (None: all)."""
+    """Pairs whose gradient blocks are formed at once in an assembly (None: all). In 3D a
+    frictional Newton matrix's block of a pair is 27 rows by up to some 200 columns: 512
+    pairs' blocks are about 20 MB."""
 
     def __init__(self, nodes: np.ndarray, present: np.ndarray, slave_facets: np.ndarray):
         self.nodes = nodes
@@ -387,7 +389,7 @@ class Surface3Stencil(PairStencil):
 
     gdim = 3
     kernel = Surface3Kernel()
-    search_margin, search_growth, search_depth, assembly_chunk = 0.5, 0.5, 2.0, 2048
+    search_margin, search_growth, search_depth, assembly_chunk = 0.5, 0.5, 2.0, 512
 
     def __init__(self, nodes, present, slave_facets, ns, nm, max_star, star_table,
                  pair_star_rows):

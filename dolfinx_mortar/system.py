@@ -25,7 +25,7 @@ from petsc4py import PETSc
 
 from . import compat
 from .friction import coefficient_names
-from .layout import BlockLayout, MonolithicMatrix
+from .layout import BlockLayout, ChunkedValues, MonolithicMatrix
 
 if typing.TYPE_CHECKING:
     from .enforcement import Rows
@@ -151,10 +151,7 @@ class ContactSystem:
             if blocks is not None:
                 contributing, pair_parts = blocks
                 for values, which, columns in pair_parts:
-                    if values.shape[0] != self._block_shape[0]:  # (another pair's rows)
-                        padded = np.zeros((self._block_shape[0],) + values.shape[1:])
-                        padded[:values.shape[0]] = values
-                        values = padded
+                    values = _padded_rows(values, self._block_shape[0])
                     which = given + (np.arange(contributing.size) if which is None else which)
                     parts.append((values, which, columns))
                 groups.append(offset + contributing)
@@ -312,14 +309,14 @@ class ContactSystem:
         forces, columns = (ns + nm) * gdim, stencil.width * gdim
         parts = []
         weighted = _weighted_rows(terms, contributing.size)
-        if weighted.size == contributing.size:
-            parts.append((interface.combined_gradients(contributing, terms), None,
-                          np.arange(columns)))
-        elif weighted.size:
-            parts.append((interface.combined_gradients(
-                contributing[weighted], [[(o, w if np.ndim(w) == 0 else w[weighted])
-                                          for o, w in row] for row in terms]),
-                weighted, np.arange(columns)))
+        if weighted.size:
+            every = weighted.size == contributing.size
+            rows = contributing if every else contributing[weighted]
+            if not every:
+                terms = [[(o, w if np.ndim(w) == 0 else w[weighted]) for o, w in row]
+                         for row in terms]
+            parts.append((_chunked_gradients(interface, rows, terms),
+                          None if every else weighted, np.arange(columns)))
         multiplier_columns = np.arange(columns, columns + num_multipliers)
         force_columns = np.zeros(0, dtype=np.int64)
         if friction is not None:
@@ -354,6 +351,19 @@ class ContactSystem:
             for vector in vectors.values():
                 vector.destroy()
         self._coefficient_vectors = []
+
+
+def _chunked_gradients(interface, rows: np.ndarray, terms) -> ChunkedValues:
+    """The combined gradients of ``terms`` at the pairs ``rows``, made
+    ``interface.assembly_chunk`` pairs at a time as the matrix sums them: the blocks of every
+    weighted pair together were the largest transient of a frictional Jacobian's assembly
+    on the rank holding the contact zone. Each pair's gradients are its own, so the sums
+    do not depend on the chunk."""
+    def gradients(start: int, stop: int) -> np.ndarray:
+        return interface.combined_gradients(
+            rows[start:stop], [[(o, w if np.ndim(w) == 0 else w[start:stop]) for o, w in row]
+                               for row in terms])
+    return ChunkedValues(gradients, interface.assembly_chunk)
 
 
 def _weighted_rows(terms, n: int) -> np.ndarray:
@@ -402,6 +412,20 @@ def _add_tangential_columns(values: np.ndarray, T: np.ndarray, coefficient: dict
             direct = -tangent * weight[:, :, None]
             row = forces + (1 + b) * ns
             values[row:row + ns, :first] += direct.transpose(1, 2, 0)
+
+
+def _padded_rows(values, rows: int):
+    """A part's values (or its :class:`ChunkedValues`) with zero rows appended up to
+    ``rows``: the blocks of a pair whose blocks have fewer rows than another pair's."""
+    def padded(array: np.ndarray) -> np.ndarray:
+        if array.shape[0] == rows:
+            return array
+        result = np.zeros((rows,) + array.shape[1:])
+        result[:array.shape[0]] = array
+        return result
+    if isinstance(values, ChunkedValues):
+        return ChunkedValues(lambda start, stop: padded(values(start, stop)), values.chunk)
+    return padded(values)
 
 
 def _pad(indices: np.ndarray, width: int) -> np.ndarray:

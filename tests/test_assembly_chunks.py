@@ -133,3 +133,32 @@ def test_matrices_stay_valid_after_a_new_search():
     assert isinstance(mortar.force_jacobian(z), PETSc.Mat)
     z.destroy()
     mortar.destroy()
+
+
+@pytest.mark.parallel
+def test_frictional_jacobian_of_chunked_blocks_equals_all_at_once():
+    """The Newton matrix's contact blocks (system.ContactSystem._contact_blocks: the weighted
+    pairs' gradients, made ``assembly_chunk`` pairs at a time as they are summed) at a
+    converged frictional state: the same pattern and values as with all pairs at once."""
+    from test_friction import load_demo
+
+    from dolfinx_mortar import Coulomb
+
+    patch = load_demo("friction_patch")
+    limit = 0.2 * patch.PRESSURE
+    problem = patch.sheared_blocks_3d((3, 7), "upper", Coulomb(0.2),
+                                      2.0 * limit / patch.SHEAR_MODULUS, limit)
+    assert problem.solve().converged
+    interfaces = problem.equations.interfaces
+    results = []
+    for chunk in (None, 3):
+        for mortar in interfaces:
+            mortar.assembly_chunk = chunk
+        results.append(_csr(problem.equations.assemble_system()))
+    contributing = max(mortar.contributing_pairs().size for mortar in interfaces)
+    assert MPI.COMM_WORLD.allreduce(contributing, op=MPI.MAX) > 3 * 3
+    (indptr, indices, values), (chunk_indptr, chunk_indices, chunk_values) = results
+    assert np.array_equal(indptr, chunk_indptr) and np.array_equal(indices, chunk_indices)
+    scale = MPI.COMM_WORLD.allreduce(np.abs(values).max(initial=0.0), op=MPI.MAX)
+    assert np.abs(values - chunk_values).max(initial=0.0) <= 1e-14 * scale
+    problem.destroy()
