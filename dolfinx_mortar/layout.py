@@ -435,17 +435,7 @@ class CooMatrix:
             if values.size != nr * br * nk * bc * n:
                 raise ValueError(f"expected {nr * br * nk * bc * n} values, got {values.size}")
             values = values.reshape(nr, br, nk, bc, n)
-            if position.dtype == np.intc:
-                compiled.pattern_sum_part(position, values, count, sums, which, columns)
-                continue
-            where = position if columns is None else position[:, np.asarray(columns)]
-            if which is not None:
-                where = np.take(where, np.asarray(which, dtype=np.int64), axis=2)
-            flat = np.ascontiguousarray(where).reshape(-1)
-            for a in range(br):
-                for b in range(bc):
-                    weights = np.ascontiguousarray(values[:, a, :, b, :]).reshape(-1)
-                    sums[a, b] += np.bincount(flat, weights=weights, minlength=count + 1)
+            compiled.pattern_sum_part(position, values, count, sums, which, columns)
         return self._in_order(sums)
 
     def _summed_groups(self, values, groups, chunk=None, out=None, row_starts=()) -> np.ndarray:
@@ -459,9 +449,8 @@ class CooMatrix:
         count = self._blocks["count"]
         position = self._positions(groups)  # (nr, nc, groups)
         sums = np.zeros((br, bc, count + 1))
-        compiled_sum = position.dtype == np.intc  # (else positions beyond int32: numpy)
-        if compiled_sum:
-            from .kernels import compiled
+        from .kernels import compiled
+
         if not callable(values):
             # all at once, entry (i, a, j, b) of every group after the other
             values = np.asarray(values, dtype=PETSc.ScalarType)
@@ -469,14 +458,7 @@ class CooMatrix:
             if values.size != expected:
                 raise ValueError(f"expected {expected} values, got {values.size}")
             values = values.reshape(nr, br, nc, bc, groups.size)
-            if compiled_sum:
-                compiled.pattern_sum(position, values, count, sums)
-            else:
-                where = position.reshape(-1)
-                for a in range(br):
-                    for b in range(bc):
-                        weights = np.ascontiguousarray(values[:, a, :, b, :]).reshape(-1)
-                        sums[a, b] = np.bincount(where, weights=weights, minlength=count + 1)
+            compiled.pattern_sum(position, values, count, sums)
             chunk, values = None, None
         step = max(int(chunk or groups.size), 1)
         for start in range(0, groups.size if values is not None else 0, step):
@@ -487,13 +469,7 @@ class CooMatrix:
             if part.size != expected:
                 raise ValueError(f"expected {expected} values, got {part.size}")
             part = part.reshape(nr, br, nc, bc, stop - start)
-            if compiled_sum:
-                compiled.pattern_sum(position, part, count, sums, start, group_major=True)
-                continue
-            where = position[..., start:stop].transpose(2, 0, 1).reshape(-1).astype(np.intp)
-            for a in range(br):
-                for b in range(bc):
-                    np.add.at(sums[a, b], where, part[:, a, :, b, :].transpose(2, 0, 1).reshape(-1))
+            compiled.pattern_sum(position, part, count, sums, start, group_major=True)
             del part
         return self._in_order(sums, out, row_starts)
 
