@@ -24,6 +24,9 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+INDEX_CHUNK = 1 << 20
+"""Indices :meth:`BlockLayout.index` maps at a time."""
+
 
 class BlockLayout:
     """Rows [u | z_1 | z_2 | ...] per rank: displacements, then each multiplier field.
@@ -77,22 +80,33 @@ class BlockLayout:
         start = int(self.within_rank[self.comm.rank, field])
         return slice(start, start + int(self.counts[self.comm.rank, field]))
 
-    def index(self, field: int, index: np.ndarray) -> np.ndarray:
-        """Monolithic index of global indices of ``field`` (negative stays -1)."""
-        index = np.asarray(index, dtype=np.int64)
+    def index(self, field: int, index: np.ndarray, dtype=np.int64) -> np.ndarray:
+        """Monolithic index of global indices of ``field`` (negative stays -1), as
+        ``dtype``. Mapped a chunk at a time: a bulk pattern's column indices (some 10^7 a
+        rank) would otherwise take several int64 temporaries of their size."""
+        index = np.asarray(index)
+        if index.dtype.kind not in "iu":
+            index = index.astype(np.int64)
+        mapped = np.empty(index.shape, dtype=dtype)
+        source, target = index.reshape(-1), mapped.reshape(-1)
         starts = self.field_offsets[:, field]
-        if self.comm.size == 1:  # a shift
-            mono = index + int(self.offsets[0] + self.within_rank[0, field] - starts[0])
-        else:
-            owner = np.searchsorted(starts, index, side="right") - 1
-            np.clip(owner, 0, self.comm.size - 1, out=owner)
-            mono = index - starts[owner] + self.offsets[owner] + self.within_rank[owner, field]
-        mono[index < 0] = -1
-        return mono
+        # per owning rank: monolithic = global + shift
+        shifts = self.offsets[:-1] + self.within_rank[:, field] - starts[:-1]
+        for begin in range(0, source.size, INDEX_CHUNK):
+            part = source[begin:begin + INDEX_CHUNK].astype(np.int64)
+            if self.comm.size == 1:
+                mono = part + shifts[0]
+            else:
+                owner = np.searchsorted(starts, part, side="right") - 1
+                np.clip(owner, 0, self.comm.size - 1, out=owner)
+                mono = part + shifts[owner]
+            mono[part < 0] = -1
+            target[begin:begin + INDEX_CHUNK] = mono
+        return mapped
 
-    def u(self, index: np.ndarray) -> np.ndarray:
+    def u(self, index: np.ndarray, dtype=np.int64) -> np.ndarray:
         """Monolithic index of global displacement dofs."""
-        return self.index(0, index)
+        return self.index(0, index, dtype)
 
     def z(self, index: np.ndarray, field: int = 1) -> np.ndarray:
         """Monolithic index of global multipliers of a multiplier field (default the first)."""

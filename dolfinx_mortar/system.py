@@ -95,7 +95,7 @@ class ContactSystem:
         indptr, indices, local_dofs, fixed_dofs = self._bulk_global
         self.layout = layout
         self.in_layout = list(in_layout)
-        self._bulk = ((indptr, layout.u(indices).astype(PETSc.IntType)), layout.u(local_dofs))
+        self._bulk = ((indptr, layout.u(indices, PETSc.IntType)), layout.u(local_dofs))
         fixed = layout.u(fixed_dofs)
         # (dirichlet_dofs may list a few dofs owned by another rank; their owner has them too)
         first = int(layout.offsets[self.comm.rank])

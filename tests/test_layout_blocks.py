@@ -271,3 +271,32 @@ def test_pattern_union_equals_the_sum_of_the_sparse_patterns():
     start = a.indptr[row]
     unsorted[start], unsorted[start + 1] = unsorted[start + 1], unsorted[start]
     assert compiled.pattern_union((a.indptr, unsorted), (b.indptr, b.indices)) is None
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("chunk", [3, 1 << 20])
+def test_block_layout_index_maps_each_global_index_to_its_owners_row(monkeypatch, chunk):
+    """Global index g of field f, owned by rank r (field_offsets[r, f] <= g <
+    field_offsets[r + 1, f]), sits at row offsets[r] + within_rank[r, f] + g -
+    field_offsets[r, f]; -1 stays -1; in chunks smaller than the input too, and as int32."""
+    from dolfinx_mortar import layout as layout_module
+
+    monkeypatch.setattr(layout_module, "INDEX_CHUNK", chunk)
+    comm = MPI.COMM_WORLD
+    rank = comm.rank
+    layout = layout_module.BlockLayout(comm, 5 + 2 * rank, [3 + rank, rank % 2])
+    rng = np.random.default_rng(11)
+    for field in range(3):
+        total = int(layout.field_offsets[-1, field])
+        index = rng.integers(-1, total, size=40).astype(np.int32)
+        expected = np.full(index.size, -1, dtype=np.int64)
+        for k, g in enumerate(index):
+            if g < 0:
+                continue
+            owner = int(np.flatnonzero(layout.field_offsets[:-1, field] <= g)[-1])
+            expected[k] = (layout.offsets[owner] + layout.within_rank[owner, field]
+                           + g - layout.field_offsets[owner, field])
+        np.testing.assert_array_equal(layout.index(field, index), expected)
+        as_int32 = layout.index(field, index.reshape(5, 8), np.int32)
+        assert as_int32.dtype == np.int32 and as_int32.shape == (5, 8)
+        np.testing.assert_array_equal(as_int32.reshape(-1), expected)
