@@ -99,11 +99,21 @@ about r/(1 - r) c_t to K_c, at most about 30 c_t here; eliminating every nonzero
 made the linear solves fail, even with an exact inner solve (docs/benchmarks.md, "The
 elimination ratio of the frictional condensation")."""
 
-RELAXATIONS = ("symmetric-SOR/Jacobi", "l1scaled-SOR/Jacobi")
-"""BoomerAMG's smoothers (down and up) between which the inner solve switches when it
-breaks down: PETSc's default, hybrid symmetric Gauss-Seidel, and its l1-scaled form. Each
-broke down on a condensed 3D system on which the other converged, and neither is the
-faster everywhere (docs/benchmarks.md, "The inner AMG's smoother")."""
+RELAXATIONS = {
+    "symmetric": ("symmetric-SOR/Jacobi", "symmetric-SOR/Jacobi"),
+    "forward-backward": ("SOR/Jacobi", "backward-SOR/Jacobi"),
+    "l1": ("l1scaled-SOR/Jacobi", "l1scaled-SOR/Jacobi"),
+}
+"""BoomerAMG's smoothers of the inner solve, (down, up): PETSc's default, hybrid
+symmetric Gauss-Seidel (2D); hybrid Gauss-Seidel forward down and backward up, a
+symmetric V-cycle of half the sweeps (3D, :data:`~dolfinx_mortar.solvers.
+BOOMERAMG_3D_OPTIONS`); and the l1-scaled hybrid symmetric Gauss-Seidel, to which an inner
+solve that breaks down switches (and from it back). A hybrid smoother broke down on
+condensed 3D systems on which the l1 form converged and the other way round, and neither
+is the faster everywhere (docs/benchmarks.md, "The inner AMG's smoother" and "Forward
+down, backward up")."""
+
+FALLBACK_RELAXATION = "l1"
 
 
 class CondensedPreconditioner:
@@ -137,7 +147,8 @@ class CondensedPreconditioner:
     def __init__(self, comm: MPI.Intracomm, u_rows, z_rows, z_node_dofs, prefix: str,
                  near_nullspace: list[np.ndarray] | None = None, keep_products: bool = True,
                  node_groups: np.ndarray | None = None,
-                 elimination_ratio: float = ELIMINATION_RATIO):
+                 elimination_ratio: float = ELIMINATION_RATIO,
+                 relaxation: str | None = "symmetric"):
         if not 0.0 < elimination_ratio < 1.0:
             raise ValueError(f"elimination_ratio must lie in (0, 1), got {elimination_ratio}")
         self.comm = comm
@@ -165,7 +176,7 @@ class CondensedPreconditioner:
         self.ksp.setOptionsPrefix(prefix)
         self.ksp.setFromOptions()
         self.prefix = prefix
-        self._relaxation = self._initial_relaxation()
+        self._initial_relaxation = self._relaxation = self._switchable(relaxation)
         self.relaxation_switches = 0
         """inner solves that broke down and were retried with the other smoother"""
         self._matrices: dict[str, PETSc.Mat] = {}
@@ -266,7 +277,7 @@ class CondensedPreconditioner:
         failure = self._inner_solve(v["rc"], v["du"])
         if failure and self._switch_relaxation():
             retried = self._inner_solve(v["rc"], v["du"])
-            failure = retried and (f"{failure}; with {RELAXATIONS[self._relaxation]} "
+            failure = retried and (f"{failure}; with {self._relaxation} "
                                    f"smoothing: {retried}")
         if failure:
             # a NaN makes the outer Krylov method fail (DIVERGED_NANORINF), and SNES stops
@@ -312,31 +323,32 @@ class CondensedPreconditioner:
         return (f"{diagnostics.describe_ksp_failure(self.ksp)} after "
                 f"{self.ksp.getIterationNumber()} iterations")
 
-    def _initial_relaxation(self) -> int | None:
-        """The position in :data:`RELAXATIONS` of the inner BoomerAMG's smoother, or
-        None if the inner preconditioner is not BoomerAMG or the user chose its smoother
-        (then a breakdown is not retried)."""
+    def _switchable(self, relaxation: str | None) -> str | None:
+        """``relaxation`` (a key of :data:`RELAXATIONS`: the smoother the options set up),
+        or None if the inner preconditioner is not BoomerAMG or the user chose its
+        smoother (then a breakdown is not retried)."""
         pc = self.ksp.getPC()
-        if pc.getType() != PETSc.PC.Type.HYPRE or pc.getHYPREType() != "boomeramg":
+        if (relaxation is None or pc.getType() != PETSc.PC.Type.HYPRE
+                or pc.getHYPREType() != "boomeramg"):
             return None
-        options = PETSc.Options()
-        if any(options.hasName(f"{self.prefix}pc_hypre_boomeramg_relax_type_{which}")
-               for which in ("all", "down", "up")):
-            return None
-        return 0
+        if relaxation not in RELAXATIONS:
+            raise ValueError(f"relaxation must be one of {sorted(RELAXATIONS)}, got {relaxation!r}")
+        return relaxation
 
     def _switch_relaxation(self) -> bool:
-        """After an inner breakdown: BoomerAMG set up anew with the other smoother of
-        :data:`RELAXATIONS`, which it keeps for later set-ups; False if there is none to
-        switch to. Collective (every rank's inner solve fails together)."""
+        """After an inner breakdown: BoomerAMG set up anew with :data:`FALLBACK_RELAXATION`
+        (from it, with the smoother it started with), which it keeps for later set-ups;
+        False if there is none to switch to. Collective (every rank's inner solve fails
+        together)."""
         if self._relaxation is None:
             return False
-        self._relaxation = 1 - self._relaxation
+        self._relaxation = (FALLBACK_RELAXATION if self._relaxation != FALLBACK_RELAXATION
+                            else self._initial_relaxation)
         options = PETSc.Options()
         names = [f"{self.prefix}pc_hypre_boomeramg_relax_type_{which}"
                  for which in ("down", "up")]
-        for name in names:
-            options[name] = RELAXATIONS[self._relaxation]
+        for name, value in zip(names, RELAXATIONS[self._relaxation], strict=True):
+            options[name] = value
         try:
             self.ksp.getPC().setFromOptions()
         finally:
