@@ -107,8 +107,8 @@ RELAXATIONS = {
 """BoomerAMG's smoothers of the inner solve, (down, up): PETSc's default, hybrid
 symmetric Gauss-Seidel (2D); hybrid Gauss-Seidel forward down and backward up, a
 symmetric V-cycle of half the sweeps (3D, :data:`~dolfinx_mortar.solvers.
-BOOMERAMG_3D_OPTIONS`); and the l1-scaled hybrid symmetric Gauss-Seidel, to which an inner
-solve that breaks down switches (and from it back). A hybrid smoother broke down on
+BOOMERAMG_3D_RELAXATION`); and the l1-scaled hybrid symmetric Gauss-Seidel, to which an
+inner solve that breaks down switches (and from it back). A hybrid smoother broke down on
 condensed 3D systems on which the l1 form converged and the other way round, and neither
 is the faster everywhere (docs/benchmarks.md, "The inner AMG's smoother" and "Forward
 down, backward up")."""
