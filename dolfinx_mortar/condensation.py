@@ -753,7 +753,7 @@ class CondensedPreconditioner:
         Collective."""
         A = self._matrices["A"]
         a_csr, k_csr = A.getValuesCSR(), K_rows.getValuesCSR()
-        a_values, k_values = a_csr[2], k_csr[2]
+        a_indptr, a_values, k_values = a_csr[0], a_csr[2], k_csr[2]
         a_part = self._inner_a_part
         a_moved = a_part is not None and bool(np.any(a_values[a_part["dropped"]] != 0.0))
         layout = self._inner_layout
@@ -766,11 +766,13 @@ class CondensedPreconditioner:
                 outside[self._rows] = False
                 a_part = self._inner_a_part = self._kept_entries(a_csr, outside)
             layout = self._inner_layout = self._merged_layout(a_part, a_csr[1], k_csr)
+        del a_csr  # (its column indices: 4 bytes an entry of A)
         from_a = layout["from_a"]
         values = np.empty(from_a.size)
-        values[from_a] = a_values[a_part["kept"]]
+        _masked_copy_by_rows(values, layout["indptr"], from_a, a_values, a_indptr,
+                             a_part["kept"])
+        del a_values
         values[~from_a] = k_values[layout["k_kept"]]
-        del a_csr, a_values
         if not fresh:
             existing.setValuesCSR(layout["indptr"], layout["indices"], values)
             existing.assemble()
@@ -859,6 +861,26 @@ class CondensedPreconditioner:
         self.ksp.destroy()
         self.is_u.destroy()
         self.is_z.destroy()
+
+
+COPY_CHUNK = 1 << 20
+"""Entries :func:`_masked_copy_by_rows` copies at a time (about)."""
+
+
+def _masked_copy_by_rows(target: np.ndarray, target_indptr: np.ndarray,
+                         target_mask: np.ndarray, source: np.ndarray,
+                         source_indptr: np.ndarray, source_mask: np.ndarray) -> None:
+    """``target[target_mask] = source[source_mask]`` for two CSR value arrays of the same
+    rows whose masked entries match row by row, in order; a block of rows at a time, so
+    that no temporary has the size of either (A's kept values would take 8 bytes an
+    entry of K_c at the set-up's peak)."""
+    num_rows = target_indptr.size - 1
+    step = max(1, num_rows * COPY_CHUNK // max(int(source_indptr[-1]), 1))
+    for first in range(0, num_rows, step):
+        last = min(num_rows, first + step)
+        t0, t1 = target_indptr[first], target_indptr[last]
+        s0, s1 = source_indptr[first], source_indptr[last]
+        target[t0:t1][target_mask[t0:t1]] = source[s0:s1][source_mask[s0:s1]]
 
 
 def _entries(matrix: PETSc.Mat, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:

@@ -294,3 +294,32 @@ def test_condensation_without_kept_products_gives_the_same_newton_steps():
     assert_same_solution(solutions[False], solutions[True], tolerance=1e-12)
     assert kept[True][1] > 0 and kept[False][1] == 0
     assert kept[False][0] == ["A", "C", "G", "K_inner", "T", "E_q"]
+
+
+@pytest.mark.parametrize("chunk", [1, 5, 1 << 20])
+def test_masked_copy_by_rows_equals_the_whole_masked_copy(monkeypatch, chunk):
+    """K_c's values from A's kept entries, a block of rows at a time, are the whole
+    masked copy ``target[target_mask] = source[source_mask]`` (rows whose masked entries
+    match in number and order; empty rows and rows with nothing kept included)."""
+    from dolfinx_mortar import condensation
+
+    monkeypatch.setattr(condensation, "COPY_CHUNK", chunk)
+    rng = np.random.default_rng(5)
+    num_rows = 40
+    source_lengths = rng.integers(0, 9, num_rows)
+    kept_per_row = np.array([rng.integers(0, n + 1) for n in source_lengths])
+    target_lengths = kept_per_row + rng.integers(0, 4, num_rows)
+    def masks(lengths):
+        return np.concatenate([rng.permutation(np.arange(n) < k)
+                               for n, k in zip(lengths, kept_per_row, strict=True)])
+
+    source_mask, target_mask = masks(source_lengths), masks(target_lengths)
+    source_indptr = np.concatenate([[0], np.cumsum(source_lengths)]).astype(np.int32)
+    target_indptr = np.concatenate([[0], np.cumsum(target_lengths)]).astype(np.int32)
+    source = rng.standard_normal(source_indptr[-1])
+    expected = np.full(target_indptr[-1], -1.0)
+    expected[target_mask] = source[source_mask]
+    target = np.full(target_indptr[-1], -1.0)
+    condensation._masked_copy_by_rows(target, target_indptr, target_mask, source,
+                                      source_indptr, source_mask)
+    np.testing.assert_array_equal(target, expected)
