@@ -169,9 +169,9 @@ BOOMERAMG_3D_RELAXATION = "forward-backward"
 """The inner BoomerAMG's smoother in 3D (a key of :data:`~dolfinx_mortar.condensation.
 RELAXATIONS`), unless the user sets ``condensed_pc_hypre_boomeramg_relax_type_*``: hybrid
 Gauss-Seidel forward on the way down and backward on the way up, one sweep each, instead
-of PETSc's symmetric sweep both ways: 13 % to 38 % more inner iterations at half the
-sweeps each, 0.84 to 0.93 times the time per Newton iteration from 2.3e5 to 9.3e5 dofs
-(docs/benchmarks.md, "Forward down, backward up")."""
+of PETSc's symmetric sweep both ways: more inner iterations at half the sweeps each,
+less time per Newton iteration on every 3D case measured (docs/benchmarks.md, "Forward
+down, backward up")."""
 
 BOOMERAMG_HEXAHEDRON_OPTIONS = {
     # added (under condensed_, unless the user set them) on hexahedral meshes, after
