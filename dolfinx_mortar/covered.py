@@ -66,8 +66,12 @@ class FacetCoefficients:
     def __init__(self, D_standard: np.ndarray, facet: np.ndarray, crosspoint: np.ndarray):
         ns = D_standard.shape[1]
         self.facets, self.index = np.unique(facet, return_inverse=True)
-        mass = np.zeros((self.facets.size, ns, ns))
-        np.add.at(mass, self.index, D_standard)
+        self.index = self.index.reshape(-1)
+        self._order = np.argsort(self.index, kind="stable")
+        sorted_index = self.index[self._order]
+        self._starts = np.flatnonzero(np.r_[True, sorted_index[1:] != sorted_index[:-1]]) \
+            if sorted_index.size else np.zeros(0, dtype=np.int64)
+        mass = self.facet_sums(D_standard)
         mass = 0.5 * (mass + mass.transpose(0, 2, 1))
         lumped = mass.sum(axis=2)
         total = lumped.sum(axis=1, keepdims=True)
@@ -84,6 +88,14 @@ class FacetCoefficients:
         P[self.index] = merge_matrices(crosspoint)
         self.P = P
         self.T = P @ self.A
+
+    def facet_sums(self, values: np.ndarray) -> np.ndarray:
+        """(facets, ...) the sums of the pairs' ``values`` (rows, ...) over each facet:
+        ``np.add.at``'s sums (to rounding) without its cost per element."""
+        result = np.zeros((self.facets.size,) + values.shape[1:])
+        if self._starts.size:
+            result[:] = np.add.reduceat(values[self._order], self._starts, axis=0)
+        return result
 
     def pair(self, name: str, rows: np.ndarray | None = None) -> np.ndarray:
         """A facet array per pair (rows: positions among the pairs given)."""
@@ -182,6 +194,7 @@ def translated_terms(stencil, q: CoveredQuantities, rows: np.ndarray, terms):
     A = coefficients.pair("A", position)
     inverse = coefficients.pair("inverse", position)
     translated, W = [], np.zeros((len(terms), rows.size, ns, ns))
+    standard, solved, merged = {}, {}, {}  # (made once per call: terms repeat them)
     for t, row in enumerate(terms):
         own = []
         for o, w in row:
@@ -194,11 +207,17 @@ def translated_terms(stencil, q: CoveredQuantities, rows: np.ndarray, terms):
             w = np.broadcast_to(np.asarray(w, dtype=float), (rows.size,))
             for i in range(ns):
                 own.append((first + (i - j) * stride + offset, T[:, j, i] * w))
-            X = _standard_values(q_std, name, rows)  # (rows, ns, ...)
-            X = X[(slice(None), slice(None)) + tuple(rest)]
-            y = np.einsum("nik,nk->ni", inverse, X)
-            z = P[:, j, :] * w[:, None]
-            W[t] += (z * y)[:, :, None] - np.einsum("nli,nl->ni", A, z)[:, :, None] * y[:, None, :]
+            # dM_e's weights: w (P_j y - (A^T P_j) y^T), y = M_e^-1 X
+            if (name, rest) not in solved:
+                if name not in standard:
+                    standard[name] = _standard_values(q_std, name, rows)  # (rows, ns, ...)
+                X = standard[name][(slice(None), slice(None)) + tuple(rest)]
+                solved[name, rest] = np.einsum("nik,nk->ni", inverse, X)
+            if j not in merged:
+                merged[j] = (P[:, j, :], np.einsum("nli,nl->ni", A, P[:, j, :]))
+            y = solved[name, rest]
+            Pj, APj = merged[j]
+            W[t] += ((Pj * y)[:, :, None] - APj[:, :, None] * y[:, None, :]) * w[:, None, None]
         translated.append(own)
     return translated, W
 
@@ -382,8 +401,7 @@ class CoveredStencil:
             terms = [[(self.base.d(i, m), 1.0)] for i in range(ns) for m in range(ns)]
             dD = self.base.combined_gradients(q_std, contributing, terms).transpose(2, 0, 1)
             master, shared = self._column_split()
-            summed = np.zeros((coefficients.facets.size, ns * ns, shared.size))
-            np.add.at(summed, coefficients.index, dD[:, :, shared])
+            summed = coefficients.facet_sums(dD[:, :, shared])
             cached = (np.ascontiguousarray(dD[:, :, master]), summed)
             q.facet_gradients = cached
         return cached
