@@ -680,7 +680,14 @@ class MortarInterface:
 
         Made at each use, not kept: only a new pattern of the monolithic matrix needs them.
         """
-        blocks = self._pair_col_blocks
+        return self.pair_dofs_of(None)
+
+    def pair_dofs_of(self, rows: np.ndarray | None) -> np.ndarray:
+        """The rows of :attr:`pair_dofs` of the pairs ``rows`` (None: all)."""
+        stencil = self.stencil
+        nodes, present = ((stencil.nodes, stencil.present) if rows is None
+                          else (stencil.nodes[rows], stencil.present[rows]))
+        blocks = np.where(present, self._node_blocks[nodes], -1)
         gdim = self.gdim
         dofs = np.empty(blocks.shape + (gdim,), dtype=np.int64)
         for component in range(gdim):  # (not a broadcast over a short last axis: slow)

@@ -162,3 +162,42 @@ def test_frictional_jacobian_of_chunked_blocks_equals_all_at_once():
     scale = MPI.COMM_WORLD.allreduce(np.abs(values).max(initial=0.0), op=MPI.MAX)
     assert np.abs(values - chunk_values).max(initial=0.0) <= 1e-14 * scale
     problem.destroy()
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("friction", [False, True])
+def test_reference_configuration_pattern_holds_the_overlapping_pairs_only(friction):
+    """On the undeformed surfaces (``configuration="reference"``) only the pairs that overlap
+    there have blocks in the Newton matrix's pattern (``ContactSystem._pattern_pairs``),
+    fewer than the candidates; the matrix equals, value for value, the one whose pattern
+    holds every candidate pair (sheared 3D blocks, solved to a state with stick or slip)."""
+    from test_friction import load_demo
+
+    from dolfinx_mortar import Coulomb
+
+    patch = load_demo("friction_patch")
+    limit = 0.2 * patch.PRESSURE
+    problem = patch.sheared_blocks_3d((3, 7), "upper", Coulomb(0.2) if friction else None,
+                                      2.0 * limit / patch.SHEAR_MODULUS, limit)
+    assert problem.solve().converged
+    equations = problem.equations
+    interfaces, system = equations.interfaces, equations.system
+    assert all(mortar.configuration == "reference" for mortar in interfaces)
+    counts = np.array([[mortar.contributing_pairs().size, mortar.stencil.num_pairs]
+                       for mortar in interfaces]).sum(axis=0)
+    contributing, candidates = MPI.COMM_WORLD.allreduce(counts, op=MPI.SUM)
+    assert 0 < contributing < candidates
+    blocks = sum(p.shape[0] for p in system._pattern[0])
+    assert MPI.COMM_WORLD.allreduce(blocks, op=MPI.SUM) == contributing
+    overlapping = equations.assemble_system().copy()
+    system._versions = ()  # (the next assembly builds its pattern again)
+    system._pattern_pairs = lambda k: None
+    every = equations.assemble_system()
+    assert MPI.COMM_WORLD.allreduce(sum(p.shape[0] for p in system._pattern[0]),
+                                    op=MPI.SUM) == candidates
+    assert overlapping.getInfo()["nz_used"] < every.getInfo()["nz_used"]
+    scale = every.norm(PETSc.NormType.INFINITY)
+    every.axpy(-1.0, overlapping, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+    assert every.norm(PETSc.NormType.INFINITY) <= 1e-14 * scale
+    overlapping.destroy()
+    problem.destroy()
