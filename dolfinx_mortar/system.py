@@ -9,8 +9,10 @@ each pair also has a tangential multiplier field (fields P + 1 .. 2P of the
 layout in 2D, P + 1 .. 3P in 3D: d - 1 per pair): the dense blocks grow by the
 slave nodes' tangential rows and columns (2D: 12 x 16), and each tangential
 row gets its own diagonal, one entry on its node's normal multiplier and, in
-3D, one on the node's other tangential multiplier. The matrix and its pattern are
-rebuilt only when a new search changed the pairs, not on every search.
+3D, one on the node's other tangential multiplier. Only the candidate pairs whose facets
+overlap have blocks; the matrix and its pattern are rebuilt when a new search changed
+the pairs (not on every search) or, on the current configuration, when a Newton iterate
+makes a pair overlap that has none.
 """
 
 from __future__ import annotations
@@ -183,15 +185,15 @@ class ContactSystem:
         matrix.assemble()
         return rebuilt, contact, time.perf_counter() - start + zeroing
 
-    def _contact_pattern(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+    def _contact_pattern(self, k: int, grown: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Monolithic rows (n, (ns + nm) gdim + ns) and columns (n, width gdim + ns) of pair
         k's dense block per pair of :meth:`_pattern_pairs` (2D: 10 x 14); rows of Dirichlet
         dofs are dropped (-1), they are identity rows."""
         interface = self.interfaces[k]
-        self._pairs[k] = None
         if interface.quantities is None or interface.without_pairs or not self.in_layout[k]:
+            self._pairs[k] = None
             return np.zeros((0, 0), dtype=PETSc.IntType), np.zeros((0, 0), dtype=PETSc.IntType)
-        pairs = self._pattern_pairs(k)
+        pairs = self._pattern_pairs(k, grown)
         every = pairs is None
         layout = self.layout
         force_dofs = layout.u(interface.pair_force_dofs if every
@@ -210,16 +212,32 @@ class ContactSystem:
         self._pairs[k] = pairs
         return row_indices.astype(PETSc.IntType), column_indices.astype(PETSc.IntType)
 
-    def _pattern_pairs(self, k: int) -> np.ndarray | None:
-        """The candidate pairs of interface k that get a block in the pattern: on the
-        undeformed surfaces (``configuration="reference"``) the pairs that overlap there,
-        which only a new search changes (a sixth of the candidates on gmsh's tetrahedra:
-        fewer entries to preallocate, sum and factorize); else None, every candidate (the
-        current configuration's overlaps change at every evaluation)."""
-        interface = self.interfaces[k]
-        if interface.configuration != "reference":
-            return None
-        return interface.contributing_pairs()
+    def _pattern_pairs(self, k: int, grown: bool = False) -> np.ndarray | None:
+        """The candidate pairs of interface k that get a block in the pattern (sorted; None:
+        every candidate): those whose facets overlap (a sixth of the candidates on gmsh's
+        tetrahedra: fewer entries to preallocate, look up, sum and factorize). On the
+        undeformed surfaces (``configuration="reference"``) only a new search changes
+        them; on the current ones a Newton iterate may make more pairs overlap: ``grown``,
+        the pattern's pairs and those (:meth:`_outgrown`)."""
+        contributing = self.interfaces[k].contributing_pairs()
+        if not grown or self._pairs[k] is None:
+            return contributing
+        return np.union1d(self._pairs[k], contributing)
+
+    def _outgrown(self) -> bool:
+        """Whether some pair overlaps that the pattern has no block for (an iterate of the
+        current configuration moved a slave facet over another master facet). Collective."""
+        outgrown = False
+        for k, interface in enumerate(self.interfaces):
+            pairs = self._pairs[k]
+            if (pairs is None or interface.quantities is None or interface.without_pairs
+                    or not self.in_layout[k]):
+                continue
+            contributing = interface.contributing_pairs()
+            position = np.minimum(np.searchsorted(pairs, contributing), max(pairs.size - 1, 0))
+            outgrown |= bool(contributing.size) and (
+                pairs.size == 0 or not np.array_equal(pairs[position], contributing))
+        return bool(self.comm.allreduce(outgrown, op=MPI.LOR))
 
     def _groups(self, k: int, contributing: np.ndarray) -> np.ndarray:
         """The pattern's groups (blocks) of interface k's contributing pairs."""
@@ -229,18 +247,19 @@ class ContactSystem:
         position = np.searchsorted(pairs, contributing)
         if contributing.size and (position[-1] >= pairs.size
                                   or not np.array_equal(pairs[position], contributing)):
-            raise RuntimeError(
-                "a pair contributes that the matrix's pattern does not hold: the overlaps on "
-                "the undeformed surfaces changed without a new search")
+            raise RuntimeError("a pair overlaps that the Newton matrix's pattern has no block "
+                               "for")
         return position
 
     def _update_pattern(self) -> bool:
-        """(Re)build the matrix when the pairs' pattern changed; True if it was rebuilt."""
+        """(Re)build the matrix when a search changed the pairs or a pair overlaps that the
+        pattern has no block for; True if it was rebuilt."""
         versions = tuple(i._pattern_version for i in self.interfaces)
-        if self.matrix is not None and versions == self._versions:
+        grown = self.matrix is not None and versions == self._versions
+        if grown and not self._outgrown():
             return False
         layout = self.layout
-        pattern = [self._contact_pattern(k) for k in range(len(self.interfaces))]
+        pattern = [self._contact_pattern(k, grown) for k in range(len(self.interfaces))]
         # pairs of different interfaces may have blocks of different shapes: pad with -1
         self._block_shape = tuple(max([p[i].shape[1] for p in pattern] + [0]) for i in range(2))
         pattern = tuple(zip(*([_pad(p[i], self._block_shape[i]) for i in range(2)]
