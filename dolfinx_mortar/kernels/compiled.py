@@ -137,7 +137,8 @@ int line2_combine(long num_rows, int kept, const double *G, int num_terms,
 """,
     "pattern": """
 int pattern_positions(long n, int nr, int nc, const int *rows, const int *cols,
-                      const long *indptr, const int *indices, int *out);
+                      const long *indptr, const int *indices, long num_rows, long num_cols,
+                      int *out);
 void pattern_sum(long n, int nr, int br, int nc, int bc, const int *positions, long stride,
                  const double *values, long count, int group_major, double *sums);
 int pattern_sum_part(long n, int nr, int br, int nc, int bc, const int *positions, long stride,
@@ -478,9 +479,9 @@ def pattern_positions(rows: np.ndarray, cols: np.ndarray, indptr: np.ndarray,
     """(nr, nc, n) int32 (the order of :func:`pattern_sum`'s positions): at (i, j, g), 1 +
     the index into ``indices`` of column ``cols[g, j]`` in row ``rows[g, i]`` of the CSR
     pattern (``indptr``, ``indices``, each row's columns sorted), 0 where the row has no such
-    column; ``rows`` (n, nr) and ``cols`` (n, nc) name rows and columns of the pattern. In C:
-    each group's columns sorted once, each row walked beside them (no index array of every
-    entry)."""
+    column; ``rows`` (n, nr) and ``cols`` (n, nc) name rows and columns of the pattern. In C,
+    row by row: a row's positions put once into a marker of the columns and read there by
+    every group that has the row (no index array of every entry)."""
     rows = np.ascontiguousarray(rows, dtype=np.intc)
     cols = np.ascontiguousarray(cols, dtype=np.intc)
     indptr = np.ascontiguousarray(indptr, dtype=np.int64)
@@ -493,14 +494,16 @@ def pattern_positions(rows: np.ndarray, cols: np.ndarray, indptr: np.ndarray,
         raise IndexError("a group's row outside the pattern")
     out = np.empty((rows.shape[1], cols.shape[1], rows.shape[0]), dtype=np.intc)
     if out.size:
+        num_cols = int(max(indices.max(initial=-1), cols.max(initial=-1)) + 1)
         module = load("pattern")
         ffi = module.ffi
         status = module.lib.pattern_positions(
             rows.shape[0], rows.shape[1], cols.shape[1], _pointer(ffi, rows, "int *"),
             _pointer(ffi, cols, "int *"), _pointer(ffi, indptr, "long *"),
-            _pointer(ffi, indices, "int *"), _pointer(ffi, out, "int *"))
+            _pointer(ffi, indices, "int *"), indptr.size - 1, num_cols,
+            _pointer(ffi, out, "int *"))
         if status != 0:
-            raise MemoryError("pattern_positions: no memory for a group's column order")
+            raise MemoryError("pattern_positions: no memory for the rows' order")
     return out
 
 

@@ -2,40 +2,48 @@
  * own module (compiled.load("pattern")). */
 #include <stdlib.h>
 
-/* the order of the nc columns of a group, by value (insertion sort: nc is a stencil's width) */
-static void sort_columns(int nc, const int *cols, int *order) {
-    for (int j = 0; j < nc; ++j) {
-        int k = j;
-        while (k > 0 && cols[order[k - 1]] > cols[j]) {
-            order[k] = order[k - 1];
-            --k;
-        }
-        order[k] = j;
-    }
-}
-
 /* out[i, j, g] = 1 + k where indices[k] == cols[g, j] within row rows[g, i] of the CSR pattern
- * (indptr, indices: each row's columns sorted), 0 where the row has no such column: n groups of
- * nr rows and nc columns (out in the order of the groups' values, pattern_sum's). The group's
- * columns are sorted once and each row is walked beside them. Returns -1 if out of memory. */
+ * (indptr, indices) of num_rows rows and columns below num_cols, 0 where the row has no such
+ * column (or the column is outside [0, num_cols)): n groups of nr rows and nc columns (out in
+ * the order of the groups' values, pattern_sum's). Row by row: the row's positions are
+ * scattered into a marker of its columns once and read by every group that has the row
+ * (groups share rows: a slave node's force rows are in every pair of its facets). Returns -1
+ * if out of memory. */
 int pattern_positions(long n, int nr, int nc, const int *rows, const int *cols,
-                      const long *indptr, const int *indices, int *out) {
-    int *order = malloc(sizeof(int) * (size_t)(nc > 0 ? nc : 1));
-    if (!order) return -1;
-    for (long g = 0; g < n; ++g) {
-        const int *group_cols = cols + g * nc;
-        sort_columns(nc, group_cols, order);
-        for (int i = 0; i < nr; ++i) {
-            int *row_out = out + (long)i * nc * n + g;
-            long k = indptr[rows[g * nr + i]], stop = indptr[rows[g * nr + i] + 1];
-            for (int s = 0; s < nc; ++s) {
-                int j = order[s], column = group_cols[j];
-                while (k < stop && indices[k] < column) ++k;
-                row_out[j * n] = (k < stop && indices[k] == column) ? (int)(k + 1) : 0;
+                      const long *indptr, const int *indices, long num_rows, long num_cols,
+                      int *out) {
+    const long entries = n * nr;
+    long *start = calloc((size_t)num_rows + 1, sizeof(long));
+    long *order = malloc(sizeof(long) * (size_t)(entries > 0 ? entries : 1));
+    int *marker = calloc((size_t)(num_cols > 0 ? num_cols : 1), sizeof(int));
+    if (!start || !order || !marker) {
+        free(start);
+        free(order);
+        free(marker);
+        return -1;
+    }
+    for (long e = 0; e < entries; ++e) ++start[rows[e] + 1];
+    for (long r = 0; r < num_rows; ++r) start[r + 1] += start[r];
+    for (long e = 0; e < entries; ++e) order[start[rows[e]]++] = e;
+    for (long r = num_rows; r > 0; --r) start[r] = start[r - 1];
+    start[0] = 0;
+    for (long r = 0; r < num_rows; ++r) {
+        if (start[r] == start[r + 1]) continue;
+        for (long k = indptr[r]; k < indptr[r + 1]; ++k) marker[indices[k]] = (int)(k + 1);
+        for (long p = start[r]; p < start[r + 1]; ++p) {
+            const long g = order[p] / nr, i = order[p] % nr;
+            const int *group_cols = cols + g * nc;
+            int *row_out = out + i * nc * n + g;
+            for (int j = 0; j < nc; ++j) {
+                const int column = group_cols[j];
+                row_out[j * n] = (column >= 0 && column < num_cols) ? marker[column] : 0;
             }
         }
+        for (long k = indptr[r]; k < indptr[r + 1]; ++k) marker[indices[k]] = 0;
     }
+    free(start);
     free(order);
+    free(marker);
     return 0;
 }
 
