@@ -67,8 +67,10 @@ class FacetCoefficients:
         ns = D_standard.shape[1]
         self.facets, self.index = np.unique(facet, return_inverse=True)
         self.index = self.index.reshape(-1)
-        self._order = np.argsort(self.index, kind="stable")
-        sorted_index = self.index[self._order]
+        # (None: the pairs come facet by facet, as the search orders them)
+        self._order = (None if np.all(self.index[1:] >= self.index[:-1])
+                       else np.argsort(self.index, kind="stable"))
+        sorted_index = self.index if self._order is None else self.index[self._order]
         self._starts = np.flatnonzero(np.r_[True, sorted_index[1:] != sorted_index[:-1]]) \
             if sorted_index.size else np.zeros(0, dtype=np.int64)
         mass = self.facet_sums(D_standard)
@@ -94,7 +96,8 @@ class FacetCoefficients:
         ``np.add.at``'s sums (to rounding) without its cost per element."""
         result = np.zeros((self.facets.size,) + values.shape[1:])
         if self._starts.size:
-            result[:] = np.add.reduceat(values[self._order], self._starts, axis=0)
+            ordered = values if self._order is None else values[self._order]
+            result[:] = np.add.reduceat(ordered, self._starts, axis=0)
         return result
 
     def pair(self, name: str, rows: np.ndarray | None = None) -> np.ndarray:

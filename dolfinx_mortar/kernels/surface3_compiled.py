@@ -252,9 +252,11 @@ class CompiledGradients:
         if not now:
             return
         names = self._names()
-        made = self._made(self.rows, names)  # (views of the kernel's buffers if one chunk)
-        self.kept = {name: grad if grad.base is None else grad.copy()
-                     for name, grad in zip(names, made, strict=True)}
+        # one call into arrays of every pair, which are then kept (no copy out of buffers)
+        out = _Buffers(self.rows.size, self.call).run(
+            self.slave_x, self.master_x, self.slave_normals, self.crosspoint, self.on_master,
+            gradients=names if self.call.some_gradients else None)
+        self.kept = {name: out[name] for name in names}
         self._buffers = None
 
     def _names(self) -> tuple[str, ...]:
