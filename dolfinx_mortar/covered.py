@@ -322,10 +322,12 @@ class CoveredStencil:
         self.partners = partners
         # a widened facet's master nodes, one slot each, the same list for its pairs
         rows = np.flatnonzero(wide)
-        keys = np.stack([np.repeat(group[rows], nm), base.master_nodes[rows].reshape(-1)],
-                        axis=1)
-        unique_keys, node_slot = np.unique(keys, axis=0, return_inverse=True) if rows.size else (
-            np.zeros((0, 2), dtype=np.int64), np.zeros(0, dtype=np.int64))
+        # (facet, master node) pairs as one integer each: np.unique of rows sorts slowly
+        num_nodes = int(base.nodes.max(initial=0)) + 1
+        keys = (np.repeat(group[rows], nm).astype(np.int64) * num_nodes
+                + base.master_nodes[rows].reshape(-1))
+        unique_keys, node_slot = np.unique(keys, return_inverse=True)
+        unique_keys = np.stack(np.divmod(unique_keys, num_nodes), axis=1)
         node_slot = node_slot.reshape(-1)
         num_groups = starts.size
         group_start = np.searchsorted(unique_keys[:, 0], np.arange(num_groups))
