@@ -10,6 +10,12 @@ sum of them. :func:`release_freed_memory` gives allocations of :data:`MMAP_THRES
 bytes and more their own mappings again (returned when freed) and trims the heap's top
 above :data:`TRIM_THRESHOLD`; smaller allocations stay on the heap, as glibc's dynamic
 threshold would keep them (docs/benchmarks.md, "glibc's malloc under PETSc").
+
+It is called when a condensed (iterative) solve is set up, whose set-ups make those
+temporaries at every new pattern, and not for the direct path: MUMPS allocates its
+workspace anew at each factorization, which then gets fresh zeroed pages every time
+instead of the heap's reused ones, for no lower peak (docs/benchmarks.md, "Mapped
+allocations and MUMPS").
 """
 
 from __future__ import annotations

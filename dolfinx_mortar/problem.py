@@ -34,7 +34,7 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from . import allocator, checks, compat, diagnostics, enforcement, solvers
+from . import checks, compat, diagnostics, enforcement, solvers
 from . import friction as friction_rules
 from .deprecation import moved
 from .equations import ContactEquations, bulk_diagonal, stiffness_scales
@@ -45,9 +45,6 @@ from .options import ContactOptions, contact_options
 from .results import ContactResults
 from .surface import body_labels as surface_body_labels
 from .system import ContactSystem
-
-# PETSc's SuperLU_DIST turned glibc's mmap off at load (dolfinx_mortar.allocator)
-allocator.release_freed_memory()
 
 __all__ = ["ContactPair", "ContactProblem"]
 

@@ -1,4 +1,5 @@
-"""glibc's malloc after PETSc's import, and after dolfinx_mortar's (dolfinx_mortar.allocator).
+"""glibc's malloc after PETSc's import, and after dolfinx_mortar.allocator set it back (which a
+condensed solve's set-up does).
 
 Each case runs in a fresh interpreter: whether freed memory goes back to the system is a
 property of the process, set by the libraries it loaded and the order it loaded them.
@@ -57,21 +58,46 @@ def test_petsc_import_keeps_freed_memory():
     assert after - before > 200
 
 
+_RELEASED = "import petsc4py.PETSc\nfrom dolfinx_mortar import allocator\nallocator.release_freed_memory()"
+
+
 @needs_glibc
-def test_dolfinx_mortar_gives_freed_memory_back():
-    """After ``import dolfinx_mortar.problem`` the same array goes back when freed."""
-    before, held, after = _probe("import petsc4py.PETSc\nimport dolfinx_mortar.problem")
+def test_release_freed_memory_gives_it_back():
+    """After :func:`allocator.release_freed_memory` the same array goes back when freed."""
+    before, held, after = _probe(_RELEASED)
     assert held - before > 200
     assert after - before < 20
+
+
+@needs_glibc
+def test_importing_the_package_leaves_malloc_as_petsc_left_it():
+    """Importing ``dolfinx_mortar.problem`` changes nothing (a direct solve keeps glibc's
+    malloc as PETSc left it): the array stays."""
+    before, held, after = _probe("import petsc4py.PETSc\nimport dolfinx_mortar.problem")
+    assert after - before > 200
 
 
 @needs_glibc
 def test_malloc_tuned_by_the_user_is_left_alone():
     """With a ``MALLOC_*_`` variable set the user owns malloc: nothing is changed (so the
     array stays, as PETSc's import left it)."""
-    before, held, after = _probe("import petsc4py.PETSc\nimport dolfinx_mortar.problem",
-                                 MALLOC_ARENA_MAX_="2")
+    before, held, after = _probe(_RELEASED, MALLOC_ARENA_MAX_="2")
     assert after - before > 200
+
+
+@pytest.mark.parametrize("linear_solver", ["direct", "iterative"])
+def test_the_condensed_solve_releases_freed_memory(monkeypatch, linear_solver):
+    """Setting up a condensed (iterative) solve calls :func:`allocator.release_freed_memory`;
+    a direct one does not (MUMPS's workspace would get fresh pages at every factorization)."""
+    from stress.common import hertz
+
+    from dolfinx_mortar import newton
+
+    calls = []
+    monkeypatch.setattr(newton.allocator, "release_freed_memory", lambda: calls.append(1))
+    setup = hertz(refinement=0, linear_solver=linear_solver)
+    assert len(calls) == (linear_solver == "iterative")
+    setup.problem.destroy()
 
 
 def test_user_tunes_malloc():
