@@ -58,7 +58,8 @@ def test_petsc_import_keeps_freed_memory():
     assert after - before > 200
 
 
-_RELEASED = "import petsc4py.PETSc\nfrom dolfinx_mortar import allocator\nallocator.release_freed_memory()"
+_RELEASED = ("import petsc4py.PETSc\nfrom dolfinx_mortar import allocator\n"
+             "allocator.release_freed_memory()")
 
 
 @needs_glibc
