@@ -14,8 +14,8 @@ threshold would keep them (docs/benchmarks.md, "glibc's malloc under PETSc").
 It is called when a condensed (iterative) solve is set up, whose set-ups make those
 temporaries at every new pattern, and not for the direct path: MUMPS allocates its
 workspace anew at each factorization, which then gets fresh zeroed pages every time
-instead of the heap's reused ones, for no lower peak (docs/benchmarks.md, "Mapped
-allocations and MUMPS").
+instead of the heap's reused ones, for no lower peak (docs/benchmarks.md, "Blocks for
+the overlapping pairs only; the direct path's malloc").
 """
 
 from __future__ import annotations
