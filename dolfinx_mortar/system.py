@@ -204,7 +204,7 @@ class ContactSystem:
         multipliers = [layout.z(node_multipliers, k + 1)]
         multipliers += [layout.z(node_multipliers, self.tangential_field(k, a))
                         for a in range(self.components)]
-        # (PETSc's integers: kept until the next search, as wide as the pairs' blocks)
+        # (PETSc's integers: kept until the next build, as wide as the pairs' blocks)
         row_indices = np.concatenate([force_dofs] + multipliers, axis=1)
         column_indices = np.concatenate(
             [layout.u(interface.pair_dofs if every else interface.pair_dofs_of(pairs))]
