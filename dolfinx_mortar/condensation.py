@@ -115,6 +115,14 @@ down, backward up")."""
 
 FALLBACK_RELAXATION = "l1"
 
+SINGULAR_COARSE_RELAXATION = "l1scaled-SOR/Jacobi"
+"""BoomerAMG's relaxation on its coarsest level while the inner matrix has a null space
+(a body that only frictionless contact holds, free to slide), instead of hypre's Gaussian
+elimination: eliminating the singular coarsest matrix made every V-cycle garbage and the
+inner GMRES broke down (3D Cattaneo-Mindlin's normal phase on 3 ranks), where these sweeps
+converge in as many iterations as the factorization did elsewhere (docs/benchmarks.md,
+"A singular coarsest level")."""
+
 
 class CondensedPreconditioner:
     """A petsc4py ``python`` PC: the condensed solve of the monolithic [u | z] system.
@@ -177,6 +185,12 @@ class CondensedPreconditioner:
         self.ksp.setFromOptions()
         self.prefix = prefix
         self._initial_relaxation = self._relaxation = self._switchable(relaxation)
+        options = PETSc.Options()
+        # the coarsest level's solve follows the null space unless the user set it
+        self._coarse_switchable = self._switchable("symmetric") is not None and not any(
+            options.hasName(f"{prefix}pc_hypre_boomeramg_relax_type_{which}")
+            for which in ("all", "coarse"))
+        self._singular_coarse = False
         self.relaxation_switches = 0
         """inner solves that broke down and were retried with the other smoother"""
         self._matrices: dict[str, PETSc.Mat] = {}
@@ -381,6 +395,7 @@ class CondensedPreconditioner:
             part.getArray()[:] = vector.getArray(readonly=True)[: self.num_u]
             part.normalize()
             vectors.append(part)
+        self._set_coarse_relaxation(bool(vectors), inner)
         space = PETSc.NullSpace().create(vectors=vectors, comm=self.comm)
         inner.setNullSpace(space)
         # and from its right-hand side: with the null space only in the output, the inner
@@ -389,6 +404,22 @@ class CondensedPreconditioner:
         space.destroy()
         for part in vectors:
             part.destroy()
+
+    def _set_coarse_relaxation(self, singular: bool, inner: PETSc.Mat) -> None:
+        """BoomerAMG's coarsest level: :data:`SINGULAR_COARSE_RELAXATION` while the inner
+        matrix is singular, hypre's Gaussian elimination otherwise (the PC is set up anew
+        where it changes). Collective (the null space is the same on every rank)."""
+        if not self._coarse_switchable or singular == self._singular_coarse:
+            return
+        self._singular_coarse = singular
+        options = PETSc.Options()
+        name = f"{self.prefix}pc_hypre_boomeramg_relax_type_coarse"
+        options[name] = SINGULAR_COARSE_RELAXATION if singular else "Gaussian-elimination"
+        try:
+            self.ksp.getPC().setFromOptions()
+        finally:
+            options.delValue(name)
+        inner.stateIncrease()
 
     def view(self, pc: PETSc.PC, viewer: PETSc.Viewer) -> None:
         viewer.printfASCII(f"static condensation of the multipliers ({self.num_active} active)\n")
