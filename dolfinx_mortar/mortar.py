@@ -647,7 +647,14 @@ class MortarInterface:
     @property
     def _pair_col_blocks(self) -> np.ndarray:
         """The block pattern of the stencil columns: node blocks, -1 where a slot is absent."""
-        return np.where(self.stencil.present, self.pair_node_blocks, -1)
+        return self._col_blocks_of(None)
+
+    def _col_blocks_of(self, rows: np.ndarray | None) -> np.ndarray:
+        """The rows of :attr:`_pair_col_blocks` of the pairs ``rows`` (None: all)."""
+        stencil = self.stencil
+        if rows is None:
+            return np.where(stencil.present, self._node_blocks[stencil.nodes], -1)
+        return np.where(stencil.present[rows], self._node_blocks[stencil.nodes[rows]], -1)
 
     @property
     def _pair_force_blocks(self) -> np.ndarray:
@@ -684,10 +691,7 @@ class MortarInterface:
 
     def pair_dofs_of(self, rows: np.ndarray | None) -> np.ndarray:
         """The rows of :attr:`pair_dofs` of the pairs ``rows`` (None: all)."""
-        stencil = self.stencil
-        nodes, present = ((stencil.nodes, stencil.present) if rows is None
-                          else (stencil.nodes[rows], stencil.present[rows]))
-        blocks = np.where(present, self._node_blocks[nodes], -1)
+        blocks = self._col_blocks_of(rows)
         gdim = self.gdim
         dofs = np.empty(blocks.shape + (gdim,), dtype=np.int64)
         for component in range(gdim):  # (not a broadcast over a short last axis: slow)
