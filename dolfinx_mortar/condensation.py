@@ -144,7 +144,7 @@ class CondensedPreconditioner:
             each body, for algebraic multigrid); orthonormal.
         keep_products: keep every sub-matrix and product between set-ups, so that
             a Jacobian of the same pattern only recomputes their values (the
-            default). False keeps only what ``apply`` needs (A, G, C, T, E Q^-1
+            default). False keeps only what ``apply`` needs (G, C, T, E Q^-1
             and the inner solver's matrix) and frees the rest as soon as it is used: the
             products (of the rows near the contact) are then built anew at every
             set-up.
@@ -219,6 +219,13 @@ class CondensedPreconditioner:
         # rows near the contact are reused; while the sets stay too, the products (their
         # symbolic part) and the inner matrix's layout, and only values are computed.
         J = pc.getOperators()[0]
+        self._J = J
+        try:
+            self._set_up(J)
+        finally:
+            self._J = None  # (a reference would keep an old Newton matrix alive)
+
+    def _set_up(self, J: PETSc.Mat) -> None:
         self._take_null_space(J)
         fingerprint = _pattern_fingerprint(J, self.comm)
         reuse = (self.keep_products and fingerprint == self._fingerprint
@@ -303,8 +310,10 @@ class CondensedPreconditioner:
         m["C"].mult(v["du"], v["sz"])
         v["sz"].aypx(-1.0, v["rz"])
         v["sz"].pointwiseMult(v["sz"], v["inverse_d"])
-        # r' - A' du = r_u - A du - G d^-1 (r_z - C du)
-        m["A"].mult(v["du"], v["tu"])
+        # r' - A' du = r_u - A du - G d^-1 (r_z - C du); A du = (J [du; 0])_u
+        v["x_mono"].getArray()[: self.num_u] = v["du"].getArray(readonly=True)
+        pc.getOperators()[0].mult(v["x_mono"], v["y_mono"])
+        v["tu"].getArray()[:] = v["y_mono"].getArray(readonly=True)[: self.num_u]
         v["tu"].aypx(-1.0, v["ru"])
         m["G"].mult(v["sz"], v["rp"])
         v["tu"].axpy(-1.0, v["rp"])
@@ -428,11 +437,12 @@ class CondensedPreconditioner:
     # -- pieces ------------------------------------------------------------
 
     def _split(self, J: PETSc.Mat, reuse: bool) -> np.ndarray:
-        """J's blocks A, G, C (with friction turned node by node: G V, U^T C), the
+        """J's blocks G, C (with friction turned node by node: G V, U^T C), the
         scalings d^-1 and P^-1 and T from them; returns which (rotated) multipliers are
         condensed (d_j = 0 or, with friction, a small sigma)."""
         m, v = self._matrices, self._vectors
-        A = m["A"] = J.createSubMatrix(self.is_u, self.is_u, submat=m.get("A"))
+        if not reuse:
+            self._number_columns(J)
         raw = "_raw" if self.rotate else ""
         G = m["G" + raw] = J.createSubMatrix(self.is_u, self.is_z, submat=m.get("G" + raw))
         m["C" + raw] = J.createSubMatrix(self.is_z, self.is_u, submat=m.get("C" + raw))
@@ -451,7 +461,9 @@ class CondensedPreconditioner:
                          "tr", "rz_raw"):
                 v[name] = G.createVecRight()
             for name in ("ru", "rp", "rc", "du", "tu"):
-                v[name] = A.createVecRight()
+                v[name] = G.createVecLeft()
+            v["x_mono"], v["y_mono"] = J.createVecs()
+            v["x_mono"].zeroEntries()
         v["inverse_d"].getArray()[:] = np.where(active, 0.0, 1.0 / np.where(active, 1.0, d))
         v["active"].getArray()[:] = active
         if self.rotate:
@@ -464,8 +476,33 @@ class CondensedPreconditioner:
             v["inverse_p"].getArray()[:] = np.where(active,
                                                     1.0 / np.where(active, lengths, 1.0), 0.0)
         self._normal_values = frames
-        m["T"] = self._normal_matrix(frames, A.getSizes()[1], m.get("T"))
+        m["T"] = self._normal_matrix(frames, self._u_sizes, m.get("T"))
         return active
+
+    def _number_columns(self, J: PETSc.Mat) -> None:
+        """The displacement block A = J[u, u] is not copied: its rows are J's first ``num_u``
+        local rows (the layout puts each rank's displacements first), and ``_a_column`` maps
+        J's global columns to A's (-1 at the multipliers'). Collective."""
+        first = J.getOwnershipRange()[0]
+        if not np.array_equal(self.is_u.getIndices(), first + np.arange(self.num_u)):
+            raise ValueError("the condensation needs each rank's displacement rows first")
+        counts = np.array(self.comm.allgather(self.num_u), dtype=np.int64)
+        starts = np.concatenate([[0], np.cumsum(counts)])
+        ranges = J.getOwnershipRanges()
+        a_column = np.full(J.getSize()[1], -1, dtype=PETSc.IntType)
+        for rank, count in enumerate(counts):
+            a_column[ranges[rank]:ranges[rank] + count] = np.arange(
+                starts[rank], starts[rank + 1], dtype=PETSc.IntType)
+        self._a_column = a_column
+        self._j_first = first
+        self._u_first = int(starts[self.comm.rank])
+        self._u_sizes = (self.num_u, int(starts[-1]))
+
+    def _a_csr(self, J: PETSc.Mat) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """J's CSR arrays of the displacement rows (views; columns in J's numbering)."""
+        indptr, indices, values = J.getValuesCSR()
+        end = indptr[self.num_u]
+        return indptr[: self.num_u + 1], indices[:end], values[:end]
 
     def _rotate(self, J: PETSc.Mat) -> np.ndarray:
         """With friction: each node's block Z_j of J turned into its singular values,
@@ -503,12 +540,14 @@ class CondensedPreconditioner:
         dofs of the pairs), the slave nodes' (T^T) and every row with an entry in a slave
         node's column (K_r T^T). Elsewhere K_c = A, so the products need these rows only.
         From the patterns (zeros included), so they hold while J's pattern does."""
-        m = self._matrices
-        A, G = m["A"], m["G"]
-        first = A.getOwnershipRange()[0]
-        slave = np.zeros(A.getSize()[0], dtype=bool)
-        slave[np.concatenate(self.comm.allgather(self.z_node_dofs.reshape(-1)))] = True
-        indptr, indices, _ = A.getValuesCSR()
+        G = self._matrices["G"]
+        first = self._u_first
+        slave_u = np.zeros(self._u_sizes[1], dtype=bool)
+        slave_u[np.concatenate(self.comm.allgather(self.z_node_dofs.reshape(-1)))] = True
+        slave = np.zeros(self._a_column.size, dtype=bool)  # over J's columns
+        is_u = self._a_column >= 0
+        slave[is_u] = slave_u[self._a_column[is_u]]
+        indptr, indices, _ = self._a_csr(self._J)
         lengths = np.diff(indptr)
         near = np.zeros(self.num_u, dtype=bool)
         if indices.size:
@@ -523,6 +562,8 @@ class CondensedPreconditioner:
         index_sets.clear()
         index_sets["rows"] = PETSc.IS().createGeneral(
             (first + self._rows).astype(PETSc.IntType), comm=self.comm)
+        index_sets["rows_of_J"] = PETSc.IS().createGeneral(
+            (self._j_first + self._rows).astype(PETSc.IntType), comm=self.comm)
         index_sets["columns"] = PETSc.IS().createStride(self.num_u, first, 1, comm=self.comm)
         rows_first = self.comm.exscan(self._rows.size) or 0
         position = np.full(self.num_u, -1, dtype=np.int64)
@@ -570,21 +611,22 @@ class CondensedPreconditioner:
         changed on any rank, the products are released (built anew). Collective."""
         m, v, sets = self._matrices, self._vectors, self._index_sets
         num_condensed, num_eliminated = self._set_sizes
-        wanted = [("A_rows", m["A"], "rows", "columns", None)]
+        wanted = [("A_rows", self._J, sets["rows_of_J"], self.is_u, None)]
         if num_eliminated:
             inverse_d = v["inverse_d"].getArray(readonly=True)[self._eliminated]
-            wanted += [("G_e", m["G"], "rows", "eliminated", None),
-                       ("C_e", m["C"], "eliminated", "columns", inverse_d)]
+            wanted += [("G_e", m["G"], sets["rows"], sets["eliminated"], None),
+                       ("C_e", m["C"], sets["eliminated"], sets["columns"], inverse_d)]
         if num_condensed:
-            wanted += [("G_a", m["G"], "rows", "condensed", None),
-                       ("C_a", m["C"], "condensed", "columns", None)]
+            wanted += [("G_a", m["G"], sets["rows"], sets["condensed"], None),
+                       ("C_a", m["C"], sets["condensed"], sets["columns"], None)]
             if self.rotate:
-                wanted += [("P_inv_a", m["P_inv"], "condensed", "condensed", None),
-                           ("S_P_inv_a", m["S_P_inv"], "condensed", "condensed", None)]
+                wanted += [("P_inv_a", m["P_inv"], sets["condensed"], sets["condensed"], None),
+                           ("S_P_inv_a", m["S_P_inv"], sets["condensed"], sets["condensed"],
+                            None)]
         scratch = self._scratch
         parts = {}
         for name, source, rows, columns, row_scaling in wanted:
-            sub = scratch[name] = source.createSubMatrix(sets[rows], sets[columns],
+            sub = scratch[name] = source.createSubMatrix(rows, columns,
                                                          submat=scratch.get(name))
             indptr, indices, values = sub.getValuesCSR()
             if row_scaling is not None:
@@ -782,8 +824,7 @@ class CondensedPreconditioner:
         patterns and the zeros), as new values of ``existing``. The layout is kept as masks
         over A's and K_rows' entries and over K_c's (a byte an entry), not as positions.
         Collective."""
-        A = self._matrices["A"]
-        a_csr, k_csr = A.getValuesCSR(), K_rows.getValuesCSR()
+        a_csr, k_csr = self._a_csr(self._J), K_rows.getValuesCSR()
         a_indptr, a_values, k_values = a_csr[0], a_csr[2], k_csr[2]
         a_part = self._inner_a_part
         a_moved = a_part is not None and bool(np.any(a_values[a_part["dropped"]] != 0.0))
@@ -795,7 +836,8 @@ class CondensedPreconditioner:
             if a_part is None or a_moved:
                 outside = np.ones(self.num_u, dtype=bool)
                 outside[self._rows] = False
-                a_part = self._inner_a_part = self._kept_entries(a_csr, outside)
+                a_part = self._inner_a_part = self._kept_entries(a_csr, self._j_first,
+                                                                 outside)
             layout = self._inner_layout = self._merged_layout(a_part, a_csr[1], k_csr)
         del a_csr  # (its column indices: 4 bytes an entry of A)
         from_a = layout["from_a"]
@@ -808,20 +850,20 @@ class CondensedPreconditioner:
             existing.setValuesCSR(layout["indptr"], layout["indices"], values)
             existing.assemble()
             return existing
-        matrix = PETSc.Mat().createAIJ(size=A.getSizes(), bsize=self.block_size,
+        matrix = PETSc.Mat().createAIJ(size=(self._u_sizes, self._u_sizes),
+                                       bsize=self.block_size,
                                        csr=(layout["indptr"], layout["indices"], values),
                                        comm=self.comm)
         matrix.assemble()
         return matrix
 
-    def _kept_entries(self, csr: tuple, taken: np.ndarray | None = None) -> dict:
+    def _kept_entries(self, csr: tuple, first: int, taken: np.ndarray | None = None) -> dict:
         """Of a matrix's local CSR entries, its local rows being displacement rows (all of
         them, or ``self._rows`` in order when ``taken`` is None), those in the rows
         ``taken`` (a mask over the displacement rows) that are nonzero or diagonal: as a
         mask over the entries, the positions of the dropped ones, and the kept entries per
         local row."""
         indptr, indices, values = csr
-        first = self._matrices["A"].getOwnershipRange()[0]
         lengths = np.diff(indptr)
         row_of_local = np.arange(self.num_u) if taken is not None else self._rows
         diagonal = indices == np.repeat((row_of_local + first).astype(indices.dtype), lengths)
@@ -841,10 +883,10 @@ class CondensedPreconditioner:
         return {"kept": kept, "dropped": dropped, "counts": counts}
 
     def _merged_layout(self, a_part: dict, a_indices: np.ndarray, k_csr: tuple) -> dict:
-        """The CSR pattern of A's kept entries (A's column indices ``a_indices``) with those
+        """The CSR pattern of A's kept entries (J's column indices ``a_indices``) with those
         of K_rows (``k_csr``) in the rows near the contact, and which entries come from A
         (each row comes whole from one of them, in order)."""
-        k_part = self._kept_entries(k_csr)
+        k_part = self._kept_entries(k_csr, self._u_first)
         counts = a_part["counts"].copy()
         counts[self._rows] = k_part["counts"]
         outside = np.ones(self.num_u, dtype=bool)
@@ -853,7 +895,10 @@ class CondensedPreconditioner:
         np.cumsum(counts, out=indptr[1:])
         from_a = np.repeat(outside, counts)
         indices = np.empty(from_a.size, dtype=PETSc.IntType)
-        indices[from_a] = a_indices[a_part["kept"]]
+        indices[from_a] = self._a_column[a_indices[a_part["kept"]]]
+        if np.any(indices[from_a] < 0):
+            raise RuntimeError("a displacement row away from the contact has a multiplier "
+                               "column")
         indices[~from_a] = k_csr[1][k_part["kept"]]
         return {"indptr": indptr, "indices": indices, "from_a": from_a,
                 "k_kept": k_part["kept"], "k_dropped": k_part["dropped"]}
