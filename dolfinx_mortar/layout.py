@@ -108,6 +108,22 @@ class BlockLayout:
         """Monolithic index of global displacement dofs."""
         return self.index(0, index, dtype)
 
+    def u_global(self, index: np.ndarray, dtype=np.int64) -> np.ndarray:
+        """Global displacement dof of monolithic displacement indices (the inverse of
+        :meth:`u`; negative stays -1), a chunk at a time as :meth:`index`."""
+        index = np.asarray(index)
+        result = np.empty(index.shape, dtype=dtype)
+        source, target = index.reshape(-1), result.reshape(-1)
+        shifts = self.field_offsets[:-1, 0] - self.offsets[:-1] - self.within_rank[:, 0]
+        for begin in range(0, source.size, INDEX_CHUNK):
+            part = source[begin:begin + INDEX_CHUNK].astype(np.int64)
+            owner = np.searchsorted(self.offsets, part, side="right") - 1
+            np.clip(owner, 0, self.comm.size - 1, out=owner)
+            dof = part + shifts[owner]
+            dof[part < 0] = -1
+            target[begin:begin + INDEX_CHUNK] = dof
+        return result
+
     def z(self, index: np.ndarray, field: int = 1) -> np.ndarray:
         """Monolithic index of global multipliers of a multiplier field (default the first)."""
         return self.index(field, index)

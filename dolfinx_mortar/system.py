@@ -68,7 +68,6 @@ class ContactSystem:
         self.comm = layout.comm
         self.components = tangential_components
         self.friction = tangential_components > 0
-        self.layout = layout
         self.interfaces = interfaces
         self.J_form = J_form
         self.bcs = bcs
@@ -82,7 +81,10 @@ class ContactSystem:
         blocks = index_map.local_to_global(
             np.arange(index_map.size_local + index_map.num_ghosts, dtype=np.int32))
         local_dofs = (blocks[:, None] * bs + np.arange(bs)).reshape(-1)
-        self._bulk_global = (indptr.astype(np.int64), indices, local_dofs, fixed_dofs)
+        # the bulk pattern's columns are kept once, numbered by the current layout
+        self._bulk = ((indptr.astype(np.int64), indices), local_dofs)
+        self._fixed_dofs = fixed_dofs
+        self.layout = None
         self.set_layout(layout, [True] * len(interfaces))
         # per pair, ghosted multiplier-layout vectors that carry the row coefficients of the
         # owned slave nodes to the ghost slave nodes (collective)
@@ -95,11 +97,16 @@ class ContactSystem:
         """Number the matrix by ``layout``, in which the pairs k with ``in_layout[k]``
         False have no multiplier rows (the next assembly builds a new matrix).
         Collective."""
-        indptr, indices, local_dofs, fixed_dofs = self._bulk_global
+        (indptr, columns), local_dofs = self._bulk
+        if self.layout is not None:  # (monolithic indices of the old layout)
+            columns = self.layout.u_global(columns, PETSc.IntType)
+            local_dofs = self.layout.u_global(local_dofs)
+        self._bulk = None
+        self._bulk = ((indptr, layout.u(columns, PETSc.IntType)), layout.u(local_dofs))
+        del columns
         self.layout = layout
         self.in_layout = list(in_layout)
-        self._bulk = ((indptr, layout.u(indices, PETSc.IntType)), layout.u(local_dofs))
-        fixed = layout.u(fixed_dofs)
+        fixed = layout.u(self._fixed_dofs)
         # (dirichlet_dofs may list a few dofs owned by another rank; their owner has them too)
         first = int(layout.offsets[self.comm.rank])
         fixed = fixed[(fixed >= first) & (fixed < first + layout.num_u[self.comm.rank])]
