@@ -11,11 +11,12 @@ bytes and more their own mappings again (returned when freed) and trims the heap
 above :data:`TRIM_THRESHOLD`; smaller allocations stay on the heap, as glibc's dynamic
 threshold would keep them (docs/benchmarks.md, "glibc's malloc under PETSc").
 
-It is called when a condensed (iterative) solve is set up, whose set-ups make those
-temporaries at every new pattern, and not for the direct path: MUMPS allocates its
-workspace anew at each factorization, which then gets fresh zeroed pages every time
-instead of the heap's reused ones, for no lower peak (docs/benchmarks.md, "Blocks for
-the overlapping pairs only; the direct path's malloc").
+It is called when a contact problem with a condensed (iterative) solve is made, before
+its set-up's temporaries (the bulk matrix and its CSR copy, freed before the first
+solve); its set-ups make more of them at every new pattern. Not for the direct path:
+MUMPS allocates its workspace anew at each factorization, which then gets fresh zeroed
+pages every time instead of the heap's reused ones, for no lower peak
+(docs/benchmarks.md, "Blocks for the overlapping pairs only; the direct path's malloc").
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from petsc4py import PETSc
 
-from . import allocator, diagnostics, solvers
+from . import diagnostics, solvers
 from .equations import ContactEquations
 from .layout import BlockLayout
 from .solvers import SolveReport
@@ -72,8 +72,6 @@ class ContactNewton:
 
         def condensation(ksp: PETSc.KSP) -> None:
             if self.condensation:
-                # its set-ups make and free large temporaries (allocator's docstring)
-                allocator.release_freed_memory()
                 V = equations.V
                 near_nullspace = (solvers.rigid_body_modes(V)
                                   if self.linear_solver == "iterative" else None)

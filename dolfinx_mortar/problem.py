@@ -34,7 +34,7 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from . import checks, compat, diagnostics, enforcement, solvers
+from . import allocator, checks, compat, diagnostics, enforcement, solvers
 from . import friction as friction_rules
 from .deprecation import moved
 from .equations import ContactEquations, bulk_diagonal, stiffness_scales
@@ -197,6 +197,10 @@ class ContactProblem(ContactResults):
                 options.basis, self.has_friction)
         self._linear_solver = linear_solver
         self._condensation = options.condensation or linear_solver == "iterative"
+        if self._condensation:
+            # before the set-up's temporaries (the bulk matrix, its CSR copy), which
+            # then go back to the system when freed (allocator's docstring)
+            allocator.release_freed_memory()
         solvers.advise_blas(self.comm)
         if self.has_friction:
             friction_rules.check_options(options.method, options.active_set,
