@@ -517,14 +517,19 @@ class CooMatrix:
                     by_block[a * count:(a + 1) * count, b] = sums[a, b, 1:]
         return summed
 
-    def _positions(self, groups: np.ndarray) -> np.ndarray:
-        """(nr, nc, len(groups)) 1 + positions of the groups' blocks; 0 for dropped ones.
+    def _positions(self, groups: np.ndarray):
+        """(nr, nc, len(groups)) 1 + positions of the groups' blocks; 0 for dropped ones
+        (as :class:`~dolfinx_mortar.kernels.compiled.RowOffsets` where the pattern's rows
+        allow: half the memory, which is most of the pairs' share on the ranks that hold
+        the contact).
 
         The answer for the last ``groups`` is kept, in the order of the values'
         entries (contiguous: no copy of an index of every entry at each assembly): a
         Newton iteration assembles the same pairs again, or almost the same (only the
         groups that were not in the last call are looked up).
         """
+        from .kernels import compiled
+
         blocks = self._blocks
         last = blocks["last"]
         if last is None:
@@ -537,22 +542,30 @@ class CooMatrix:
             index = where[groups]
             known = index >= 0
             if known.any():
-                result = np.take(last[1], np.where(known, index, 0), axis=2)
-                if not known.all():
-                    result[..., ~known] = self._lookup(groups[~known])
+                kept = np.where(known, index, 0)
+                cached = last[1]
+                if isinstance(cached, compiled.RowOffsets):
+                    result = cached.take(kept)
+                    if not known.all():
+                        result.put(~known, self._lookup(groups[~known]))
+                else:
+                    result = np.take(cached, kept, axis=2)
+                    if not known.all():
+                        result[..., ~known] = self._lookup(groups[~known])
             else:
                 result = self._lookup(groups)
         blocks["last"] = (groups.copy(), result)
         return result
 
-    def _lookup(self, groups: np.ndarray) -> np.ndarray:
+    def _lookup(self, groups: np.ndarray):
         """(nr, nc, len(groups)) 1 + positions of the groups' blocks, found in the pattern
-        (int32)."""
+        (RowOffsets, or int32 where a row is too long for them)."""
         from .kernels import compiled
 
         blocks = self._blocks
         rows, cols = blocks["rows"][groups], blocks["cols"][groups]
-        return compiled.pattern_positions(rows, cols, blocks["indptr"], blocks["indices"])
+        return compiled.pattern_positions(rows, cols, blocks["indptr"], blocks["indices"],
+                                          row_offsets=True)
 
     def release_pattern(self) -> None:
         """Drop what only further assemblies need (the block pattern, the groups'

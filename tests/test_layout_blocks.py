@@ -142,6 +142,68 @@ def test_pattern_positions_equal_scipys_lookup():
         compiled.pattern_positions(rows + num_rows, cols, pattern.indptr, pattern.indices)
 
 
+def test_row_offsets_hold_the_positions(monkeypatch):
+    """Positions as row starts and uint16 offsets (``row_offsets=True``) are the int32 ones:
+    present and absent entries, an empty row; the groups taken and put back as np.take and
+    an assignment would; a pattern with a row of OFFSET_LIMIT entries or more gets int32
+    positions; and the sums over either are the same bits (pattern_sum in both orders,
+    pattern_sum_part on some groups and columns)."""
+    import scipy.sparse
+
+    from dolfinx_mortar.kernels import compiled
+
+    rng = np.random.default_rng(15)
+    num_rows, num_cols, n = 30, 80, 40
+    dense = rng.random((num_rows, num_cols)) < 0.3
+    dense[4] = False
+    pattern = scipy.sparse.csr_matrix(dense.astype(float))
+    pattern.sort_indices()
+    rows = rng.integers(0, num_rows, (n, 3)).astype(np.int32)
+    rows[0, 0] = 4
+    cols = rng.integers(0, num_cols, (n, 7)).astype(np.int32)
+    absolute = compiled.pattern_positions(rows, cols, pattern.indptr, pattern.indices)
+    compact = compiled.pattern_positions(rows, cols, pattern.indptr, pattern.indices,
+                                         row_offsets=True)
+    assert isinstance(compact, compiled.RowOffsets) and compact.offsets.dtype == np.uint16
+    assert (absolute > 0).any() and (absolute == 0).any()
+    np.testing.assert_array_equal(compact.absolute(), absolute)
+    index = rng.integers(0, n, 25)
+    taken = compact.take(index)
+    np.testing.assert_array_equal(taken.absolute(), np.take(absolute, index, axis=2))
+    mask = rng.random(25) < 0.5
+    other = compact.take(index[::-1][mask])
+    taken.put(mask, other)
+    expected = np.take(absolute, index, axis=2)
+    expected[..., mask] = np.take(absolute, index[::-1][mask], axis=2)
+    np.testing.assert_array_equal(taken.absolute(), expected)
+    count = pattern.nnz
+    for br, bc in ((1, 1), (2, 3)):
+        values = rng.standard_normal((3, br, 7, bc, n))
+        np.testing.assert_array_equal(compiled.pattern_sum(compact, values, count),
+                                      compiled.pattern_sum(absolute, values, count))
+        part = np.ascontiguousarray(values[..., 10:30])
+        np.testing.assert_array_equal(
+            compiled.pattern_sum(compact, part, count, start=10, group_major=True),
+            compiled.pattern_sum(absolute, part, count, start=10, group_major=True))
+        which, columns = rng.permutation(n)[:15], np.array([6, 0, 2])
+        some = rng.standard_normal((3, br, 3, bc, 15))
+        for chosen, on in ((which, columns), (None, None)):
+            some_values = some if chosen is not None else values
+            np.testing.assert_array_equal(
+                compiled.pattern_sum_part(compact, some_values, count,
+                                          np.zeros((br, bc, count + 1)), chosen, on),
+                compiled.pattern_sum_part(absolute, some_values, count,
+                                          np.zeros((br, bc, count + 1)), chosen, on))
+    compact.offsets[0, 0, 0] = count + 1
+    with pytest.raises(IndexError):
+        compiled.pattern_sum(compact, values, count)
+    monkeypatch.setattr(compiled, "OFFSET_LIMIT", int(np.diff(pattern.indptr).max()))
+    fallback = compiled.pattern_positions(rows, cols, pattern.indptr, pattern.indices,
+                                          row_offsets=True)
+    assert isinstance(fallback, np.ndarray) and fallback.dtype == np.intc
+    np.testing.assert_array_equal(fallback, absolute)
+
+
 @pytest.mark.parametrize("block_shape", [(1, 1), (3, 2)])
 def test_pattern_sum_adds_as_bincount_and_add_at(block_shape):
     """The compiled sum of the groups' values into the pattern gives np.bincount's bits (all

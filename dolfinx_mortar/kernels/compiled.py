@@ -31,6 +31,7 @@ depends on it, trixie's does not (there it comes with python3-ffcx).
 
 from __future__ import annotations
 
+import dataclasses
 import fcntl
 import hashlib
 import importlib.machinery
@@ -138,10 +139,12 @@ int line2_combine(long num_rows, int kept, const double *G, int num_terms,
     "pattern": """
 int pattern_positions(long n, int nr, int nc, const int *rows, const int *cols,
                       const long *indptr, const int *indices, long num_rows, long num_cols,
-                      int *out);
-void pattern_sum(long n, int nr, int br, int nc, int bc, const int *positions, long stride,
+                      int *out, int *starts, unsigned short *offsets);
+void pattern_sum(long n, int nr, int br, int nc, int bc, const int *positions,
+                 const int *starts, const unsigned short *offsets, long stride,
                  const double *values, long count, int group_major, double *sums);
-int pattern_sum_part(long n, int nr, int br, int nc, int bc, const int *positions, long stride,
+int pattern_sum_part(long n, int nr, int br, int nc, int bc, const int *positions,
+                     const int *starts, const unsigned short *offsets, long stride,
                      const long *which, int nk, const long *columns, const double *values,
                      long count, double *sums);
 int pattern_union(long num_rows, const long *a_indptr, const int *a_indices,
@@ -474,14 +477,77 @@ def pair_quantities_compiled(slave_x, master_x, slave_normals, *, normals: str =
     return out
 
 
+OFFSET_LIMIT = 65535
+"""Rows of a pattern shorter than this let :func:`pattern_positions` give positions as
+:class:`RowOffsets` (2 bytes an entry instead of 4)."""
+
+
+@dataclasses.dataclass
+class RowOffsets:
+    """Positions (nr, nc, G) kept as each entry's place within its row: entry (i, j, g) is
+    at ``starts[i, g] + offsets[i, j, g]`` (0 where the offset is 0: not in the pattern).
+    A group's block repeats its rows' starts, so this holds 2 bytes an entry (and 4 a row)
+    where :func:`pattern_positions`' int32 positions hold 4."""
+
+    starts: np.ndarray
+    """(nr, G) int32: the first index of each group's row in the pattern."""
+    offsets: np.ndarray
+    """(nr, nc, G) uint16: 1 + the entry's place within its row, 0 where it has none."""
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return self.offsets.shape
+
+    def take(self, index: np.ndarray) -> RowOffsets:
+        """The positions of the groups ``index``."""
+        return RowOffsets(np.ascontiguousarray(np.take(self.starts, index, axis=1)),
+                          np.ascontiguousarray(np.take(self.offsets, index, axis=2)))
+
+    def put(self, mask: np.ndarray, other: RowOffsets) -> None:
+        """Those of the groups ``mask`` replaced by ``other``'s."""
+        self.starts[:, mask] = other.starts
+        self.offsets[..., mask] = other.offsets
+
+    def absolute(self) -> np.ndarray:
+        """As :func:`pattern_positions`' int32 positions."""
+        offsets = self.offsets.astype(np.int64)
+        return np.where(offsets > 0, self.starts[:, None, :] + offsets, 0).astype(np.intc)
+
+    def largest(self, groups: slice = slice(None)) -> tuple[int, int]:
+        """(smallest, largest) position of the groups ``groups`` (0 for none)."""
+        offsets, starts = self.offsets[..., groups], self.starts[:, groups]
+        if not offsets.size:
+            return 0, 0
+        present = np.where(offsets.max(axis=1) > 0, starts + offsets.max(axis=1), 0)
+        return int(min(0, starts.min())), int(present.max())
+
+
+def _check_positions(positions) -> tuple:
+    """The C arguments (positions, starts, offsets) of int32 positions or RowOffsets."""
+    if isinstance(positions, RowOffsets):
+        if (positions.offsets.dtype != np.uint16 or positions.starts.dtype != np.intc
+                or not positions.offsets.flags.c_contiguous
+                or not positions.starts.flags.c_contiguous
+                or positions.starts.shape != (positions.shape[0], positions.shape[2])):
+            raise ValueError("RowOffsets must hold contiguous int32 starts (nr, G) and uint16 "
+                             "offsets (nr, nc, G)")
+        return None, positions.starts, positions.offsets
+    if positions.dtype != np.intc or not positions.flags.c_contiguous:
+        raise ValueError(f"positions {positions.dtype} {positions.shape} are not contiguous "
+                         "int32")
+    return positions, None, None
+
+
 def pattern_positions(rows: np.ndarray, cols: np.ndarray, indptr: np.ndarray,
-                      indices: np.ndarray) -> np.ndarray:
+                      indices: np.ndarray, row_offsets: bool = False) -> np.ndarray | RowOffsets:
     """(nr, nc, n) int32 (the order of :func:`pattern_sum`'s positions): at (i, j, g), 1 +
     the index into ``indices`` of column ``cols[g, j]`` in row ``rows[g, i]`` of the CSR
     pattern (``indptr``, ``indices``, each row's columns sorted), 0 where the row has no such
-    column; ``rows`` (n, nr) and ``cols`` (n, nc) name rows and columns of the pattern. In C,
-    row by row: a row's positions put once into a marker of the columns and read there by
-    every group that has the row (no index array of every entry)."""
+    column; ``rows`` (n, nr) and ``cols`` (n, nc) name rows and columns of the pattern. With
+    ``row_offsets`` the same as :class:`RowOffsets` where every row of the pattern is
+    shorter than :data:`OFFSET_LIMIT`. In C, row by row: a row's positions put once into a
+    marker of the columns and read there by every group that has the row (no index array of
+    every entry)."""
     rows = np.ascontiguousarray(rows, dtype=np.intc)
     cols = np.ascontiguousarray(cols, dtype=np.intc)
     indptr = np.ascontiguousarray(indptr, dtype=np.int64)
@@ -492,8 +558,15 @@ def pattern_positions(rows: np.ndarray, cols: np.ndarray, indptr: np.ndarray,
         raise ValueError("pattern_positions takes patterns of fewer than 2^31 entries")
     if rows.size and (rows.min() < 0 or rows.max() >= indptr.size - 1):
         raise IndexError("a group's row outside the pattern")
-    out = np.empty((rows.shape[1], cols.shape[1], rows.shape[0]), dtype=np.intc)
-    if out.size:
+    shape = (rows.shape[1], cols.shape[1], rows.shape[0])
+    compact = row_offsets and (indptr.size < 2 or int(np.diff(indptr).max()) < OFFSET_LIMIT)
+    out, starts, offsets = None, None, None
+    if compact:
+        starts = np.zeros(shape[::2], dtype=np.intc)
+        offsets = np.empty(shape, dtype=np.uint16)
+    else:
+        out = np.empty(shape, dtype=np.intc)
+    if rows.size and cols.size:
         num_cols = int(max(indices.max(initial=-1), cols.max(initial=-1)) + 1)
         module = load("pattern")
         ffi = module.ffi
@@ -501,56 +574,68 @@ def pattern_positions(rows: np.ndarray, cols: np.ndarray, indptr: np.ndarray,
             rows.shape[0], rows.shape[1], cols.shape[1], _pointer(ffi, rows, "int *"),
             _pointer(ffi, cols, "int *"), _pointer(ffi, indptr, "long *"),
             _pointer(ffi, indices, "int *"), indptr.size - 1, num_cols,
-            _pointer(ffi, out, "int *"))
+            _pointer(ffi, out, "int *"), _pointer(ffi, starts, "int *"),
+            _pointer(ffi, offsets, "unsigned short *"))
         if status != 0:
             raise MemoryError("pattern_positions: no memory for the rows' order")
-    return out
+    return RowOffsets(starts, offsets) if compact else out
 
 
-def pattern_sum(positions: np.ndarray, values: np.ndarray, count: int,
+def pattern_sum(positions: np.ndarray | RowOffsets, values: np.ndarray, count: int,
                 sums: np.ndarray | None = None, start: int = 0,
                 group_major: bool = False) -> np.ndarray:
     """sums[a, b, positions[i, j, start + g]] += values[i, a, j, b, g] for the int32
-    ``positions`` (nr, nc, G) of G groups and ``values`` (nr, br, nc, bc, n) of the groups
-    start .. start + n - 1; ``sums`` (br, bc, count + 1), zeros if None, is returned (slot 0
-    takes the dropped entries). Each sum takes its entries in the order (i, j, g), or with
-    ``group_major`` (g, i, j), as np.bincount (np.add.at) over them in that order would."""
+    ``positions`` (nr, nc, G) (or :class:`RowOffsets`) of G groups and ``values`` (nr, br, nc,
+    bc, n) of the groups start .. start + n - 1; ``sums`` (br, bc, count + 1), zeros if None,
+    is returned (slot 0 takes the dropped entries). Each sum takes its entries in the order
+    (i, j, g), or with ``group_major`` (g, i, j), as np.bincount (np.add.at) over them in
+    that order would."""
     values = np.ascontiguousarray(values, dtype=np.float64)
     nr, br, nc, bc, n = values.shape
-    if (positions.dtype != np.intc or not positions.flags.c_contiguous
-            or positions.shape[:2] != (nr, nc) or not 0 <= start <= positions.shape[2] - n):
-        raise ValueError(f"positions {positions.dtype} {positions.shape} do not hold the "
-                         f"groups {start} .. {start + n - 1} of values {values.shape}")
+    absolute, starts, offsets = _check_positions(positions)
+    if positions.shape[:2] != (nr, nc) or not 0 <= start <= positions.shape[2] - n:
+        raise ValueError(f"positions {positions.shape} do not hold the groups {start} .. "
+                         f"{start + n - 1} of values {values.shape}")
     if sums is None:
         sums = np.zeros((br, bc, count + 1))
     if sums.shape != (br, bc, count + 1) or sums.dtype != np.float64 or not sums.flags.c_contiguous:
         raise ValueError(f"sums must be contiguous float64 {(br, bc, count + 1)}")
-    part = positions[..., start:start + n]
-    if part.size and (part.min() < 0 or part.max() > count):
+    groups = slice(start, start + n)
+    if absolute is None:
+        smallest, largest = positions.largest(groups)
+    else:
+        part = absolute[..., groups]
+        smallest, largest = (int(part.min()), int(part.max())) if part.size else (0, 0)
+    if smallest < 0 or largest > count:
         raise IndexError("a position outside the pattern")
     if values.size:
         module = load("pattern")
         ffi = module.ffi
-        first = ffi.cast("int *", positions.ctypes.data) + start
-        module.lib.pattern_sum(n, nr, br, nc, bc, first, positions.shape[2],
+        stride = positions.shape[2]
+        first = None if absolute is None else ffi.cast("int *", absolute.ctypes.data) + start
+        first_start = None if starts is None else ffi.cast("int *", starts.ctypes.data) + start
+        first_offset = (None if offsets is None
+                        else ffi.cast("unsigned short *", offsets.ctypes.data) + start)
+        module.lib.pattern_sum(n, nr, br, nc, bc, first or ffi.NULL, first_start or ffi.NULL,
+                               first_offset or ffi.NULL, stride,
                                _pointer(ffi, values, "double *"), count, int(group_major),
                                _pointer(ffi, sums, "double *"))
     return sums
 
 
-def pattern_sum_part(positions: np.ndarray, values: np.ndarray, count: int, sums: np.ndarray,
-                     which: np.ndarray | None = None,
+def pattern_sum_part(positions: np.ndarray | RowOffsets, values: np.ndarray, count: int,
+                     sums: np.ndarray, which: np.ndarray | None = None,
                      columns: np.ndarray | None = None) -> np.ndarray:
     """:func:`pattern_sum` of the values (nr, br, len(columns), bc, len(which)) of the groups
     ``which`` (None: all) on the block columns ``columns`` (None: all) of the int32
-    ``positions`` (nr, nc, G), added to ``sums`` (br, bc, count + 1) in pattern_sum's order,
-    with no copy of the positions."""
+    ``positions`` (nr, nc, G) (or :class:`RowOffsets`), added to ``sums`` (br, bc, count +
+    1) in pattern_sum's order, with no copy of the positions."""
     values = np.ascontiguousarray(values, dtype=np.float64)
     nr, br, nk, bc, n = values.shape
-    if (positions.dtype != np.intc or not positions.flags.c_contiguous
-            or positions.shape[0] != nr):
-        raise ValueError(f"positions {positions.dtype} {positions.shape} do not hold the "
-                         f"rows of values {values.shape}")
+    absolute, starts, offsets = _check_positions(positions)
+    if positions.shape[0] != nr:
+        raise ValueError(f"positions {positions.shape} do not hold the rows of values "
+                         f"{values.shape}")
     if sums.shape != (br, bc, count + 1) or sums.dtype != np.float64 or not sums.flags.c_contiguous:
         raise ValueError(f"sums must be contiguous float64 {(br, bc, count + 1)}")
     index = [None if a is None else np.ascontiguousarray(a, dtype=np.int64)
@@ -562,7 +647,8 @@ def pattern_sum_part(positions: np.ndarray, values: np.ndarray, count: int, sums
         module = load("pattern")
         ffi = module.ffi
         status = module.lib.pattern_sum_part(
-            n, nr, br, positions.shape[1], bc, _pointer(ffi, positions, "int *"),
+            n, nr, br, positions.shape[1], bc, _pointer(ffi, absolute, "int *"),
+            _pointer(ffi, starts, "int *"), _pointer(ffi, offsets, "unsigned short *"),
             positions.shape[2], _pointer(ffi, index[0], "long *"), nk,
             _pointer(ffi, index[1], "long *"), _pointer(ffi, values, "double *"), count,
             _pointer(ffi, sums, "double *"))

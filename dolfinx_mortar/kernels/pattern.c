@@ -5,13 +5,15 @@
 /* out[i, j, g] = 1 + k where indices[k] == cols[g, j] within row rows[g, i] of the CSR pattern
  * (indptr, indices) of num_rows rows and columns below num_cols, 0 where the row has no such
  * column (or the column is outside [0, num_cols)): n groups of nr rows and nc columns (out in
- * the order of the groups' values, pattern_sum's). Row by row: the row's positions are
+ * the order of the groups' values, pattern_sum's). With offsets (out NULL) the same as
+ * starts[i, g] = indptr[rows[g, i]] and offsets[i, j, g] = out[i, j, g] - starts[i, g] (0
+ * where out is 0; every row shorter than 65535). Row by row: the row's positions are
  * scattered into a marker of its columns once and read by every group that has the row
  * (groups share rows: a slave node's force rows are in every pair of its facets). Returns -1
  * if out of memory. */
 int pattern_positions(long n, int nr, int nc, const int *rows, const int *cols,
                       const long *indptr, const int *indices, long num_rows, long num_cols,
-                      int *out) {
+                      int *out, int *starts, unsigned short *offsets) {
     const long entries = n * nr;
     long *start = calloc((size_t)num_rows + 1, sizeof(long));
     long *order = malloc(sizeof(long) * (size_t)(entries > 0 ? entries : 1));
@@ -33,6 +35,16 @@ int pattern_positions(long n, int nr, int nc, const int *rows, const int *cols,
         for (long p = start[r]; p < start[r + 1]; ++p) {
             const long g = order[p] / nr, i = order[p] % nr;
             const int *group_cols = cols + g * nc;
+            if (offsets) {
+                unsigned short *row_offsets = offsets + i * nc * n + g;
+                starts[i * n + g] = (int)indptr[r];
+                for (int j = 0; j < nc; ++j) {
+                    const int column = group_cols[j];
+                    const int found = (column >= 0 && column < num_cols) ? marker[column] : 0;
+                    row_offsets[j * n] = (unsigned short)(found ? found - indptr[r] : 0);
+                }
+                continue;
+            }
             int *row_out = out + i * nc * n + g;
             for (int j = 0; j < nc; ++j) {
                 const int column = group_cols[j];
@@ -49,10 +61,12 @@ int pattern_positions(long n, int nr, int nc, const int *rows, const int *cols,
 
 /* sums[a, b, positions[i, j, g]] += values[i, a, j, b, g] over n groups of nr x br rows and
  * nc x bc columns, positions[i, j, g] at (i nc + j) stride + g (0: a dropped entry, summed
- * into the unread slot 0); sums is (br, bc, count + 1). Each sum takes its entries in the
- * order (i, j, g), or with group_major (g, i, j): that of np.bincount over the entries in
- * either order. */
-void pattern_sum(long n, int nr, int br, int nc, int bc, const int *positions, long stride,
+ * into the unread slot 0), or with offsets (positions NULL) the position
+ * starts[i stride + g] + offsets[(i nc + j) stride + g] (0 where the offset is 0); sums is
+ * (br, bc, count + 1). Each sum takes its entries in the order (i, j, g), or with
+ * group_major (g, i, j): that of np.bincount over the entries in either order. */
+void pattern_sum(long n, int nr, int br, int nc, int bc, const int *positions,
+                 const int *starts, const unsigned short *offsets, long stride,
                  const double *values, long count, int group_major, double *sums) {
     const long slot = count + 1;
     if (group_major) {
@@ -60,7 +74,13 @@ void pattern_sum(long n, int nr, int br, int nc, int bc, const int *positions, l
             for (int i = 0; i < nr; ++i)
                 for (int a = 0; a < br; ++a)
                     for (int j = 0; j < nc; ++j) {
-                        const long where = positions[((long)i * nc + j) * stride + g];
+                        const long at = ((long)i * nc + j) * stride + g;
+                        long where;
+                        if (offsets)
+                            where = offsets[at] ? (long)starts[(long)i * stride + g] + offsets[at]
+                                                : 0;
+                        else
+                            where = positions[at];
                         for (int b = 0; b < bc; ++b)
                             sums[((long)a * bc + b) * slot + where] +=
                                 values[((((long)i * br + a) * nc + j) * bc + b) * n + g];
@@ -70,20 +90,29 @@ void pattern_sum(long n, int nr, int br, int nc, int bc, const int *positions, l
     for (int i = 0; i < nr; ++i)
         for (int a = 0; a < br; ++a)
             for (int j = 0; j < nc; ++j) {
-                const int *where = positions + ((long)i * nc + j) * stride;
+                const long at = ((long)i * nc + j) * stride;
                 for (int b = 0; b < bc; ++b) {
                     const double *v = values + ((((long)i * br + a) * nc + j) * bc + b) * n;
                     double *s = sums + ((long)a * bc + b) * slot;
-                    for (long g = 0; g < n; ++g) s[where[g]] += v[g];
+                    if (offsets) {
+                        const unsigned short *o = offsets + at;
+                        const int *first = starts + (long)i * stride;
+                        for (long g = 0; g < n; ++g) s[o[g] ? first[g] + o[g] : 0] += v[g];
+                    } else {
+                        const int *where = positions + at;
+                        for (long g = 0; g < n; ++g) s[where[g]] += v[g];
+                    }
                 }
             }
 }
 
 /* pattern_sum over a part of the groups' blocks, without a copy of their positions: values
  * (nr, br, nk, bc, n) of the groups which[0 .. n - 1] (NULL: 0 .. n - 1) on the block columns
- * columns[0 .. nk - 1] (NULL: 0 .. nk - 1) of positions (nr, nc, stride). The order of the
- * additions is pattern_sum's (i, j, g). Returns -1 for a group or column outside positions. */
-int pattern_sum_part(long n, int nr, int br, int nc, int bc, const int *positions, long stride,
+ * columns[0 .. nk - 1] (NULL: 0 .. nk - 1) of positions (nr, nc, stride), or of starts and
+ * offsets as pattern_sum's. The order of the additions is pattern_sum's (i, j, g). Returns
+ * -1 for a group or column outside positions. */
+int pattern_sum_part(long n, int nr, int br, int nc, int bc, const int *positions,
+                     const int *starts, const unsigned short *offsets, long stride,
                      const long *which, int nk, const long *columns, const double *values,
                      long count, double *sums) {
     const long slot = count + 1;
@@ -95,14 +124,24 @@ int pattern_sum_part(long n, int nr, int br, int nc, int bc, const int *position
         for (int a = 0; a < br; ++a)
             for (int k = 0; k < nk; ++k) {
                 const long j = columns ? columns[k] : k;
-                const int *where = positions + ((long)i * nc + j) * stride;
+                const long at = ((long)i * nc + j) * stride;
+                const int *first = offsets ? starts + (long)i * stride : NULL;
                 for (int b = 0; b < bc; ++b) {
                     const double *v = values + ((((long)i * br + a) * nk + k) * bc + b) * n;
                     double *s = sums + ((long)a * bc + b) * slot;
-                    if (which)
-                        for (long g = 0; g < n; ++g) s[where[which[g]]] += v[g];
-                    else
-                        for (long g = 0; g < n; ++g) s[where[g]] += v[g];
+                    if (offsets) {
+                        const unsigned short *o = offsets + at;
+                        for (long g = 0; g < n; ++g) {
+                            const long e = which ? which[g] : g;
+                            s[o[e] ? first[e] + o[e] : 0] += v[g];
+                        }
+                    } else {
+                        const int *where = positions + at;
+                        if (which)
+                            for (long g = 0; g < n; ++g) s[where[which[g]]] += v[g];
+                        else
+                            for (long g = 0; g < n; ++g) s[where[g]] += v[g];
+                    }
                 }
             }
     return 0;
