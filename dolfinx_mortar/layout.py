@@ -542,16 +542,9 @@ class CooMatrix:
             index = where[groups]
             known = index >= 0
             if known.any():
-                kept = np.where(known, index, 0)
-                cached = last[1]
-                if isinstance(cached, compiled.RowOffsets):
-                    result = cached.take(kept)
-                    if not known.all():
-                        result.put(~known, self._lookup(groups[~known]))
-                else:
-                    result = np.take(cached, kept, axis=2)
-                    if not known.all():
-                        result[..., ~known] = self._lookup(groups[~known])
+                result = compiled.take_groups(last[1], np.where(known, index, 0))
+                if not known.all():
+                    compiled.put_groups(result, ~known, self._lookup(groups[~known]))
             else:
                 result = self._lookup(groups)
         blocks["last"] = (groups.copy(), result)

@@ -176,6 +176,11 @@ def test_row_offsets_hold_the_positions(monkeypatch):
     expected = np.take(absolute, index, axis=2)
     expected[..., mask] = np.take(absolute, index[::-1][mask], axis=2)
     np.testing.assert_array_equal(taken.absolute(), expected)
+    for kind in (compact, absolute):  # (CooMatrix's reuse of the last groups' positions)
+        reused = compiled.take_groups(kind, index)
+        compiled.put_groups(reused, mask, compiled.take_groups(kind, index[::-1][mask]))
+        got = reused.absolute() if isinstance(reused, compiled.RowOffsets) else reused
+        np.testing.assert_array_equal(got, expected)
     count = pattern.nnz
     for br, bc in ((1, 1), (2, 3)):
         values = rng.standard_normal((3, br, 7, bc, n))

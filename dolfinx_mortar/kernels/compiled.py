@@ -513,13 +513,34 @@ class RowOffsets:
         offsets = self.offsets.astype(np.int64)
         return np.where(offsets > 0, self.starts[:, None, :] + offsets, 0).astype(np.intc)
 
-    def largest(self, groups: slice = slice(None)) -> tuple[int, int]:
-        """(smallest, largest) position of the groups ``groups`` (0 for none)."""
-        offsets, starts = self.offsets[..., groups], self.starts[:, groups]
+
+
+def take_groups(positions: np.ndarray | RowOffsets, index: np.ndarray):
+    """The positions (either kind) of the groups ``index``."""
+    if isinstance(positions, RowOffsets):
+        return positions.take(index)
+    return np.take(positions, index, axis=2)
+
+
+def put_groups(positions: np.ndarray | RowOffsets, mask: np.ndarray, other) -> None:
+    """The positions of the groups ``mask`` replaced by ``other`` (of the same kind)."""
+    if isinstance(positions, RowOffsets):
+        positions.put(mask, other)
+    else:
+        positions[..., mask] = other
+
+
+def _bounds(positions: np.ndarray | RowOffsets, groups: slice) -> tuple[int, int]:
+    """(smallest, largest) position of the groups ``groups`` (0, 0 for none)."""
+    if isinstance(positions, RowOffsets):
+        offsets, starts = positions.offsets[..., groups], positions.starts[:, groups]
         if not offsets.size:
             return 0, 0
-        present = np.where(offsets.max(axis=1) > 0, starts + offsets.max(axis=1), 0)
+        last = offsets.max(axis=1)
+        present = np.where(last > 0, starts + last, 0)
         return int(min(0, starts.min())), int(present.max())
+    part = positions[..., groups]
+    return (int(part.min()), int(part.max())) if part.size else (0, 0)
 
 
 def _check_positions(positions) -> tuple:
@@ -600,24 +621,19 @@ def pattern_sum(positions: np.ndarray | RowOffsets, values: np.ndarray, count: i
         sums = np.zeros((br, bc, count + 1))
     if sums.shape != (br, bc, count + 1) or sums.dtype != np.float64 or not sums.flags.c_contiguous:
         raise ValueError(f"sums must be contiguous float64 {(br, bc, count + 1)}")
-    groups = slice(start, start + n)
-    if absolute is None:
-        smallest, largest = positions.largest(groups)
-    else:
-        part = absolute[..., groups]
-        smallest, largest = (int(part.min()), int(part.max())) if part.size else (0, 0)
+    smallest, largest = _bounds(positions, slice(start, start + n))
     if smallest < 0 or largest > count:
         raise IndexError("a position outside the pattern")
     if values.size:
         module = load("pattern")
         ffi = module.ffi
-        stride = positions.shape[2]
-        first = None if absolute is None else ffi.cast("int *", absolute.ctypes.data) + start
-        first_start = None if starts is None else ffi.cast("int *", starts.ctypes.data) + start
-        first_offset = (None if offsets is None
-                        else ffi.cast("unsigned short *", offsets.ctypes.data) + start)
-        module.lib.pattern_sum(n, nr, br, nc, bc, first or ffi.NULL, first_start or ffi.NULL,
-                               first_offset or ffi.NULL, stride,
+
+        def from_start(array, ctype):  # (the group axis is the last: group start's entry)
+            return ffi.NULL if array is None else ffi.cast(ctype, array.ctypes.data) + start
+
+        module.lib.pattern_sum(n, nr, br, nc, bc, from_start(absolute, "int *"),
+                               from_start(starts, "int *"),
+                               from_start(offsets, "unsigned short *"), positions.shape[2],
                                _pointer(ffi, values, "double *"), count, int(group_major),
                                _pointer(ffi, sums, "double *"))
     return sums
