@@ -785,6 +785,23 @@ class MortarInterface:
         return self._require().rows
 
     @property
+    def differentiated_columns(self) -> np.ndarray | None:
+        """The stencil columns (slot * gdim + component, :attr:`pair_dofs`) on which the
+        pairs' quantities may have nonzero derivatives, when fewer than all (None: all). On
+        the undeformed surfaces (``configuration="reference"``) the integrals and normals
+        are frozen and the weighted gaps are linear in the facets' own nodes: the slave and
+        master facet nodes, in that order (the columns of :attr:`pair_force_dofs`); the
+        normals' stars are read, never differentiated, and the Newton matrix gets no
+        blocks of zeros for them."""
+        stencil = self.stencil
+        if self.configuration != "reference" or stencil is None:
+            return None
+        slots = np.concatenate([stencil.slave_slots, stencil.master_slots])
+        if slots.size == stencil.width:
+            return None
+        return (slots[:, None] * self.gdim + np.arange(self.gdim)).reshape(-1)
+
+    @property
     def pair_force_dofs(self) -> np.ndarray:
         """(n, (ns + nm) * gdim) displacement dofs of each pair's slave and master facet
         nodes: the rows of its force terms (-1: absent)."""

@@ -194,8 +194,10 @@ class ContactSystem:
 
     def _contact_pattern(self, k: int, grown: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Monolithic rows (n, (ns + nm) gdim + ns) and columns (n, width gdim + ns) of pair
-        k's dense block per pair of :meth:`_pattern_pairs` (2D: 10 x 14); rows of Dirichlet
-        dofs are dropped (-1), they are identity rows."""
+        k's dense block per pair of :meth:`_pattern_pairs` (2D: 10 x 14; on the undeformed
+        surfaces the displacement columns of
+        :attr:`~dolfinx_mortar.mortar.MortarInterface.differentiated_columns` only); rows of
+        Dirichlet dofs are dropped (-1), they are identity rows."""
         interface = self.interfaces[k]
         if interface.quantities is None or interface.without_pairs or not self.in_layout[k]:
             self._pairs[k] = None
@@ -211,11 +213,13 @@ class ContactSystem:
         multipliers = [layout.z(node_multipliers, k + 1)]
         multipliers += [layout.z(node_multipliers, self.tangential_field(k, a))
                         for a in range(self.components)]
+        displacement_dofs = interface.pair_dofs if every else interface.pair_dofs_of(pairs)
+        kept = interface.differentiated_columns
+        if kept is not None:
+            displacement_dofs = displacement_dofs[:, kept]
         # (PETSc's integers: kept until the next build, as wide as the pairs' blocks)
         row_indices = np.concatenate([force_dofs] + multipliers, axis=1)
-        column_indices = np.concatenate(
-            [layout.u(interface.pair_dofs if every else interface.pair_dofs_of(pairs))]
-            + multipliers, axis=1)
+        column_indices = np.concatenate([layout.u(displacement_dofs)] + multipliers, axis=1)
         self._pairs[k] = pairs
         return row_indices.astype(PETSc.IntType), column_indices.astype(PETSc.IntType)
 
@@ -365,31 +369,42 @@ class ContactSystem:
                 for a in range(m) for j in js]
             num_multipliers = (1 + m) * ns
         terms = force_terms + multiplier_terms
-        forces, columns = (ns + nm) * gdim, stencil.width * gdim
+        forces = (ns + nm) * gdim
+        kept = interface.differentiated_columns
+        columns = stencil.width * gdim if kept is None else kept.size
         parts = []
         weighted = _weighted_rows(terms, contributing.size)
         if weighted.size:
             every = weighted.size == contributing.size
             rows = contributing if every else contributing[weighted]
-            if not every:
-                terms = [[(o, w if np.ndim(w) == 0 else w[weighted]) for o, w in row]
-                         for row in terms]
-            parts.append((_chunked_gradients(interface, rows, terms),
+            parts.append((_chunked_gradients(interface, rows, terms,
+                                             None if every else weighted, kept),
                           None if every else weighted, np.arange(columns)))
         multiplier_columns = np.arange(columns, columns + num_multipliers)
         force_columns = np.zeros(0, dtype=np.int64)
         if friction is not None:
             slots = np.concatenate([stencil.slave_slots, stencil.master_slots])
             force_columns = (slots[:, None] * gdim + np.arange(gdim)).reshape(-1)
-        values = np.zeros((forces + num_multipliers, force_columns.size + num_multipliers,
-                           contributing.size))
+            if kept is not None:
+                position = np.full(stencil.width * gdim, -1)
+                position[kept] = np.arange(kept.size)
+                force_columns = position[force_columns]
         coefficients = interface.force_coefficients(contributing)  # (m, j, k, c)
         first = force_columns.size
-        values[:forces, first:first + ns] = -coefficients.reshape(
-            contributing.size, ns, forces).transpose(2, 1, 0)
-        if friction is not None:
-            _add_tangential_columns(values, tangents.coefficients, coefficient, ns, first)
-        parts.append((values, None, np.concatenate([force_columns, multiplier_columns])))
+
+        def coefficient_values(start: int, stop: int) -> np.ndarray:
+            # the pairs' -B^T (and -T^T, the slip's direct derivative) a chunk at a time
+            values = np.zeros((forces + num_multipliers, first + num_multipliers,
+                               stop - start))
+            values[:forces, first:first + ns] = -coefficients[start:stop].reshape(
+                stop - start, ns, forces).transpose(2, 1, 0)
+            if friction is not None:
+                _add_tangential_columns(
+                    values, tangents.coefficients[start:stop],
+                    {name: c[start:stop] for name, c in coefficient.items()}, ns, first)
+            return values
+        parts.append((ChunkedValues(coefficient_values, interface.assembly_chunk), None,
+                      np.concatenate([force_columns, multiplier_columns])))
         return contributing, parts
 
     def _at_nodes(self, k: int, owned: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -412,16 +427,21 @@ class ContactSystem:
         self._coefficient_vectors = []
 
 
-def _chunked_gradients(interface, rows: np.ndarray, terms) -> ChunkedValues:
+def _chunked_gradients(interface, rows: np.ndarray, terms, selected: np.ndarray | None = None,
+                       columns: np.ndarray | None = None) -> ChunkedValues:
     """The combined gradients of ``terms`` at the pairs ``rows``, made
     ``interface.assembly_chunk`` pairs at a time as the matrix sums them: the blocks of every
     weighted pair together were the largest transient of a frictional Jacobian's assembly
     on the rank holding the contact zone. Each pair's gradients are its own, so the sums
-    do not depend on the chunk."""
+    do not depend on the chunk. ``selected``: the rows' places in the terms' weights (None:
+    in order), taken a chunk at a time too; ``columns``: the stencil columns kept (None:
+    all)."""
     def gradients(start: int, stop: int) -> np.ndarray:
-        return interface.combined_gradients(
-            rows[start:stop], [[(o, w if np.ndim(w) == 0 else w[start:stop]) for o, w in row]
+        where = slice(start, stop) if selected is None else selected[start:stop]
+        result = interface.combined_gradients(
+            rows[start:stop], [[(o, w if np.ndim(w) == 0 else w[where]) for o, w in row]
                                for row in terms])
+        return result if columns is None else result[:, columns]
     return ChunkedValues(gradients, interface.assembly_chunk)
 
 

@@ -195,6 +195,49 @@ def test_reference_configuration_pattern_holds_the_overlapping_pairs_only(fricti
     problem.destroy()
 
 
+@pytest.mark.parallel
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("friction", [False, True])
+def test_reference_configuration_blocks_hold_the_facet_columns_only(dim, friction):
+    """On the undeformed surfaces the pairs' blocks have the displacement columns of their
+    slave and master facet nodes only (``MortarInterface.differentiated_columns``), not
+    those of the averaged normals' stars: the matrix equals, value for value, the one whose
+    blocks span the whole stencil, with fewer entries (sheared blocks, averaged normals,
+    solved to a state with stick or slip)."""
+    from test_friction import load_demo
+
+    from dolfinx_mortar import Coulomb
+    from dolfinx_mortar.mortar import MortarInterface
+
+    patch = load_demo("friction_patch")
+    limit = 0.2 * patch.PRESSURE
+    make = patch.sheared_blocks_3d if dim == 3 else patch.sheared_blocks
+    problem = make((3, 7), "upper", Coulomb(0.2) if friction else None,
+                   2.0 * limit / patch.SHEAR_MODULUS, limit)
+    assert problem.solve().converged
+    equations = problem.equations
+    interfaces, system = equations.interfaces, equations.system
+    assert all(m.configuration == "reference" and m.normals == "averaged" for m in interfaces)
+    facet_columns = (interfaces[0].stencil.ns + interfaces[0].stencil.nm) * dim
+    multipliers = (dim if friction else 1) * interfaces[0].stencil.ns
+    assert system._block_shape[1] == facet_columns + multipliers
+    narrow = equations.assemble_system().copy()
+    system._versions = ()  # (the next assembly builds its pattern again)
+    wide = pytest.MonkeyPatch()
+    wide.setattr(MortarInterface, "differentiated_columns", property(lambda self: None))
+    try:
+        whole = equations.assemble_system()
+        assert system._block_shape[1] == interfaces[0].stencil.width * dim + multipliers
+    finally:
+        wide.undo()
+    assert narrow.getInfo()["nz_used"] < whole.getInfo()["nz_used"]
+    scale = whole.norm(PETSc.NormType.INFINITY)
+    whole.axpy(-1.0, narrow, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+    assert whole.norm(PETSc.NormType.INFINITY) <= 1e-14 * scale
+    narrow.destroy()
+    problem.destroy()
+
+
 def _assert_every_candidate_adds_only_zeros(equations) -> None:
     """The Newton matrix as assembled equals, to rounding, the one whose pattern holds a
     block for every candidate pair, which has more entries."""
