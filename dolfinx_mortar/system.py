@@ -340,7 +340,7 @@ class ContactSystem:
         if contributing.size == 0:
             return None
         stencil, gdim = interface.stencil, interface.gdim
-        ns, nm = stencil.ns, stencil.nm
+        ns = stencil.ns
         slave_nodes = stencil.slave_nodes[contributing]
         z_pair, alpha_pair, beta_pair = (
             v[slave_nodes] for v in (z_nodes, alpha_nodes, beta_nodes))
@@ -369,7 +369,6 @@ class ContactSystem:
                 for a in range(m) for j in js]
             num_multipliers = (1 + m) * ns
         terms = force_terms + multiplier_terms
-        forces = (ns + nm) * gdim
         kept = interface.differentiated_columns
         columns = stencil.width * gdim if kept is None else kept.size
         parts = []
@@ -389,22 +388,10 @@ class ContactSystem:
                 position = np.full(stencil.width * gdim, -1)
                 position[kept] = np.arange(kept.size)
                 force_columns = position[force_columns]
-        coefficients = interface.force_coefficients(contributing)  # (m, j, k, c)
-        first = force_columns.size
-
-        def coefficient_values(start: int, stop: int) -> np.ndarray:
-            # the pairs' -B^T (and -T^T, the slip's direct derivative) a chunk at a time
-            values = np.zeros((forces + num_multipliers, first + num_multipliers,
-                               stop - start))
-            values[:forces, first:first + ns] = -coefficients[start:stop].reshape(
-                stop - start, ns, forces).transpose(2, 1, 0)
-            if friction is not None:
-                _add_tangential_columns(
-                    values, tangents.coefficients[start:stop],
-                    {name: c[start:stop] for name, c in coefficient.items()}, ns, first)
-            return values
-        parts.append((ChunkedValues(coefficient_values, interface.assembly_chunk), None,
-                      np.concatenate([force_columns, multiplier_columns])))
+        tangential_part = None if friction is None else (tangents.coefficients, coefficient)
+        parts.append((_coefficient_values(interface, contributing, num_multipliers,
+                                          force_columns.size, tangential_part),
+                      None, np.concatenate([force_columns, multiplier_columns])))
         return contributing, parts
 
     def _at_nodes(self, k: int, owned: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -443,6 +430,29 @@ def _chunked_gradients(interface, rows: np.ndarray, terms, selected: np.ndarray 
                                for row in terms])
         return result if columns is None else result[:, columns]
     return ChunkedValues(gradients, interface.assembly_chunk)
+
+
+def _coefficient_values(interface, contributing: np.ndarray, num_multipliers: int,
+                        first: int, tangential: tuple | None) -> ChunkedValues:
+    """The contributing pairs' -B^T (force rows, normal multipliers' columns) and, with
+    friction (``tangential``: T and the slip coefficients), -T^T and the slip's direct
+    derivative, made a chunk of pairs at a time. Columns: ``first`` facet displacement
+    columns (with friction), then the multipliers'."""
+    coefficients = interface.force_coefficients(contributing)  # (m, j, k, c)
+    ns = coefficients.shape[1]
+    forces = coefficients.shape[2] * coefficients.shape[3]
+
+    def values(start: int, stop: int) -> np.ndarray:
+        block = np.zeros((forces + num_multipliers, first + num_multipliers, stop - start))
+        block[:forces, first:first + ns] = -coefficients[start:stop].reshape(
+            stop - start, ns, forces).transpose(2, 1, 0)
+        if tangential is not None:
+            T, coefficient = tangential
+            _add_tangential_columns(block, T[start:stop],
+                                    {name: c[start:stop] for name, c in coefficient.items()},
+                                    ns, first)
+        return block
+    return ChunkedValues(values, interface.assembly_chunk)
 
 
 def _weighted_rows(terms, n: int) -> np.ndarray:
