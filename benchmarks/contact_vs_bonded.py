@@ -61,6 +61,7 @@ from dolfinx_mortar import (
     allocator,
     compat,
     condensation,
+    inner_matrix,
     internal_work,
     meshes3d,
     solvers,
@@ -272,19 +273,21 @@ class CondensationTimer:
     """Wraps the condensed preconditioner's phases with wall clocks (this rank's), for
     the contact run; ``restore`` puts the originals back."""
 
-    PHASES = {"_split": "sub-matrices", "_choose_rows": "rows near the contact",
-              "_condensed_rows": "condensed products", "_inner_matrix": "inner matrix",
-              "setUp": "set-up", "apply": "application"}
+    PHASES = {(condensation.CondensedPreconditioner, "_split"): "sub-matrices",
+              (condensation.CondensedPreconditioner, "_choose_rows"): "rows near the contact",
+              (condensation.CondensedPreconditioner, "_condensed_rows"): "condensed products",
+              (inner_matrix.InnerMatrix, "fill"): "inner matrix",
+              (condensation.CondensedPreconditioner, "setUp"): "set-up",
+              (condensation.CondensedPreconditioner, "apply"): "application"}
 
     def __init__(self):
         self.seconds = {label: 0.0 for label in self.PHASES.values()}
         self.calls = {label: 0 for label in self.PHASES.values()}
         self.set_ups: list[dict] = []
         self.originals = {}
-        cls = condensation.CondensedPreconditioner
-        for name, label in self.PHASES.items():
+        for (cls, name), label in self.PHASES.items():
             original = getattr(cls, name)
-            self.originals[name] = original
+            self.originals[cls, name] = original
             setattr(cls, name, self._timed(original, label))
 
     def _timed(self, original, label):
@@ -311,8 +314,8 @@ class CondensationTimer:
         return timed
 
     def restore(self) -> None:
-        for name, original in self.originals.items():
-            setattr(condensation.CondensedPreconditioner, name, original)
+        for (cls, name), original in self.originals.items():
+            setattr(cls, name, original)
 
     def summary(self) -> dict:
         """Seconds per phase; the inner solver's set-up is the set-up less the products."""

@@ -87,6 +87,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from . import diagnostics
+from .inner_matrix import DisplacementBlock, InnerMatrix
 
 ELIMINATION_RATIO = 0.03
 """With friction, a rotated multiplier whose singular value sigma is at least this
@@ -200,8 +201,8 @@ class CondensedPreconditioner:
         self._scratch: dict[str, PETSc.Mat] = {}
         self._inputs_kept: dict[str, tuple] = {}
         self._sets: tuple | None = None
-        self._inner_layout: dict | None = None
-        self._inner_a_part: dict | None = None
+        self._inner = InnerMatrix(comm, self.block_size)
+        self._a: DisplacementBlock | None = None
         self._fingerprint = None
         self._null_space: PETSc.NullSpace | None = None
         self.num_active = 0
@@ -242,14 +243,14 @@ class CondensedPreconditioner:
                            *(kept[0] for kept in self._inputs_kept.values())):
                 matrix.destroy()
             self._products, self._scratch, self._inputs_kept = {}, {}, {}
-            self._inner_layout = None
+            self._inner.forget_layout()
         K_rows = self._condensed_rows()
         if reuse:
             self.reuses += 1
         else:
             self.rebuilds += 1
         m = self._matrices
-        inner = self._inner_matrix(K_rows, m.get("K_inner"))
+        inner = self._inner.fill(J, self._a, self._rows, K_rows, m.get("K_inner"))
         if inner is not m.get("K_inner"):
             if "K_inner" in m:
                 m["K_inner"].destroy()
@@ -442,7 +443,7 @@ class CondensedPreconditioner:
         condensed (d_j = 0 or, with friction, a small sigma)."""
         m, v = self._matrices, self._vectors
         if not reuse:
-            self._number_columns(J)
+            self._a = DisplacementBlock(self.comm, J, self.is_u.getIndices())
         raw = "_raw" if self.rotate else ""
         G = m["G" + raw] = J.createSubMatrix(self.is_u, self.is_z, submat=m.get("G" + raw))
         m["C" + raw] = J.createSubMatrix(self.is_z, self.is_u, submat=m.get("C" + raw))
@@ -476,33 +477,8 @@ class CondensedPreconditioner:
             v["inverse_p"].getArray()[:] = np.where(active,
                                                     1.0 / np.where(active, lengths, 1.0), 0.0)
         self._normal_values = frames
-        m["T"] = self._normal_matrix(frames, self._u_sizes, m.get("T"))
+        m["T"] = self._normal_matrix(frames, self._a.sizes, m.get("T"))
         return active
-
-    def _number_columns(self, J: PETSc.Mat) -> None:
-        """The displacement block A = J[u, u] is not copied: its rows are J's first ``num_u``
-        local rows (the layout puts each rank's displacements first), and ``_a_column`` maps
-        J's global columns to A's (-1 at the multipliers'). Collective."""
-        first = J.getOwnershipRange()[0]
-        if not np.array_equal(self.is_u.getIndices(), first + np.arange(self.num_u)):
-            raise ValueError("the condensation needs each rank's displacement rows first")
-        counts = np.array(self.comm.allgather(self.num_u), dtype=np.int64)
-        starts = np.concatenate([[0], np.cumsum(counts)])
-        ranges = J.getOwnershipRanges()
-        a_column = np.full(J.getSize()[1], -1, dtype=PETSc.IntType)
-        for rank, count in enumerate(counts):
-            a_column[ranges[rank]:ranges[rank] + count] = np.arange(
-                starts[rank], starts[rank + 1], dtype=PETSc.IntType)
-        self._a_column = a_column
-        self._j_first = first
-        self._u_first = int(starts[self.comm.rank])
-        self._u_sizes = (self.num_u, int(starts[-1]))
-
-    def _a_csr(self, J: PETSc.Mat) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """J's CSR arrays of the displacement rows (views; columns in J's numbering)."""
-        indptr, indices, values = J.getValuesCSR()
-        end = indptr[self.num_u]
-        return indptr[: self.num_u + 1], indices[:end], values[:end]
 
     def _rotate(self, J: PETSc.Mat) -> np.ndarray:
         """With friction: each node's block Z_j of J turned into its singular values,
@@ -541,13 +517,14 @@ class CondensedPreconditioner:
         node's column (K_r T^T). Elsewhere K_c = A, so the products need these rows only.
         From the patterns (zeros included), so they hold while J's pattern does."""
         G = self._matrices["G"]
-        first = self._u_first
-        slave_u = np.zeros(self._u_sizes[1], dtype=bool)
+        A = self._a
+        first = A.first
+        slave_u = np.zeros(A.sizes[1], dtype=bool)
         slave_u[np.concatenate(self.comm.allgather(self.z_node_dofs.reshape(-1)))] = True
-        slave = np.zeros(self._a_column.size, dtype=bool)  # over J's columns
-        is_u = self._a_column >= 0
-        slave[is_u] = slave_u[self._a_column[is_u]]
-        indptr, indices, _ = self._a_csr(self._J)
+        slave = np.zeros(A.column.size, dtype=bool)  # over J's columns
+        is_u = A.column >= 0
+        slave[is_u] = slave_u[A.column[is_u]]
+        indptr, indices, _ = A.csr(self._J)
         lengths = np.diff(indptr)
         near = np.zeros(self.num_u, dtype=bool)
         if indices.size:
@@ -563,7 +540,7 @@ class CondensedPreconditioner:
         index_sets["rows"] = PETSc.IS().createGeneral(
             (first + self._rows).astype(PETSc.IntType), comm=self.comm)
         index_sets["rows_of_J"] = PETSc.IS().createGeneral(
-            (self._j_first + self._rows).astype(PETSc.IntType), comm=self.comm)
+            (A.j_first + self._rows).astype(PETSc.IntType), comm=self.comm)
         index_sets["columns"] = PETSc.IS().createStride(self.num_u, first, 1, comm=self.comm)
         rows_first = self.comm.exscan(self._rows.size) or 0
         position = np.full(self.num_u, -1, dtype=np.int64)
@@ -652,7 +629,7 @@ class CondensedPreconditioner:
                 matrix.destroy()
             self._products, kept = {}, {}
             self._inputs_kept = kept
-            self._inner_layout = None
+            self._inner.forget_layout()
             for name, (indptr, indices, values) in nonzero.items():
                 matrix = PETSc.Mat().createAIJ(size=parts[name][3], csr=(indptr, indices, values),
                                                comm=self.comm)
@@ -817,92 +794,6 @@ class CondensedPreconditioner:
         its pattern is fixed, so an ``existing`` T only gets the new values."""
         return _sparse_rows(normals, self.z_node_dofs, column_sizes, self.comm, existing)
 
-    def _inner_matrix(self, K_rows: PETSc.Mat, existing: PETSc.Mat | None) -> PETSc.Mat:
-        """K_c without its stored zeros (the diagonal kept; A's hold J's pattern, e.g. the
-        Dirichlet columns dolfinx zeroes): A's rows, with ``K_rows`` in the rows near the
-        contact; as a new matrix or, while the layout holds (J's pattern, the products'
-        patterns and the zeros), as new values of ``existing``. The layout is kept as masks
-        over A's and K_rows' entries and over K_c's (a byte an entry), not as positions.
-        Collective."""
-        a_csr, k_csr = self._a_csr(self._J), K_rows.getValuesCSR()
-        a_indptr, a_values, k_values = a_csr[0], a_csr[2], k_csr[2]
-        a_part = self._inner_a_part
-        a_moved = a_part is not None and bool(np.any(a_values[a_part["dropped"]] != 0.0))
-        layout = self._inner_layout
-        fresh = self.comm.allreduce(
-            existing is None or layout is None or a_moved
-            or bool(np.any(k_values[layout["k_dropped"]] != 0.0)), op=MPI.LOR)
-        if fresh:
-            if a_part is None or a_moved:
-                outside = np.ones(self.num_u, dtype=bool)
-                outside[self._rows] = False
-                a_part = self._inner_a_part = self._kept_entries(a_csr, self._j_first,
-                                                                 outside)
-            layout = self._inner_layout = self._merged_layout(a_part, a_csr[1], k_csr)
-        del a_csr  # (its column indices: 4 bytes an entry of A)
-        from_a = layout["from_a"]
-        values = np.empty(from_a.size)
-        _masked_copy_by_rows(values, layout["indptr"], from_a, a_values, a_indptr,
-                             a_part["kept"])
-        del a_values
-        values[~from_a] = k_values[layout["k_kept"]]
-        if not fresh:
-            existing.setValuesCSR(layout["indptr"], layout["indices"], values)
-            existing.assemble()
-            return existing
-        matrix = PETSc.Mat().createAIJ(size=(self._u_sizes, self._u_sizes),
-                                       bsize=self.block_size,
-                                       csr=(layout["indptr"], layout["indices"], values),
-                                       comm=self.comm)
-        matrix.assemble()
-        return matrix
-
-    def _kept_entries(self, csr: tuple, first: int, taken: np.ndarray | None = None) -> dict:
-        """Of a matrix's local CSR entries, its local rows being displacement rows (all of
-        them, or ``self._rows`` in order when ``taken`` is None), those in the rows
-        ``taken`` (a mask over the displacement rows) that are nonzero or diagonal: as a
-        mask over the entries, the positions of the dropped ones, and the kept entries per
-        local row."""
-        indptr, indices, values = csr
-        lengths = np.diff(indptr)
-        row_of_local = np.arange(self.num_u) if taken is not None else self._rows
-        diagonal = indices == np.repeat((row_of_local + first).astype(indices.dtype), lengths)
-        kept = (values != 0.0) | diagonal
-        del diagonal
-        if taken is not None:
-            in_rows = np.repeat(taken, lengths)
-            dropped = np.flatnonzero(in_rows & ~kept)
-            kept &= in_rows
-            del in_rows
-        else:
-            dropped = np.flatnonzero(~kept)
-        starts = np.minimum(indptr[:-1], max(kept.size - 1, 0))
-        counts = (np.add.reduceat(kept, starts, dtype=np.int64) if kept.size
-                  else np.zeros(lengths.size, dtype=np.int64))
-        counts[lengths == 0] = 0
-        return {"kept": kept, "dropped": dropped, "counts": counts}
-
-    def _merged_layout(self, a_part: dict, a_indices: np.ndarray, k_csr: tuple) -> dict:
-        """The CSR pattern of A's kept entries (J's column indices ``a_indices``) with those
-        of K_rows (``k_csr``) in the rows near the contact, and which entries come from A
-        (each row comes whole from one of them, in order)."""
-        k_part = self._kept_entries(k_csr, self._u_first)
-        counts = a_part["counts"].copy()
-        counts[self._rows] = k_part["counts"]
-        outside = np.ones(self.num_u, dtype=bool)
-        outside[self._rows] = False
-        indptr = np.zeros(self.num_u + 1, dtype=PETSc.IntType)
-        np.cumsum(counts, out=indptr[1:])
-        from_a = np.repeat(outside, counts)
-        indices = np.empty(from_a.size, dtype=PETSc.IntType)
-        indices[from_a] = self._a_column[a_indices[a_part["kept"]]]
-        if np.any(indices[from_a] < 0):
-            raise RuntimeError("a displacement row away from the contact has a multiplier "
-                               "column")
-        indices[~from_a] = k_csr[1][k_part["kept"]]
-        return {"indptr": indptr, "indices": indices, "from_a": from_a,
-                "k_kept": k_part["kept"], "k_dropped": k_part["dropped"]}
-
     def _set_near_nullspace(self, matrix: PETSc.Mat) -> None:
         if not self.near_nullspace:
             return
@@ -922,7 +813,8 @@ class CondensedPreconditioner:
                        *self._scratch.values(), *(kept[0] for kept in self._inputs_kept.values())):
             matrix.destroy()
         self._products, self._scratch, self._inputs_kept = {}, {}, {}
-        self._sets = self._inner_layout = self._inner_a_part = None
+        self._sets = None
+        self._inner.reset()
         for vector in self._vectors.values():
             vector.destroy()
         self._matrices, self._vectors = {}, {}
@@ -937,26 +829,6 @@ class CondensedPreconditioner:
         self.ksp.destroy()
         self.is_u.destroy()
         self.is_z.destroy()
-
-
-COPY_CHUNK = 1 << 20
-"""Entries :func:`_masked_copy_by_rows` copies at a time (about)."""
-
-
-def _masked_copy_by_rows(target: np.ndarray, target_indptr: np.ndarray,
-                         target_mask: np.ndarray, source: np.ndarray,
-                         source_indptr: np.ndarray, source_mask: np.ndarray) -> None:
-    """``target[target_mask] = source[source_mask]`` for two CSR value arrays of the same
-    rows whose masked entries match row by row, in order; a block of rows at a time, so
-    that no temporary has the size of either (A's kept values would take 8 bytes an
-    entry of K_c at the set-up's peak)."""
-    num_rows = target_indptr.size - 1
-    step = max(1, num_rows * COPY_CHUNK // max(int(source_indptr[-1]), 1))
-    for first in range(0, num_rows, step):
-        last = min(num_rows, first + step)
-        t0, t1 = target_indptr[first], target_indptr[last]
-        s0, s1 = source_indptr[first], source_indptr[last]
-        target[t0:t1][target_mask[t0:t1]] = source[s0:s1][source_mask[s0:s1]]
 
 
 def _entries(matrix: PETSc.Mat, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:

@@ -301,9 +301,9 @@ def test_masked_copy_by_rows_equals_the_whole_masked_copy(monkeypatch, chunk):
     """K_c's values from A's kept entries, a block of rows at a time, are the whole
     masked copy ``target[target_mask] = source[source_mask]`` (rows whose masked entries
     match in number and order; empty rows and rows with nothing kept included)."""
-    from dolfinx_mortar import condensation
+    from dolfinx_mortar import inner_matrix
 
-    monkeypatch.setattr(condensation, "COPY_CHUNK", chunk)
+    monkeypatch.setattr(inner_matrix, "COPY_CHUNK", chunk)
     rng = np.random.default_rng(5)
     num_rows = 40
     source_lengths = rng.integers(0, 9, num_rows)
@@ -320,6 +320,6 @@ def test_masked_copy_by_rows_equals_the_whole_masked_copy(monkeypatch, chunk):
     expected = np.full(target_indptr[-1], -1.0)
     expected[target_mask] = source[source_mask]
     target = np.full(target_indptr[-1], -1.0)
-    condensation._masked_copy_by_rows(target, target_indptr, target_mask, source,
-                                      source_indptr, source_mask)
+    inner_matrix.masked_copy_by_rows(target, target_indptr, target_mask, source,
+                                     source_indptr, source_mask)
     np.testing.assert_array_equal(target, expected)
