@@ -250,7 +250,8 @@ class CondensedPreconditioner:
         else:
             self.rebuilds += 1
         m = self._matrices
-        inner = self._inner.fill(J, self._a, self._rows, K_rows, m.get("K_inner"))
+        inner = self._inner.fill(J, self._a, self._rows, K_rows, m.get("K_inner"),
+                                 "hypre" if self.ksp.getPC().getType() == "hypre" else "aij")
         if inner is not m.get("K_inner"):
             if "K_inner" in m:
                 m["K_inner"].destroy()

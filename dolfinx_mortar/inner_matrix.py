@@ -61,6 +61,12 @@ class InnerMatrix:
     """K_c without its stored zeros (the diagonal kept): A's rows, with the condensed rows
     ``K_rows`` in the rows near the contact.
 
+    For hypre's BoomerAMG it is made a hypre matrix (``MATHYPRE``) at once: given an AIJ
+    matrix, PETSc's hypre preconditioner converts it into hypre's own and keeps both, the
+    copy with an AIJ delegate and its COO maps (three to four times the AIJ's memory on
+    top of it while it converts); the inner Krylov method multiplies with hypre's matrix
+    as well as with an AIJ.
+
     Args:
         comm: communicator.
         block_size: the displacement block size (the matrix's, for AMG's nodal coarsening).
@@ -81,10 +87,11 @@ class InnerMatrix:
         self._layout = self._a_part = None
 
     def fill(self, J: PETSc.Mat, A: DisplacementBlock, rows: np.ndarray, K_rows: PETSc.Mat,
-             existing: PETSc.Mat | None) -> PETSc.Mat:
+             existing: PETSc.Mat | None, matrix_type: str = "aij") -> PETSc.Mat:
         """K_c from J's displacement rows and ``K_rows`` (the local ``rows`` near the
-        contact, in order): a new matrix or, while the layout holds (J's pattern, the
-        products' patterns and the zeros), new values of ``existing``. Collective."""
+        contact, in order): a new matrix of ``matrix_type`` (``aij`` or ``hypre``) or, while
+        the layout holds (J's pattern, the products' patterns and the zeros), new values of
+        ``existing``. Collective."""
         a_csr, k_csr = A.csr(J), K_rows.getValuesCSR()
         a_indptr, a_values, k_values = a_csr[0], a_csr[2], k_csr[2]
         a_part = self._a_part
@@ -111,9 +118,29 @@ class InnerMatrix:
             existing.setValuesCSR(layout["indptr"], layout["indices"], values)
             existing.assemble()
             return existing
+        if matrix_type == "hypre":
+            return self._hypre_matrix(A, layout["indptr"], layout["indices"], values)
         matrix = PETSc.Mat().createAIJ(size=(A.sizes, A.sizes), bsize=self.block_size,
                                        csr=(layout["indptr"], layout["indices"], values),
                                        comm=self.comm)
+        matrix.assemble()
+        return matrix
+
+    def _hypre_matrix(self, A: DisplacementBlock, indptr: np.ndarray, indices: np.ndarray,
+                      values: np.ndarray) -> PETSc.Mat:
+        """The CSR rows as a hypre matrix, preallocated exactly."""
+        matrix = PETSc.Mat().create(self.comm)
+        matrix.setSizes((A.sizes, A.sizes), bsize=self.block_size)
+        matrix.setType(PETSc.Mat.Type.HYPRE)
+        inside = (indices >= A.first) & (indices < A.first + A.num_u)
+        lengths = np.diff(indptr)
+        diagonal = np.zeros(lengths.size, dtype=PETSc.IntType)
+        if inside.size:
+            diagonal[:] = np.add.reduceat(inside, np.minimum(indptr[:-1], inside.size - 1))
+            diagonal[lengths == 0] = 0
+        del inside
+        matrix.setPreallocationNNZ((diagonal, (lengths - diagonal).astype(PETSc.IntType)))
+        matrix.setValuesCSR(indptr, indices, values)
         matrix.assemble()
         return matrix
 
