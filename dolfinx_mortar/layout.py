@@ -605,7 +605,10 @@ class MonolithicMatrix:
         sizes: (owned, global) rows and columns.
         local_to_global: monolithic index of each local displacement dof.
         bulk_pattern: (indptr, indices) of the bulk block's owned rows in
-            monolithic columns; they are the first rows of this rank.
+            monolithic columns; they are the first rows of this rank. Or (indptr,
+            indices, block): as ``block`` x ``block`` blocks
+            (:func:`~dolfinx_mortar.kernels.compiled.pattern_blocks`), the indices each
+            block's first column.
         group_rows, group_cols: (groups, nr) and (groups, nc) monolithic
             indices of each group's dense block; negative ones are dropped.
         diagonal_rows: owned monolithic rows that get a diagonal entry.
@@ -630,8 +633,8 @@ class MonolithicMatrix:
                 [self.diagonal_rows, np.asarray(point_entries[0], dtype=PETSc.IntType)])
             self._entry_cols = np.concatenate(
                 [self.diagonal_rows, np.asarray(point_entries[1], dtype=PETSc.IntType)])
-        bulk_indptr, bulk_indices = bulk_pattern
-        num_bulk = bulk_indptr.size - 1
+        bulk_indptr, bulk_indices = bulk_pattern[:2]
+        block = bulk_pattern[2] if len(bulk_pattern) > 2 else 1
         self.mat = PETSc.Mat().create(comm=comm)
         self.mat.setType(PETSc.Mat.Type.AIJ)
         self.mat.setSizes((sizes, sizes))
@@ -641,7 +644,6 @@ class MonolithicMatrix:
         cols = np.concatenate([group_indices.astype(np.int64), self._entry_cols.astype(np.int64)])
         rows, cols = _entries_to_owners(comm, first, rows, cols)
         shape = (num_owned, max(num_global, 1))
-        bulk_ptr = np.concatenate([bulk_indptr, np.full(num_owned - num_bulk, bulk_indptr[-1])])
         extra = scipy.sparse.coo_matrix((np.ones(rows.size), (rows - first, cols)),
                                         shape=shape).tocsr()
         extra.sum_duplicates()
@@ -649,8 +651,12 @@ class MonolithicMatrix:
 
         # the bulk rows merged with the few entries of the pairs and multipliers in one pass
         # (no sum of the whole pattern as sparse matrices: 12 bytes an entry more, each time)
-        pattern = compiled.pattern_union((bulk_ptr, bulk_indices), (extra.indptr, extra.indices))
+        pattern = compiled.pattern_union((bulk_indptr, bulk_indices),
+                                         (extra.indptr, extra.indices), block)
         if pattern is None:  # (a bulk row not sorted)
+            bulk_ptr, bulk_indices = _unblocked(bulk_indptr, bulk_indices, block)
+            bulk_ptr = np.concatenate([bulk_ptr, np.full(num_owned + 1 - bulk_ptr.size,
+                                                         bulk_ptr[-1])])
             bulk = scipy.sparse.csr_matrix((np.ones(bulk_indices.size), bulk_indices, bulk_ptr),
                                            shape=shape)
             merged = (bulk + extra).tocsr()
@@ -685,6 +691,20 @@ class MonolithicMatrix:
     def destroy(self) -> None:
         """Free the PETSc matrix (collective)."""
         self.mat.destroy()
+
+
+def _unblocked(indptr: np.ndarray, indices: np.ndarray,
+               block: int) -> tuple[np.ndarray, np.ndarray]:
+    """A pattern of ``block`` x ``block`` blocks (block rows' indptr, blocks' first columns)
+    as a plain CSR pattern."""
+    if block == 1:
+        return indptr, indices
+    lengths = np.repeat(np.diff(indptr) * block, block)
+    expanded = (np.asarray(indices)[:, None] + np.arange(block)).reshape(-1)
+    rows = [np.tile(expanded[indptr[b] * block:indptr[b + 1] * block], block)
+            for b in range(indptr.size - 1)]
+    scalar_indptr = np.concatenate([[0], np.cumsum(lengths)])
+    return scalar_indptr, (np.concatenate(rows) if rows else np.zeros(0, dtype=indices.dtype))
 
 
 def _entries_to_owners(comm: MPI.Intracomm, first: int, rows: np.ndarray,

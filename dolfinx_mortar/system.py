@@ -27,6 +27,7 @@ from petsc4py import PETSc
 
 from . import compat
 from .friction import coefficient_names
+from .kernels import compiled
 from .layout import BlockLayout, ChunkedValues, MonolithicMatrix
 
 if typing.TYPE_CHECKING:
@@ -81,8 +82,14 @@ class ContactSystem:
         blocks = index_map.local_to_global(
             np.arange(index_map.size_local + index_map.num_ghosts, dtype=np.int32))
         local_dofs = (blocks[:, None] * bs + np.arange(bs)).reshape(-1)
-        # the bulk pattern's columns are kept once, numbered by the current layout
-        self._bulk = ((indptr.astype(np.int64), indices), local_dofs)
+        # the bulk pattern's columns are kept once, numbered by the current layout, and a
+        # block's once (a ninth of them in 3D)
+        blocks = compiled.pattern_blocks(indptr, indices, bs)
+        if blocks is None:
+            self._bulk = ((indptr.astype(np.int64), indices, 1), local_dofs)
+        else:
+            self._bulk = ((*blocks, bs), local_dofs)
+        del indptr, indices, blocks
         self._fixed_dofs = fixed_dofs
         self.layout = None
         self.set_layout(layout, [True] * len(interfaces))
@@ -97,12 +104,12 @@ class ContactSystem:
         """Number the matrix by ``layout``, in which the pairs k with ``in_layout[k]``
         False have no multiplier rows (the next assembly builds a new matrix).
         Collective."""
-        (indptr, columns), local_dofs = self._bulk
+        (indptr, columns, block), local_dofs = self._bulk
         if self.layout is not None:  # (monolithic indices of the old layout)
             columns = self.layout.u_global(columns, PETSc.IntType)
             local_dofs = self.layout.u_global(local_dofs)
         self._bulk = None
-        self._bulk = ((indptr, layout.u(columns, PETSc.IntType)), layout.u(local_dofs))
+        self._bulk = ((indptr, layout.u(columns, PETSc.IntType), block), layout.u(local_dofs))
         del columns
         self.layout = layout
         self.in_layout = list(in_layout)

@@ -340,6 +340,56 @@ def test_pattern_union_equals_the_sum_of_the_sparse_patterns():
     assert compiled.pattern_union((a.indptr, unsorted), (b.indptr, b.indices)) is None
 
 
+@pytest.mark.parametrize("block", [2, 3])
+def test_blocked_pattern_holds_the_same_entries(block):
+    """A pattern of whole block x block blocks (as dolfinx makes a vector space's) is kept
+    as its blocks' first columns (``pattern_blocks``): expanded (``layout._unblocked``) it is
+    the pattern again, and its union with another pattern of more rows (``pattern_union``
+    with ``a_block``) is the union of the expanded one; a pattern with one entry more or
+    less, or with a block off the block grid, is no block pattern."""
+    import scipy.sparse
+
+    from dolfinx_mortar.kernels import compiled
+    from dolfinx_mortar.layout import _unblocked
+
+    rng = np.random.default_rng(3)
+    nodes = scipy.sparse.random(20, 30, density=0.15, random_state=rng, format="lil")
+    nodes[4] = 0.0  # (an empty block row)
+    nodes = nodes.tocsr()
+    nodes.sort_indices()
+    scalar = scipy.sparse.kron(nodes, np.ones((block, block)), format="csr")
+    scalar.sort_indices()
+    indptr, indices = scalar.indptr.astype(np.int64), scalar.indices.astype(np.int32)
+    blocks = compiled.pattern_blocks(indptr, indices, block)
+    assert blocks is not None
+    block_indptr, first = blocks
+    assert block_indptr.tolist() == nodes.indptr.tolist()
+    assert first.tolist() == (nodes.indices * block).tolist()
+    expanded = _unblocked(block_indptr, first, block)
+    assert expanded[0].tolist() == indptr.tolist()
+    assert expanded[1].tolist() == indices.tolist()
+    other = scipy.sparse.random(scalar.shape[0] + 5, scalar.shape[1], density=0.03,
+                                random_state=rng, format="csr")
+    other.sort_indices()
+    padded = np.concatenate([indptr, np.full(5, indptr[-1])])
+    expected = compiled.pattern_union((padded, indices), (other.indptr, other.indices))
+    union = compiled.pattern_union((block_indptr, first), (other.indptr, other.indices), block)
+    assert union[0].tolist() == expected[0].tolist()
+    assert union[1].tolist() == expected[1].tolist()
+    shifted = (first + 1).astype(np.int32)  # (blocks off the grid still union right)
+    union = compiled.pattern_union((block_indptr, shifted), (other.indptr, other.indices), block)
+    expected = compiled.pattern_union(
+        (padded, _unblocked(block_indptr, shifted, block)[1]), (other.indptr, other.indices))
+    assert union[1].tolist() == expected[1].tolist()
+    assert compiled.pattern_blocks(indptr, indices + 1, block) is None
+    row = int(np.argmax(np.diff(indptr)))
+    fewer = np.delete(indices, indptr[row + 1] - 1)
+    fewer_indptr = indptr.copy()
+    fewer_indptr[row + 1:] -= 1
+    assert compiled.pattern_blocks(fewer_indptr, fewer, block) is None
+    assert compiled.pattern_blocks(indptr[:-1], indices[:indptr[-2]], block) is None
+
+
 @pytest.mark.parallel
 @pytest.mark.parametrize("chunk", [3, 1 << 20])
 def test_block_layout_index_maps_each_global_index_to_its_owners_row(monkeypatch, chunk):

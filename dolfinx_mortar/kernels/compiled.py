@@ -147,9 +147,11 @@ int pattern_sum_part(long n, int nr, int br, int nc, int bc, const int *position
                      const int *starts, const unsigned short *offsets, long stride,
                      const long *which, int nk, const long *columns, const double *values,
                      long count, double *sums);
-int pattern_union(long num_rows, const long *a_indptr, const int *a_indices,
-                  const long *b_indptr, const int *b_indices, long *out_indptr,
-                  int *out_indices);
+int pattern_union(long num_rows, long a_rows, int a_block, const long *a_indptr,
+                  const int *a_indices, const long *b_indptr, const int *b_indices,
+                  long *out_indptr, int *out_indices);
+int pattern_blocks(long num_rows, int bs, const long *indptr, const int *indices,
+                   long *block_indptr, int *block_first);
 int pattern_of_groups(long n, int nr, int nc, const int *row_blocks, const int *col_blocks,
                       long num_row_blocks, long num_col_blocks, long *out_indptr,
                       int *out_indices);
@@ -673,16 +675,19 @@ def pattern_sum_part(positions: np.ndarray | RowOffsets, values: np.ndarray, cou
     return sums
 
 
-def pattern_union(a: tuple[np.ndarray, np.ndarray],
-                  b: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
-    """The union (indptr int64, indices int32) of two CSR patterns (indptr, indices) of the
-    same rows, each row's columns strictly increasing and below 2^31; None if a row is not
-    (the caller merges another way). One pass to count, one to fill."""
+def pattern_union(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray],
+                  a_block: int = 1) -> tuple[np.ndarray, np.ndarray] | None:
+    """The union (indptr int64, indices int32) of two CSR patterns (indptr, indices), each
+    row's columns strictly increasing and below 2^31; None if a row is not (the caller
+    merges another way). ``a`` may have fewer rows than ``b`` (the others empty) and be
+    blocked (:func:`pattern_blocks`: ``a_block`` x ``a_block`` blocks, its indptr over block
+    rows and its indices the blocks' first columns). One pass to count, one to fill."""
     (a_indptr, a_indices), (b_indptr, b_indices) = a, b
-    if a_indptr.size != b_indptr.size:
-        raise ValueError(f"patterns of {a_indptr.size - 1} and {b_indptr.size - 1} rows")
-    for indices in (a_indices, b_indices):
-        if indices.size and (indices.min() < 0 or indices.max() >= 2**31 - 1):
+    a_rows = (a_indptr.size - 1) * a_block
+    if a_rows > b_indptr.size - 1:
+        raise ValueError(f"patterns of {a_rows} and {b_indptr.size - 1} rows")
+    for indices, width in ((a_indices, a_block), (b_indices, 1)):
+        if indices.size and (indices.min() < 0 or indices.max() + width >= 2**31):
             raise ValueError("pattern_union takes columns in [0, 2^31 - 1)")
     arrays = [np.ascontiguousarray(a_indptr, dtype=np.int64),
               np.ascontiguousarray(a_indices, dtype=np.intc),
@@ -692,15 +697,38 @@ def pattern_union(a: tuple[np.ndarray, np.ndarray],
     ffi = module.ffi
     pointers = [_pointer(ffi, array, ctype) for array, ctype in
                 zip(arrays, ("long *", "int *", "long *", "int *"), strict=True)]
-    indptr = np.empty(a_indptr.size, dtype=np.int64)
-    num_rows = a_indptr.size - 1
-    if module.lib.pattern_union(num_rows, *pointers, _pointer(ffi, indptr, "long *"),
-                                ffi.NULL) != 0:
+    indptr = np.empty(b_indptr.size, dtype=np.int64)
+    num_rows = b_indptr.size - 1
+    if module.lib.pattern_union(num_rows, a_rows, a_block, *pointers,
+                                _pointer(ffi, indptr, "long *"), ffi.NULL) != 0:
         return None
     indices = np.empty(int(indptr[-1]), dtype=np.intc)
-    module.lib.pattern_union(num_rows, *pointers, _pointer(ffi, indptr, "long *"),
-                             _pointer(ffi, indices, "int *"))
+    module.lib.pattern_union(num_rows, a_rows, a_block, *pointers,
+                             _pointer(ffi, indptr, "long *"), _pointer(ffi, indices, "int *"))
     return indptr, indices
+
+
+def pattern_blocks(indptr: np.ndarray, indices: np.ndarray,
+                   block: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """A CSR pattern (indptr, indices) as ``block`` x ``block`` blocks: the block rows' indptr
+    (int64) and each block's first column (int32), a ``block``-th of the rows and a
+    ``block``^2-th of the columns; None if the pattern is not made of whole blocks (or has
+    a number of rows that is not a multiple of ``block``)."""
+    num_rows = indptr.size - 1
+    if block < 1 or num_rows % block:
+        return None
+    indptr = np.ascontiguousarray(indptr, dtype=np.int64)
+    indices = np.ascontiguousarray(indices, dtype=np.intc)
+    block_indptr = np.empty(num_rows // block + 1, dtype=np.int64)
+    block_first = np.empty(indices.size // block**2, dtype=np.intc)
+    module = load("pattern")
+    ffi = module.ffi
+    if module.lib.pattern_blocks(num_rows, block, _pointer(ffi, indptr, "long *"),
+                                 _pointer(ffi, indices, "int *"),
+                                 _pointer(ffi, block_indptr, "long *"),
+                                 _pointer(ffi, block_first, "int *")) != 0:
+        return None
+    return block_indptr, block_first
 
 
 def pattern_of_groups(row_blocks: np.ndarray, col_blocks: np.ndarray, num_row_blocks: int,

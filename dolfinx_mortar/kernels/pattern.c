@@ -149,34 +149,73 @@ int pattern_sum_part(long n, int nr, int br, int nc, int bc, const int *position
 
 /* The union of two CSR patterns of num_rows rows (each row's columns strictly increasing):
  * with out_indices NULL, out_indptr (num_rows + 1) gets the union's row starts; else the
- * union's columns go to out_indices (out_indptr as the first call made it). Returns -1 if a
- * row of either pattern is not strictly increasing. */
-int pattern_union(long num_rows, const long *a_indptr, const int *a_indices,
-                  const long *b_indptr, const int *b_indices, long *out_indptr,
-                  int *out_indices) {
+ * union's columns go to out_indices (out_indptr as the first call made it). Pattern a has
+ * rows in [0, a_rows) only and is blocked: a_indptr (a_rows / a_block + 1) over its block
+ * rows, a_indices the first column of each a_block x a_block block (a_block 1: a plain CSR
+ * pattern). Returns -1 if a row of either pattern is not strictly increasing. */
+int pattern_union(long num_rows, long a_rows, int a_block, const long *a_indptr,
+                  const int *a_indices, const long *b_indptr, const int *b_indices,
+                  long *out_indptr, int *out_indices) {
     if (!out_indices) out_indptr[0] = 0;
     for (long r = 0; r < num_rows; ++r) {
-        long i = a_indptr[r], a_stop = a_indptr[r + 1];
+        long i = 0, a_stop = 0;
+        if (r < a_rows) {
+            i = a_indptr[r / a_block] * a_block;
+            a_stop = a_indptr[r / a_block + 1] * a_block;
+        }
         long j = b_indptr[r], b_stop = b_indptr[r + 1];
         long k = out_indptr[r];
         for (long p = i + 1; p < a_stop; ++p)
-            if (a_indices[p] <= a_indices[p - 1]) return -1;
+            if (a_indices[p / a_block] + (int)(p % a_block)
+                    <= a_indices[(p - 1) / a_block] + (int)((p - 1) % a_block))
+                return -1;
         for (long p = j + 1; p < b_stop; ++p)
             if (b_indices[p] <= b_indices[p - 1]) return -1;
         while (i < a_stop || j < b_stop) {
             int column;
-            if (j == b_stop || (i < a_stop && a_indices[i] < b_indices[j])) {
-                column = a_indices[i++];
-            } else if (i == a_stop || b_indices[j] < a_indices[i]) {
+            int a_column = i < a_stop ? a_indices[i / a_block] + (int)(i % a_block) : 0;
+            if (j == b_stop || (i < a_stop && a_column < b_indices[j])) {
+                column = a_column;
+                ++i;
+            } else if (i == a_stop || b_indices[j] < a_column) {
                 column = b_indices[j++];
             } else {
-                column = a_indices[i++];
+                column = a_column;
+                ++i;
                 ++j;
             }
             if (out_indices) out_indices[k] = column;
             ++k;
         }
         if (!out_indices) out_indptr[r + 1] = k;
+    }
+    return 0;
+}
+
+/* A CSR pattern of num_rows rows (a multiple of bs) as bs x bs blocks: block_indptr
+ * (num_rows / bs + 1) and the first column of each block (block_first, as many as the
+ * pattern has entries / bs^2). Returns -1 if the pattern is not made of whole blocks (the
+ * rows of a block row alike, each a run of whole blocks, their first columns multiples of
+ * bs). */
+int pattern_blocks(long num_rows, int bs, const long *indptr, const int *indices,
+                   long *block_indptr, int *block_first) {
+    block_indptr[0] = 0;
+    for (long b = 0; b < num_rows / bs; ++b) {
+        long first = indptr[b * bs], length = indptr[b * bs + 1] - first;
+        if (length % bs) return -1;
+        long blocks = length / bs;
+        block_indptr[b + 1] = block_indptr[b] + blocks;
+        for (int c = 0; c < bs; ++c) {
+            long start = indptr[b * bs + c];
+            if (indptr[b * bs + c + 1] - start != length) return -1;
+            for (long e = 0; e < blocks; ++e) {
+                int column = indices[first + e * bs];
+                if (column % bs) return -1;
+                for (int d = 0; d < bs; ++d)
+                    if (indices[start + e * bs + d] != column + d) return -1;
+                if (c == 0) block_first[block_indptr[b] + e] = column;
+            }
+        }
     }
     return 0;
 }
