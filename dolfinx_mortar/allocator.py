@@ -8,8 +8,8 @@ large temporaries (the bulk pattern, the condensation's CSR copies, BoomerAMG's
 hierarchy at each set-up); with mmap off the resident set only grows and its peak is the
 sum of them. :func:`release_freed_memory` gives allocations of :data:`MMAP_THRESHOLD`
 bytes and more their own mappings again (returned when freed) and trims the heap's top
-above :data:`TRIM_THRESHOLD`; smaller allocations stay on the heap, as glibc's dynamic
-threshold would keep them (docs/benchmarks.md, "glibc's malloc under PETSc").
+above :data:`TRIM_THRESHOLD`; smaller allocations stay on the heap (docs/benchmarks.md,
+"glibc's malloc under PETSc" and "mmap from 4 MiB").
 
 It is called when a contact problem with a condensed (iterative) solve is made, before
 its set-up's temporaries (the bulk matrix and its CSR copy, freed before the first
@@ -25,9 +25,12 @@ import ctypes
 import os
 import platform
 
-MMAP_THRESHOLD = 32 * 1024 * 1024
-"""Allocations of at least this many bytes are mapped on their own (glibc's largest
-dynamic threshold on 64-bit systems)."""
+MMAP_THRESHOLD = 4 * 1024 * 1024
+"""Allocations of at least this many bytes are mapped on their own. Below glibc's largest
+dynamic threshold (32 MiB): BoomerAMG's coarser levels and the set-up's mid-sized
+temporaries, made anew at every set-up in other sizes, otherwise stayed on the heap as
+holes the next ones did not fit; small enough arrays (the kernels' per-chunk work) stay
+on the heap and pay no page faults."""
 
 TRIM_THRESHOLD = 2 * MMAP_THRESHOLD
 """Free memory at the heap's top beyond this many bytes goes back to the system."""
