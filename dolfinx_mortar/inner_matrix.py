@@ -63,9 +63,9 @@ class InnerMatrix:
 
     For hypre's BoomerAMG it is made a hypre matrix (``MATHYPRE``) at once: given an AIJ
     matrix, PETSc's hypre preconditioner converts it into hypre's own and keeps both, the
-    copy with an AIJ delegate and its COO maps (three to four times the AIJ's memory on
-    top of it while it converts); the inner Krylov method multiplies with hypre's matrix
-    as well as with an AIJ.
+    copy with an AIJ delegate and its COO maps, and the conversion's temporaries come on
+    top at the set-up's peak (docs/benchmarks.md); the inner Krylov method multiplies with
+    hypre's matrix as well as with an AIJ.
 
     Args:
         comm: communicator.
