@@ -158,32 +158,36 @@ int pattern_union(long num_rows, long a_rows, int a_block, const long *a_indptr,
                   long *out_indptr, int *out_indices) {
     if (!out_indices) out_indptr[0] = 0;
     for (long r = 0; r < num_rows; ++r) {
-        long i = 0, a_stop = 0;
+        /* a's columns run over its block entries e, each a_block columns d = 0, 1, ... */
+        long e = 0, e_stop = 0;
         if (r < a_rows) {
-            i = a_indptr[r / a_block] * a_block;
-            a_stop = a_indptr[r / a_block + 1] * a_block;
+            e = a_indptr[r / a_block];
+            e_stop = a_indptr[r / a_block + 1];
         }
+        int d = 0;
         long j = b_indptr[r], b_stop = b_indptr[r + 1];
         long k = out_indptr[r];
-        for (long p = i + 1; p < a_stop; ++p)
-            if (a_indices[p / a_block] + (int)(p % a_block)
-                    <= a_indices[(p - 1) / a_block] + (int)((p - 1) % a_block))
-                return -1;
+        for (long p = e + 1; p < e_stop; ++p)
+            if ((long)a_indices[p] < (long)a_indices[p - 1] + a_block) return -1;
         for (long p = j + 1; p < b_stop; ++p)
             if (b_indices[p] <= b_indices[p - 1]) return -1;
-        while (i < a_stop || j < b_stop) {
+        while (e < e_stop || j < b_stop) {
             int column;
-            int a_column = i < a_stop ? a_indices[i / a_block] + (int)(i % a_block) : 0;
-            if (j == b_stop || (i < a_stop && a_column < b_indices[j])) {
-                column = a_column;
-                ++i;
-            } else if (i == a_stop || b_indices[j] < a_column) {
-                column = b_indices[j++];
+            int a_column = e < e_stop ? a_indices[e] + d : 0;
+            int take_a = 0, take_b = 0;
+            if (j == b_stop || (e < e_stop && a_column < b_indices[j])) {
+                take_a = 1;
+            } else if (e == e_stop || b_indices[j] < a_column) {
+                take_b = 1;
             } else {
-                column = a_column;
-                ++i;
-                ++j;
+                take_a = take_b = 1;
             }
+            column = take_a ? a_column : b_indices[j];
+            if (take_a && ++d == a_block) {
+                d = 0;
+                ++e;
+            }
+            if (take_b) ++j;
             if (out_indices) out_indices[k] = column;
             ++k;
         }
