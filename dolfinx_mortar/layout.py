@@ -699,12 +699,12 @@ def _unblocked(indptr: np.ndarray, indices: np.ndarray,
     as a plain CSR pattern."""
     if block == 1:
         return indptr, indices
-    lengths = np.repeat(np.diff(indptr) * block, block)
     expanded = (np.asarray(indices)[:, None] + np.arange(block)).reshape(-1)
-    rows = [np.tile(expanded[indptr[b] * block:indptr[b + 1] * block], block)
-            for b in range(indptr.size - 1)]
+    lengths = np.repeat(np.diff(indptr) * block, block)  # each block row's rows alike
     scalar_indptr = np.concatenate([[0], np.cumsum(lengths)])
-    return scalar_indptr, (np.concatenate(rows) if rows else np.zeros(0, dtype=indices.dtype))
+    starts = np.repeat(np.asarray(indptr[:-1]) * block, block)
+    within = np.arange(scalar_indptr[-1]) - np.repeat(scalar_indptr[:-1], lengths)
+    return scalar_indptr, expanded[np.repeat(starts, lengths) + within]
 
 
 def _entries_to_owners(comm: MPI.Intracomm, first: int, rows: np.ndarray,
