@@ -262,7 +262,28 @@ class CondensedPreconditioner:
         _MatrixStore(self._products, self.keep_products).release("K_rows")
         self.ksp.setUp()
 
+    def postSolve(self, pc: PETSc.PC, ksp: PETSc.KSP, b: PETSc.Vec,  # noqa: N802
+                  x: PETSc.Vec) -> None:
+        self.release_inner()
+
+    def release_inner(self) -> None:
+        """Free K_c and the inner preconditioner's data while the Newton iteration has no
+        use for them (the next set-up makes K_c anew from J, its layout kept while it
+        holds). Algebraic multigrid is set up anew at every set-up anyway, so keeping them
+        through the residual and Jacobian assembly and into the next fill only raises the
+        peak (docs/benchmarks.md). A factorization keeps them (MUMPS reuses its analysis
+        while the pattern holds)."""
+        inner = self._matrices.get("K_inner")
+        if inner is None or self.ksp.getPC().getType() in (PETSc.PC.Type.LU,
+                                                           PETSc.PC.Type.CHOLESKY):
+            return
+        self.ksp.reset()  # (the preconditioner's references to K_c)
+        inner.destroy()
+        del self._matrices["K_inner"]
+
     def apply(self, pc: PETSc.PC, x: PETSc.Vec, y: PETSc.Vec) -> None:
+        if "K_inner" not in self._matrices:  # (released, and J is the same)
+            self.setUp(pc)
         m, v = self._matrices, self._vectors
         source = x.getArray(readonly=True)
         v["ru"].getArray()[:] = source[: self.num_u]

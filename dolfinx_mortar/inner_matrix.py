@@ -91,14 +91,14 @@ class InnerMatrix:
         """K_c from J's displacement rows and ``K_rows`` (the local ``rows`` near the
         contact, in order): a new matrix of ``matrix_type`` (``aij`` or ``hypre``) or, while
         the layout holds (J's pattern, the products' patterns and the zeros), new values of
-        ``existing``. Collective."""
+        ``existing`` if there is one. Collective."""
         a_csr, k_csr = A.csr(J), K_rows.getValuesCSR()
         a_indptr, a_values, k_values = a_csr[0], a_csr[2], k_csr[2]
         a_part = self._a_part
         a_moved = a_part is not None and bool(np.any(a_values[a_part["dropped"]] != 0.0))
         layout = self._layout
         fresh = self.comm.allreduce(
-            existing is None or layout is None or a_moved
+            layout is None or a_moved
             or bool(np.any(k_values[layout["k_dropped"]] != 0.0)), op=MPI.LOR)
         if fresh:
             if a_part is None or a_moved:
@@ -114,7 +114,7 @@ class InnerMatrix:
                             a_part["kept"])
         del a_values
         values[~from_a] = k_values[layout["k_kept"]]
-        if not fresh:
+        if existing is not None and not fresh:
             existing.setValuesCSR(layout["indptr"], layout["indices"], values)
             existing.assemble()
             return existing

@@ -76,7 +76,7 @@ def test_inner_matrix_is_k_c_without_its_zeros():
     node_dofs = np.concatenate(comm.allgather(condenser.z_node_dofs))
     J = gathered_dense(problem.snes.getJacobian()[0])
     reference = condensed_reference(J, u, z, node_dofs)
-    hypre_matrix = condenser.ksp.getOperators()[0]
+    hypre_matrix = rebuilt_inner_matrix(problem)
     assert hypre_matrix.getType() == "hypre"  # (BoomerAMG's own: no AIJ copy beside it)
     # (read before the conversion, which sets both matrices' block size to 1)
     assert hypre_matrix.getBlockSize() == 2
@@ -92,6 +92,42 @@ def test_inner_matrix_is_k_c_without_its_zeros():
     assert np.all((values != 0.0) | (indices == local_rows))
     inner.destroy()
     setup.destroy()
+
+
+@pytest.mark.parallel
+@pytest.mark.timeout(300)
+def test_a_second_solve_with_the_same_matrix_makes_k_c_again():
+    """The condenser frees K_c after each linear solve; a solve with the same Newton matrix
+    (PETSc then skips the preconditioner's set-up) makes it again and gives the first
+    solve's answer, bit for bit."""
+    setup = hertz(refinement=0, linear_solver="iterative")
+    assert setup.steps(1).converged
+    problem = setup.problem
+    condenser = problem._condenser
+    assert "K_inner" not in condenser._matrices
+    ksp = problem.snes.getKSP()
+    rhs = problem.b.duplicate()
+    rhs.setRandom(PETSc.Random().create(MPI.COMM_WORLD))
+    answers = []
+    for _ in range(2):
+        x = rhs.duplicate()
+        before = len(condenser.inner_iterations)
+        ksp.solve(rhs, x)
+        assert ksp.getConvergedReason() > 0
+        assert len(condenser.inner_iterations) > before
+        assert "K_inner" not in condenser._matrices
+        answers.append(x.getArray().copy())
+    assert np.array_equal(answers[0], answers[1])
+    setup.destroy()
+
+
+def rebuilt_inner_matrix(problem) -> PETSc.Mat:
+    """K_c of the last Newton matrix, made again: the condenser frees it (and the inner
+    preconditioner's data) after each linear solve."""
+    condenser = problem._condenser
+    assert "K_inner" not in condenser._matrices
+    condenser.setUp(problem.snes.getKSP().getPC())
+    return condenser.ksp.getOperators()[0]
 
 
 def inner_preconditioner_view(problem) -> str:

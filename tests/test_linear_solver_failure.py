@@ -147,6 +147,8 @@ def _iterative_equals_direct_after(change) -> None:
         solve_load_steps(problem, apply_load, 1)
         if linear_solver == "iterative":
             condenser = problem.solver.condenser
+            # (K_c, freed after each linear solve, made again from the last Newton matrix)
+            condenser.setUp(problem.solver.snes.getKSP().getPC())
             change(condenser)
             before = len(condenser.inner_iterations)
         apply_load(2.0)
