@@ -82,12 +82,15 @@ diagonal).
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
 from . import diagnostics
-from .inner_matrix import DisplacementBlock, InnerMatrix
+from .inner_matrix import DisplacementBlock, InnerMatrix, row_reduce
+from .petsc_c import local_blocks
 
 ELIMINATION_RATIO = 0.03
 """With friction, a rotated multiplier whose singular value sigma is at least this
@@ -546,12 +549,11 @@ class CondensedPreconditioner:
         slave = np.zeros(A.column.size, dtype=bool)  # over J's columns
         is_u = A.column >= 0
         slave[is_u] = slave_u[A.column[is_u]]
-        indptr, indices, _ = A.csr(self._J)
-        lengths = np.diff(indptr)
         near = np.zeros(self.num_u, dtype=bool)
-        if indices.size:
-            near = np.logical_or.reduceat(slave[indices], np.minimum(indptr[:-1], indices.size - 1))
-            near &= lengths > 0
+        with A.blocks(self._J) as blocks:
+            for block in blocks:
+                near |= row_reduce(np.logical_or, slave[block.columns][block.indices],
+                                   block.indptr)
         near[np.diff(G.getValuesCSR()[0]) > 0] = True
         near[self.z_node_dofs.reshape(-1) - first] = True
         self._rows = np.flatnonzero(near)
@@ -869,10 +871,13 @@ def _entries(matrix: PETSc.Mat, rows: np.ndarray, columns: np.ndarray) -> np.nda
 
 
 def _pattern_fingerprint(J: PETSc.Mat, comm: MPI.Intracomm) -> tuple:
-    """Collective: a key of J's layout and nonzero pattern on every rank."""
-    indptr, indices, _ = J.getValuesCSR()
-    local = (J.getOwnershipRange(), indices.size,
-             hash(indptr.tobytes()), hash(indices.tobytes()))
+    """Collective: a key of J's layout and nonzero pattern on every rank (read in place)."""
+    digest = hashlib.blake2b(digest_size=16)
+    with local_blocks(J) as blocks:
+        for block in blocks:
+            for array in (block.indptr, block.indices, block.columns):
+                digest.update(np.ascontiguousarray(array).data)
+    local = (J.getOwnershipRange(), digest.hexdigest())
     return tuple(comm.allgather(local))
 
 

@@ -2,23 +2,32 @@
 
 :class:`~dolfinx_mortar.condensation.CondensedPreconditioner` never copies the
 displacement block A = J[u, u]: its rows are J's first local rows (the layout puts each
-rank's displacements first) and :class:`DisplacementBlock` renumbers J's columns to A's.
-K_c equals A away from the contact and the condensed products' rows near it;
-:class:`InnerMatrix` merges the two into one CSR matrix without their stored zeros (J's
-pattern holds entries that are zero at this state: Dirichlet columns, inactive nodes),
-which algebraic multigrid would otherwise carry into its coarse levels. Its layout is
-kept as masks (a byte an entry) while J's pattern, the products' and the zeros hold, so
-that a Newton iteration on the same active set only copies values.
+rank's displacements first), read in PETSc's own arrays (:mod:`~dolfinx_mortar.petsc_c`:
+J's diagonal and off-diagonal blocks), and :class:`DisplacementBlock` renumbers J's
+columns to A's. K_c equals A away from the contact and the condensed products' rows near
+it; :class:`InnerMatrix` merges the two into one CSR matrix without their stored zeros
+(J's pattern holds entries that are zero at this state: Dirichlet columns, inactive
+nodes), which algebraic multigrid would otherwise carry into its coarse levels. Its
+layout is kept (which source each entry comes from, a byte an entry) while J's pattern,
+the products' and the zeros hold.
 """
 
 from __future__ import annotations
+
+import contextlib
+import typing
 
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from .petsc_c import CsrBlock, local_blocks, preallocate_hypre
+
 COPY_CHUNK = 1 << 20
 """Entries :func:`masked_copy_by_rows` copies at a time (about)."""
+
+FROM_K_ROWS = 0
+"""The source code of K_c's entries taken from the condensed rows (A's blocks: 1, 2)."""
 
 
 class DisplacementBlock:
@@ -50,11 +59,12 @@ class DisplacementBlock:
         self.first = int(starts[comm.rank])
         self.sizes = (num_u, int(starts[-1]))
 
-    def csr(self, J: PETSc.Mat) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """J's CSR arrays of the displacement rows (views; columns in J's numbering)."""
-        indptr, indices, values = J.getValuesCSR()
-        end = indptr[self.num_u]
-        return indptr[: self.num_u + 1], indices[:end], values[:end]
+    @contextlib.contextmanager
+    def blocks(self, J: PETSc.Mat) -> typing.Iterator[list[CsrBlock]]:
+        """J's displacement rows as CSR blocks of views into J (columns in J's numbering),
+        valid inside the block."""
+        with local_blocks(J) as blocks:
+            yield [block.rows(self.num_u) for block in blocks]
 
 
 class InnerMatrix:
@@ -76,7 +86,8 @@ class InnerMatrix:
         self.comm = comm
         self.block_size = block_size
         self._layout: dict | None = None
-        self._a_part: dict | None = None
+        self._a_part: list[dict] | None = None
+        self._segments: list[tuple] = []
 
     def forget_layout(self) -> None:
         """The next fill builds the merged layout anew (the products' patterns changed)."""
@@ -92,28 +103,33 @@ class InnerMatrix:
         contact, in order): a new matrix of ``matrix_type`` (``aij`` or ``hypre``) or, while
         the layout holds (J's pattern, the products' patterns and the zeros), new values of
         ``existing`` if there is one. Collective."""
-        a_csr, k_csr = A.csr(J), K_rows.getValuesCSR()
-        a_indptr, a_values, k_values = a_csr[0], a_csr[2], k_csr[2]
-        a_part = self._a_part
-        a_moved = a_part is not None and bool(np.any(a_values[a_part["dropped"]] != 0.0))
-        layout = self._layout
-        fresh = self.comm.allreduce(
-            layout is None or a_moved
-            or bool(np.any(k_values[layout["k_dropped"]] != 0.0)), op=MPI.LOR)
-        if fresh:
-            if a_part is None or a_moved:
-                outside = np.ones(A.num_u, dtype=bool)
-                outside[rows] = False
-                a_part = self._a_part = _kept_entries(a_csr, A.j_first, np.arange(A.num_u),
-                                                      outside)
-            layout = self._layout = self._merged_layout(A, rows, a_part, a_csr[1], k_csr)
-        del a_csr  # (its column indices: 4 bytes an entry of A)
-        from_a = layout["from_a"]
-        values = np.empty(from_a.size)
-        masked_copy_by_rows(values, layout["indptr"], from_a, a_values, a_indptr,
-                            a_part["kept"])
-        del a_values
-        values[~from_a] = k_values[layout["k_kept"]]
+        k_csr = K_rows.getValuesCSR()
+        k_values = k_csr[2]
+        with A.blocks(J) as a_blocks:
+            a_parts = self._a_part
+            a_moved = a_parts is not None and any(
+                bool(np.any(block.values[part["dropped"]] != 0.0))
+                for block, part in zip(a_blocks, a_parts, strict=True))
+            layout = self._layout
+            fresh = self.comm.allreduce(
+                layout is None or a_moved
+                or bool(np.any(k_values[layout["k_dropped"]] != 0.0)), op=MPI.LOR)
+            if fresh:
+                if a_parts is None or a_moved:
+                    outside = np.ones(A.num_u, dtype=bool)
+                    outside[rows] = False
+                    diagonal = A.j_first + np.arange(A.num_u, dtype=np.int64)
+                    a_parts = self._a_part = [_kept_entries(block, diagonal, outside)
+                                              for block in a_blocks]
+                    self._segments = _row_segments(a_blocks, a_parts, A.j_first)
+                layout = self._layout = self._merged_layout(A, rows, self._segments,
+                                                            a_blocks, k_csr)
+            values = np.empty(layout["source"].size)
+            for code, (which, kept, _) in enumerate(self._segments, 1):
+                block = a_blocks[which]
+                masked_copy_by_rows(values, layout["indptr"], layout["source"], block.values,
+                                    block.indptr, kept, code)
+        values[layout["source"] == FROM_K_ROWS] = k_values[layout["k_kept"]]
         if existing is not None and not fresh:
             existing.setValuesCSR(layout["indptr"], layout["indices"], values)
             existing.assemble()
@@ -128,57 +144,107 @@ class InnerMatrix:
 
     def _hypre_matrix(self, A: DisplacementBlock, indptr: np.ndarray, indices: np.ndarray,
                       values: np.ndarray) -> PETSc.Mat:
-        """The CSR rows as a hypre matrix, preallocated exactly."""
+        """The CSR rows as a hypre matrix, preallocated exactly
+        (:func:`~dolfinx_mortar.petsc_c.preallocate_hypre`)."""
         matrix = PETSc.Mat().create(self.comm)
         matrix.setSizes((A.sizes, A.sizes), bsize=self.block_size)
         matrix.setType(PETSc.Mat.Type.HYPRE)
         inside = (indices >= A.first) & (indices < A.first + A.num_u)
         lengths = np.diff(indptr)
-        diagonal = np.zeros(lengths.size, dtype=PETSc.IntType)
-        if inside.size:
-            diagonal[:] = np.add.reduceat(inside, np.minimum(indptr[:-1], inside.size - 1))
-            diagonal[lengths == 0] = 0
+        diagonal = row_reduce(np.add, inside, indptr, PETSc.IntType)
         del inside
-        matrix.setPreallocationNNZ((diagonal, (lengths - diagonal).astype(PETSc.IntType)))
+        # every row set once, whole: hypre writes into its matrix, no auxiliary copy
+        matrix.setOption(PETSc.Mat.Option.SORTED_FULL, True)
+        preallocate_hypre(matrix, diagonal, lengths - diagonal)
         matrix.setValuesCSR(indptr, indices, values)
         matrix.assemble()
         return matrix
 
     @staticmethod
-    def _merged_layout(A: DisplacementBlock, rows: np.ndarray, a_part: dict,
-                       a_indices: np.ndarray, k_csr: tuple) -> dict:
-        """The CSR pattern of A's kept entries (J's column indices ``a_indices``) with those
-        of K_rows (``k_csr``) in the ``rows`` near the contact, and which entries come from
-        A (each row comes whole from one of them, in order)."""
-        k_part = _kept_entries(k_csr, A.first, rows)
-        counts = a_part["counts"].copy()
-        counts[rows] = k_part["counts"]
-        outside = np.ones(A.num_u, dtype=bool)
-        outside[rows] = False
+    def _merged_layout(A: DisplacementBlock, rows: np.ndarray, segments: list[tuple],
+                       a_blocks: list[CsrBlock], k_csr: tuple) -> dict:
+        """The CSR pattern of A's kept entries (``segments``, :func:`_row_segments`) with
+        those of K_rows (``k_csr``) in the ``rows`` near the contact, and the source of each
+        entry (:data:`FROM_K_ROWS`, or the segment's number from 1): a row from A holds its
+        segments in turn, so its columns stay in order."""
+        k_part = _kept_entries(CsrBlock(*k_csr, columns=None), A.first + rows)
+        counts = np.zeros((A.num_u, len(segments) + 1), dtype=np.int64)
+        for code, (_, _, segment_counts) in enumerate(segments, 1):
+            counts[:, code] = segment_counts
+        counts[rows, FROM_K_ROWS] = k_part["counts"]
         indptr = np.zeros(A.num_u + 1, dtype=PETSc.IntType)
-        np.cumsum(counts, out=indptr[1:])
-        from_a = np.repeat(outside, counts)
-        indices = np.empty(from_a.size, dtype=PETSc.IntType)
-        indices[from_a] = A.column[a_indices[a_part["kept"]]]
-        if np.any(indices[from_a] < 0):
+        np.cumsum(counts.sum(axis=1), out=indptr[1:])
+        codes = np.broadcast_to(np.arange(counts.shape[1], dtype=np.uint8), counts.shape)
+        source = np.repeat(codes.reshape(-1), counts.reshape(-1))
+        del counts, codes
+        indices = np.empty(source.size, dtype=PETSc.IntType)
+        for code, (which, kept, _) in enumerate(segments, 1):
+            block = a_blocks[which]
+            masked_copy_by_rows(indices, indptr, source, block.indices, block.indptr, kept,
+                                code, transform=lambda local, columns=block.columns:
+                                A.column[columns[local]])
+        if np.any(indices[source != FROM_K_ROWS] < 0):
             raise RuntimeError("a displacement row away from the contact has a multiplier "
                                "column")
-        indices[~from_a] = k_csr[1][k_part["kept"]]
-        return {"indptr": indptr, "indices": indices, "from_a": from_a,
+        indices[source == FROM_K_ROWS] = k_csr[1][k_part["kept"]]
+        return {"indptr": indptr, "indices": indices, "source": source,
                 "k_kept": k_part["kept"], "k_dropped": k_part["dropped"]}
 
 
-def _kept_entries(csr: tuple, first: int, row_of_local: np.ndarray,
-                  taken: np.ndarray | None = None) -> dict:
-    """Of a matrix's local CSR entries (its local rows the displacement rows
-    ``row_of_local``, numbered from ``first``), those in the rows ``taken`` (a mask over
-    the local rows; None: all) that are nonzero or diagonal: as a mask over the entries,
-    the positions of the dropped ones, and the kept entries per local row."""
-    indptr, indices, values = csr
+def _row_segments(blocks: list[CsrBlock], parts: list[dict], first_column: int
+                  ) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """The kept entries of A's blocks as segments of each row in column order: (block,
+    mask over its entries, count per row). One block: itself; an MPIAIJ matrix's two
+    (:func:`~dolfinx_mortar.petsc_c.local_blocks`): the off-diagonal block's columns
+    before this rank's (``first_column`` on), the diagonal block's, the off-diagonal's
+    after. (PETSc's AIJ constructor wants each row's columns in order.)"""
+    if len(blocks) == 1:
+        return [(0, parts[0]["kept"], parts[0]["counts"])]
+    off = blocks[1]
+    before = np.zeros(off.indices.size, dtype=bool)
+    for start in range(0, off.indices.size, COPY_CHUNK):
+        chunk = slice(start, start + COPY_CHUNK)
+        before[chunk] = off.columns[off.indices[chunk]] < first_column
+    left, right = parts[1]["kept"] & before, parts[1]["kept"] & ~before
+    return [(1, left, _row_counts(left, off.indptr)),
+            (0, parts[0]["kept"], parts[0]["counts"]),
+            (1, right, _row_counts(right, off.indptr))]
+
+
+def _row_counts(mask: np.ndarray, indptr: np.ndarray) -> np.ndarray:
+    """The entries of ``mask`` in each CSR row."""
+    return row_reduce(np.add, mask, indptr, np.int64)
+
+
+def row_reduce(ufunc: np.ufunc, entries: np.ndarray, indptr: np.ndarray,
+               dtype=None) -> np.ndarray:
+    """``ufunc`` over each CSR row's ``entries`` (its identity in an empty row)."""
     lengths = np.diff(indptr)
-    diagonal = indices == np.repeat((row_of_local + first).astype(indices.dtype), lengths)
-    kept = (values != 0.0) | diagonal
-    del diagonal
+    result = np.full(lengths.size, ufunc.identity, dtype=dtype or entries.dtype)
+    nonempty = lengths > 0
+    # (reduceat over the nonempty rows' starts only: an empty row's start is the next
+    # row's, or the end of the entries)
+    if np.any(nonempty):
+        result[nonempty] = ufunc.reduceat(entries, indptr[:-1][nonempty], dtype=dtype)
+    return result
+
+
+def _kept_entries(block: CsrBlock, diagonal: np.ndarray, taken: np.ndarray | None = None
+                  ) -> dict:
+    """Of a block's entries, those in the rows ``taken`` (a mask over its rows; None: all)
+    that are nonzero or diagonal (row i's diagonal column, in the block's ``columns``
+    numbering or, without them, in its indices', is ``diagonal[i]``): as a mask over the
+    entries, the positions of the dropped ones, and the kept entries per row."""
+    indptr, indices, values = block.indptr, block.indices, block.values
+    lengths = np.diff(indptr)
+    kept = values != 0.0
+    num_rows = lengths.size
+    step = max(1, num_rows * COPY_CHUNK // max(int(indptr[-1]), 1))
+    for first in range(0, num_rows, step):
+        last = min(num_rows, first + step)
+        e0, e1 = indptr[first], indptr[last]
+        columns = indices[e0:e1] if block.columns is None else block.columns[indices[e0:e1]]
+        kept[e0:e1] |= columns == np.repeat(diagonal[first:last], lengths[first:last])
     if taken is not None:
         in_rows = np.repeat(taken, lengths)
         dropped = np.flatnonzero(in_rows & ~kept)
@@ -186,24 +252,25 @@ def _kept_entries(csr: tuple, first: int, row_of_local: np.ndarray,
         del in_rows
     else:
         dropped = np.flatnonzero(~kept)
-    starts = np.minimum(indptr[:-1], max(kept.size - 1, 0))
-    counts = (np.add.reduceat(kept, starts, dtype=np.int64) if kept.size
-              else np.zeros(lengths.size, dtype=np.int64))
-    counts[lengths == 0] = 0
-    return {"kept": kept, "dropped": dropped, "counts": counts}
+    return {"kept": kept, "dropped": dropped, "counts": _row_counts(kept, indptr)}
 
 
 def masked_copy_by_rows(target: np.ndarray, target_indptr: np.ndarray,
-                        target_mask: np.ndarray, source: np.ndarray,
-                        source_indptr: np.ndarray, source_mask: np.ndarray) -> None:
-    """``target[target_mask] = source[source_mask]`` for two CSR value arrays of the same
-    rows whose masked entries match row by row, in order; a block of rows at a time, so
-    that no temporary has the size of either (A's kept values would take 8 bytes an
-    entry of K_c at the set-up's peak)."""
+                        target_source: np.ndarray, source: np.ndarray,
+                        source_indptr: np.ndarray, source_mask: np.ndarray,
+                        code: int | bool = True,
+                        transform: typing.Callable[[np.ndarray], np.ndarray] | None = None
+                        ) -> None:
+    """``target[target_source == code] = transform(source[source_mask])`` for two CSR
+    arrays of the same rows whose selected entries match row by row, in order; a block of
+    rows at a time, so that no temporary has the size of either (A's kept values would
+    take 8 bytes an entry of K_c at the set-up's peak)."""
     num_rows = target_indptr.size - 1
     step = max(1, num_rows * COPY_CHUNK // max(int(source_indptr[-1]), 1))
     for first in range(0, num_rows, step):
         last = min(num_rows, first + step)
         t0, t1 = target_indptr[first], target_indptr[last]
         s0, s1 = source_indptr[first], source_indptr[last]
-        target[t0:t1][target_mask[t0:t1]] = source[s0:s1][source_mask[s0:s1]]
+        taken = source[s0:s1][source_mask[s0:s1]]
+        target[t0:t1][target_source[t0:t1] == code] = (
+            taken if transform is None else transform(taken))

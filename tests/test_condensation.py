@@ -324,3 +324,19 @@ def test_masked_copy_by_rows_equals_the_whole_masked_copy(monkeypatch, chunk):
     inner_matrix.masked_copy_by_rows(target, target_indptr, target_mask, source,
                                      source_indptr, source_mask)
     np.testing.assert_array_equal(target, expected)
+
+
+def test_row_reduce_counts_rows_with_empty_rows_anywhere():
+    """Per-row sums and ORs over CSR rows equal a loop's, empty rows first, between and
+    last included (an off-diagonal block's last rows are often empty)."""
+    from dolfinx_mortar.inner_matrix import row_reduce
+
+    rng = np.random.default_rng(11)
+    for lengths in ([0, 3, 0, 0, 2, 0, 0], [4], [0, 0], [1, 0, 5]):
+        indptr = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int32)
+        mask = rng.random(indptr[-1]) < 0.5
+        rows = [mask[indptr[i]:indptr[i + 1]] for i in range(len(lengths))]
+        np.testing.assert_array_equal(row_reduce(np.add, mask, indptr, np.int64),
+                                      [row.sum() for row in rows])
+        np.testing.assert_array_equal(row_reduce(np.logical_or, mask, indptr),
+                                      [row.any() for row in rows])
