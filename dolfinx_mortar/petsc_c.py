@@ -121,10 +121,12 @@ def local_blocks(matrix: PETSc.Mat) -> typing.Iterator[list[CsrBlock]]:
     """This rank's rows of ``matrix`` as CSR blocks of views into PETSc's own arrays (no
     copy), valid inside the block only and while the matrix is not changed: for MPIAIJ
     its diagonal and off-diagonal blocks, for SeqAIJ the matrix. Another type (none that
-    this package makes) is copied through ``getValuesCSR`` into one block."""
+    this package makes), or a PETSc whose scalars are not real doubles, is copied through
+    ``getValuesCSR`` into one block."""
     kind = matrix.getType()
     first = matrix.getOwnershipRangeColumn()[0]
-    if kind not in (PETSc.Mat.Type.MPIAIJ, PETSc.Mat.Type.SEQAIJ):
+    if (kind not in (PETSc.Mat.Type.MPIAIJ, PETSc.Mat.Type.SEQAIJ)
+            or np.dtype(PETSc.ScalarType) != np.float64):  # (the views read doubles)
         indptr, indices, values = matrix.getValuesCSR()
         yield [CsrBlock(indptr, indices, values,
                         np.arange(matrix.getSize()[1], dtype=PETSc.IntType))]
